@@ -1,0 +1,317 @@
+"""Rectified stereo endoscope: projection, triangulation and PyBullet rendering.
+
+Frames:
+    * world: the robot base frame (metres, z up).
+    * camera: OpenCV convention (x right, y down, z forward along the optical
+      axis), origin at the LEFT camera's optical centre. The right camera is the
+      left one translated by ``+baseline`` along the left camera's x axis.
+
+Pixel convention: OpenCV, i.e. pixel centres at integer coordinates, row 0 at
+the top of the image. PyBullet's TinyRenderer samples column ``i`` at viewport
+coordinate ``x = i`` (no half-pixel offset) and flips the image vertically so
+that output row ``r`` is sampled at viewport ``y = H - 1 - r``; the projection
+matrix below compensates for both so that rendered pixels agree with
+:meth:`StereoCamera.project` (verified in ``tests/test_camera.py``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pybullet
+
+PAPER_BASELINE_M = 0.0062
+WORKSPACE_CENTER_M = (0.040, 0.042, -0.164)
+CAMERA_DISTANCE_M = 0.19
+# Camera -> base rotation fitted to the paper authors' data (columns = camera
+# x, y, z axes expressed in the base frame); orthonormalised in default_camera_pose.
+_PAPER_ROTATION_BASE_CAM = (
+    (-0.965, -0.145, -0.219),
+    (-0.115, 0.983, -0.144),
+    (0.236, -0.114, -0.965),
+)
+# Where TinyRenderer samples pixel (u, v) relative to the OpenCV pixel centre,
+# expressed as offsets added before normalising to NDC (measured, see module doc).
+_TINY_SAMPLE_OFFSET_U_PX = 0.0
+_TINY_SAMPLE_OFFSET_V_PX = 1.0
+# OpenCV camera frame -> OpenGL camera frame (y up, looking along -z).
+_CV_TO_GL = np.diag([1.0, -1.0, -1.0, 1.0])
+_SIDES = ("left", "right")
+
+
+@dataclass(frozen=True)
+class CameraIntrinsics:
+    """Pinhole intrinsics of one camera of the rectified pair.
+
+    Attributes:
+        width: Image width in pixels.
+        height: Image height in pixels.
+        fx: Horizontal focal length in pixels.
+        fy: Vertical focal length in pixels.
+        cx: Principal point column in pixels (pixel centres at integers).
+        cy: Principal point row in pixels (pixel centres at integers).
+    """
+
+    width: int
+    height: int
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+
+    def __post_init__(self) -> None:
+        for name in ("width", "height"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value <= 0:
+                raise ValueError(f"CameraIntrinsics.{name} must be a positive int, got {value!r}")
+        for name in ("fx", "fy"):
+            value = getattr(self, name)
+            if not np.isfinite(value) or value <= 0:
+                raise ValueError(f"CameraIntrinsics.{name} must be finite and > 0 px, got {value!r}")
+        for name in ("cx", "cy"):
+            if not np.isfinite(getattr(self, name)):
+                raise ValueError(f"CameraIntrinsics.{name} must be finite, got {getattr(self, name)!r}")
+
+    def scaled(self, width: int, height: int) -> CameraIntrinsics:
+        """Return the intrinsics of the same camera resampled to ``width`` x ``height`` px.
+
+        Focal lengths scale by the size ratio; principal points map as
+        ``(c + 0.5) * s - 0.5`` because pixel centres sit at integers.
+        """
+        probe = CameraIntrinsics(width, height, 1.0, 1.0, 0.0, 0.0)  # validates the size
+        sx = probe.width / self.width
+        sy = probe.height / self.height
+        return CameraIntrinsics(
+            width, height, self.fx * sx, self.fy * sy,
+            (self.cx + 0.5) * sx - 0.5, (self.cy + 0.5) * sy - 0.5,
+        )
+
+
+PAPER_INTRINSICS = CameraIntrinsics(1920, 1080, 2144.0, 2144.0, 959.5, 539.5)
+
+
+@dataclass(frozen=True)
+class PixelWindow:
+    """Sub-rectangle of the full image; pixel (u0, v0) is its top-left (full-image indices)."""
+
+    u0: int
+    v0: int
+    width: int
+    height: int
+
+    def __post_init__(self) -> None:
+        for name in ("u0", "v0", "width", "height"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+                raise ValueError(f"PixelWindow.{name} must be an int, got {value!r}")
+        if self.width <= 0 or self.height <= 0:
+            raise ValueError(f"PixelWindow size must be positive, got {self.width}x{self.height}")
+
+
+def default_camera_pose() -> np.ndarray:
+    """Return T_world_leftcam (4x4): the paper's rotation, optical axis through the
+    workspace centre at ``CAMERA_DISTANCE_M`` (0.19 m, ~15 deg from straight down)."""
+    u, _, vt = np.linalg.svd(np.asarray(_PAPER_ROTATION_BASE_CAM, dtype=float))
+    rotation = u @ np.diag([1.0, 1.0, np.linalg.det(u @ vt)]) @ vt
+    pose = np.eye(4)
+    pose[:3, :3] = rotation
+    pose[:3, 3] = np.asarray(WORKSPACE_CENTER_M) - CAMERA_DISTANCE_M * rotation[:, 2]
+    return pose
+
+
+def _as_points(points: np.ndarray, dims: int, name: str) -> np.ndarray:
+    """Validate (N, dims) or (dims,) finite input and return it as float (N, dims)."""
+    array = np.asarray(points, dtype=float)
+    if array.ndim == 1:
+        array = array[None, :]
+    if array.ndim != 2 or array.shape[1] != dims:
+        raise ValueError(f"{name} must have shape (N, {dims}) or ({dims},), got {np.shape(points)}")
+    bad = np.flatnonzero(~np.isfinite(array).all(axis=1))
+    if bad.size:
+        raise ValueError(f"{name} has non-finite values in row(s) {bad.tolist()}")
+    return array
+
+
+class StereoCamera:
+    """Rectified stereo endoscope (same rotation and intrinsics for both cameras).
+
+    Args:
+        intrinsics: Intrinsics of each camera (pixels).
+        baseline_m: Distance between the optical centres in metres (> 0).
+        pose: T_world_leftcam (4x4, metres); defaults to :func:`default_camera_pose`.
+        near_m: Near clipping plane for rendering, metres.
+        far_m: Far clipping plane for rendering, metres.
+    """
+
+    def __init__(
+        self,
+        intrinsics: CameraIntrinsics = PAPER_INTRINSICS,
+        baseline_m: float = PAPER_BASELINE_M,
+        pose: np.ndarray | None = None,
+        near_m: float = 0.01,
+        far_m: float = 1.0,
+    ) -> None:
+        if not isinstance(intrinsics, CameraIntrinsics):
+            raise ValueError(f"intrinsics must be CameraIntrinsics, got {type(intrinsics).__name__}")
+        if not np.isfinite(baseline_m) or baseline_m <= 0:
+            raise ValueError(f"baseline_m must be finite and > 0, got {baseline_m!r}")
+        if not (np.isfinite(near_m) and np.isfinite(far_m) and 0 < near_m < far_m):
+            raise ValueError(f"need 0 < near_m < far_m (finite), got {near_m!r}, {far_m!r}")
+        pose = default_camera_pose() if pose is None else np.array(pose, dtype=float)
+        if pose.shape != (4, 4) or not np.isfinite(pose).all():
+            raise ValueError(f"pose must be a finite 4x4 matrix, got shape {pose.shape}")
+        rotation = pose[:3, :3]
+        if (not np.allclose(rotation.T @ rotation, np.eye(3), atol=1e-6)
+                or np.linalg.det(rotation) <= 0 or not np.allclose(pose[3], [0, 0, 0, 1])):
+            raise ValueError("pose must be a rigid transform (orthonormal rotation, det +1)")
+        self.intrinsics = intrinsics
+        self.baseline_m = float(baseline_m)
+        self.near_m = float(near_m)
+        self.far_m = float(far_m)
+        self._pose = pose
+        self._pose.flags.writeable = False
+        self._cam_from_world = np.linalg.inv(pose)
+
+    @property
+    def pose(self) -> np.ndarray:
+        """T_world_leftcam (4x4, read-only view, metres)."""
+        return self._pose
+
+    def to_camera_frame(self, points_world: np.ndarray) -> np.ndarray:
+        """Map world points (N, 3) or (3,) in metres to the left camera frame, (N, 3) m."""
+        points = _as_points(points_world, 3, "points_world")
+        return points @ self._cam_from_world[:3, :3].T + self._cam_from_world[:3, 3]
+
+    def to_world(self, points_cam: np.ndarray) -> np.ndarray:
+        """Map left-camera-frame points (N, 3) or (3,) in metres to the world frame, (N, 3) m."""
+        points = _as_points(points_cam, 3, "points_cam")
+        return points @ self._pose[:3, :3].T + self._pose[:3, 3]
+
+    def project(self, points_world: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Project world points (N, 3) or (3,) in metres to (left_uv, right_uv), each (N, 2) px."""
+        return self.project_camera_frame(self.to_camera_frame(points_world))
+
+    def project_camera_frame(self, points_cam: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Project left-camera-frame points (N, 3) m to (left_uv, right_uv), each (N, 2) px.
+
+        Raises:
+            ValueError: If a point is not strictly in front of the camera (z <= 0).
+        """
+        points = _as_points(points_cam, 3, "points_cam")
+        behind = np.flatnonzero(points[:, 2] <= 0)
+        if behind.size:
+            raise ValueError(f"points_cam row(s) {behind.tolist()} are not in front of the camera (z <= 0)")
+        k = self.intrinsics
+        x, y, z = points.T
+        v = k.fy * y / z + k.cy
+        left = np.stack([k.fx * x / z + k.cx, v], axis=1)
+        right = np.stack([k.fx * (x - self.baseline_m) / z + k.cx, v], axis=1)
+        return left, right
+
+    def triangulate(self, left_uv: np.ndarray, right_uv: np.ndarray) -> np.ndarray:
+        """Triangulate matched pixels (N, 2) of the rectified pair into the LEFT camera frame.
+
+        Depth is ``z = fx * baseline / (u_left - u_right)``; the row used is the mean
+        of both rows (least squares for a rectified pair).
+
+        Returns:
+            (N, 3) positions in metres, left camera frame.
+
+        Raises:
+            ValueError: On shape mismatch, non-finite input or non-positive disparity.
+        """
+        left = _as_points(left_uv, 2, "left_uv")
+        right = _as_points(right_uv, 2, "right_uv")
+        if left.shape != right.shape:
+            raise ValueError(f"left_uv and right_uv shapes differ: {left.shape} vs {right.shape}")
+        disparity = left[:, 0] - right[:, 0]
+        bad = np.flatnonzero(disparity <= 0)
+        if bad.size:
+            raise ValueError(f"non-positive disparity in row(s) {bad.tolist()}: {disparity[bad].tolist()} px")
+        k = self.intrinsics
+        z = k.fx * self.baseline_m / disparity
+        x = (left[:, 0] - k.cx) * z / k.fx
+        y = (0.5 * (left[:, 1] + right[:, 1]) - k.cy) * z / k.fy
+        return np.stack([x, y, z], axis=1)
+
+    def view_matrix(self, side: str) -> list[float]:
+        """OpenGL view matrix (world -> GL eye) of ``side``, column-major list of 16 floats."""
+        if side not in _SIDES:
+            raise ValueError(f"side must be one of {_SIDES}, got {side!r}")
+        cam_from_world = self._cam_from_world.copy()
+        if side == "right":
+            cam_from_world[0, 3] -= self.baseline_m
+        return (_CV_TO_GL @ cam_from_world).flatten(order="F").tolist()
+
+    def projection_matrix(self, window: PixelWindow | None = None) -> list[float]:
+        """OpenGL projection matrix for TinyRenderer, column-major list of 16 floats.
+
+        With ``window`` the frustum is the off-centre sub-frustum covering exactly
+        that window's pixels (principal point shifted by (u0, v0)).
+        """
+        k = self.intrinsics
+        if window is None:
+            window = PixelWindow(0, 0, k.width, k.height)
+        self._check_window(window)
+        w, h = window.width, window.height
+        cx = k.cx - window.u0 + _TINY_SAMPLE_OFFSET_U_PX
+        cy = k.cy - window.v0 + _TINY_SAMPLE_OFFSET_V_PX
+        n, f = self.near_m, self.far_m
+        proj = np.zeros((4, 4))
+        proj[0, 0] = 2.0 * k.fx / w
+        proj[0, 2] = 1.0 - 2.0 * cx / w
+        proj[1, 1] = 2.0 * k.fy / h
+        proj[1, 2] = 2.0 * cy / h - 1.0
+        proj[2, 2] = -(f + n) / (f - n)
+        proj[2, 3] = -2.0 * f * n / (f - n)
+        proj[3, 2] = -1.0
+        return proj.flatten(order="F").tolist()
+
+    def render(self, client: object, side: str, window: PixelWindow | None = None) -> np.ndarray:
+        """Render ``side`` (or only ``window`` of it) with PyBullet's TinyRenderer.
+
+        Args:
+            client: A ``pybullet_utils.bullet_client.BulletClient``.
+            side: "left" or "right".
+            window: Sub-rectangle to render; must lie inside the image (see
+                :meth:`window_around` for clipping).
+
+        Returns:
+            (h, w, 3) uint8 RGB image (full image, or the window's pixels).
+        """
+        k = self.intrinsics
+        w, h = (k.width, k.height) if window is None else (window.width, window.height)
+        result = client.getCameraImage(
+            w, h, viewMatrix=self.view_matrix(side), projectionMatrix=self.projection_matrix(window),
+            renderer=pybullet.ER_TINY_RENDERER, shadow=0, flags=pybullet.ER_NO_SEGMENTATION_MASK,
+        )
+        rgba = np.asarray(result[2], dtype=np.uint8).reshape(h, w, 4)
+        return np.ascontiguousarray(rgba[:, :, :3])
+
+    def window_around(self, uv: np.ndarray, half_size_px: int) -> PixelWindow:
+        """Window of ``2 * half_size_px + 1`` px centred on the pixel nearest ``uv``, clipped to the image.
+
+        Raises:
+            ValueError: If ``uv`` is not finite, ``half_size_px`` < 0, or the window
+                lies entirely outside the image.
+        """
+        centre = _as_points(uv, 2, "uv")
+        if centre.shape[0] != 1:
+            raise ValueError(f"uv must be a single (2,) pixel, got shape {np.shape(uv)}")
+        if isinstance(half_size_px, bool) or not isinstance(half_size_px, (int, np.integer)) or half_size_px < 0:
+            raise ValueError(f"half_size_px must be an int >= 0, got {half_size_px!r}")
+        u, v = np.floor(centre[0] + 0.5).astype(int)
+        u_lo, v_lo = max(u - half_size_px, 0), max(v - half_size_px, 0)
+        u_hi = min(u + half_size_px, self.intrinsics.width - 1)
+        v_hi = min(v + half_size_px, self.intrinsics.height - 1)
+        if u_hi < u_lo or v_hi < v_lo:
+            raise ValueError(f"window around uv={centre[0].tolist()} lies entirely outside the image")
+        return PixelWindow(int(u_lo), int(v_lo), int(u_hi - u_lo + 1), int(v_hi - v_lo + 1))
+
+    def _check_window(self, window: PixelWindow) -> None:
+        """Raise ValueError unless ``window`` lies fully inside the image."""
+        k = self.intrinsics
+        if (window.u0 < 0 or window.v0 < 0 or window.u0 + window.width > k.width
+                or window.v0 + window.height > k.height):
+            raise ValueError(f"{window} is not inside the {k.width}x{k.height} image; clip it first (window_around)")

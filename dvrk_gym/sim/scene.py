@@ -1,0 +1,164 @@
+"""The workspace: a silicone phantom under white paper printed with 35 circles, a receptacle.
+
+All positions are in the robot base frame (origin at the remote centre of motion, z up),
+in metres, where the paper's own data put the workspace (its rows span bx 5-70 mm,
+by 11-74 mm, bz -170 to -158 mm): the phantom covers bx 2.5-77.5 mm and by 4.5-79.5 mm,
+and the paper's top surface is at bz = -0.164 m.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from dvrk_gym.sim.physics import Physics
+
+WORKSPACE_CENTER_M = np.array([0.040, 0.042, -0.164])
+"""Centre of the paper's top surface, (x, y, z) in metres, base frame."""
+
+PHANTOM_SIZE_M = np.array([0.075, 0.075, 0.010])
+"""Silicone phantom extent, (x, y, z) in metres."""
+
+PAPER_THICKNESS_M = 0.0003
+GRID_ROWS = 5
+GRID_COLUMNS = 7
+GRID_PITCH_M = np.array([0.0100, 0.0125])
+"""Centre-to-centre spacing of the printed circles along (x, y), in metres."""
+CIRCLE_RADIUS_M = 0.0025
+CIRCLE_PRINT_HEIGHT_M = 0.00005
+"""How far the printed discs stand above the paper (keeps them in front in the z-buffer)."""
+
+RECEPTACLE_CENTER_M = np.array([-0.022, 0.042, -0.172])
+"""Centre of the receptacle's floor top, (x, y, z) in metres: left of the phantom, in view."""
+RECEPTACLE_INNER_SIZE_M = np.array([0.026, 0.030])
+RECEPTACLE_WALL_HEIGHT_M = 0.014
+RECEPTACLE_WALL_THICKNESS_M = 0.0015
+
+TRAY_TOP_Z_M = -0.180
+"""Top of the dark tray everything stands on, in metres."""
+
+PHANTOM_CONTACT_STIFFNESS_N_M = 3.0e3
+"""Silicone compliance: about 0.3 mm of indentation per newton."""
+PHANTOM_CONTACT_DAMPING_N_S_M = 40.0
+
+WHITE = (0.95, 0.95, 0.93, 1.0)
+BLACK = (0.03, 0.03, 0.03, 1.0)
+SILICONE = (0.85, 0.62, 0.55, 1.0)
+RECEPTACLE_BLUE = (0.25, 0.40, 0.70, 1.0)
+TRAY_GREY = (0.30, 0.30, 0.32, 1.0)
+
+
+def grid_circle_centers() -> np.ndarray:
+    """The centres of the 35 printed circles on the paper's surface.
+
+    Returns:
+        (35, 3) positions in metres, base frame, row-major: row r (along y) then
+        column c (along x), so index = r * 7 + c.
+    """
+    cols = (np.arange(GRID_COLUMNS) - (GRID_COLUMNS - 1) / 2) * GRID_PITCH_M[0]
+    rows = (np.arange(GRID_ROWS) - (GRID_ROWS - 1) / 2) * GRID_PITCH_M[1]
+    yy, xx = np.meshgrid(rows, cols, indexing="ij")
+    offsets = np.stack([xx.ravel(), yy.ravel(), np.zeros(xx.size)], axis=1)
+    return WORKSPACE_CENTER_M + offsets
+
+
+@dataclass(frozen=True)
+class SceneBodies:
+    """PyBullet ids of the workspace bodies (also registered by name in Physics)."""
+
+    tray: int
+    phantom: int
+    paper: int
+    grid_rows: tuple[int, ...]
+    receptacle: int
+
+
+def build_scene(physics: Physics) -> SceneBodies:
+    """Create the tray, phantom, paper, printed grid and receptacle in ``physics``."""
+    tray = _box(physics, "tray", [0.16, 0.12, 0.004], [0.02, 0.042, TRAY_TOP_Z_M - 0.002], TRAY_GREY)
+    phantom_top = WORKSPACE_CENTER_M[2] - PAPER_THICKNESS_M
+    phantom_center = WORKSPACE_CENTER_M.copy()
+    phantom_center[2] = phantom_top - PHANTOM_SIZE_M[2] / 2
+    phantom = _box(physics, "phantom", PHANTOM_SIZE_M, phantom_center, SILICONE)
+    physics.client.changeDynamics(
+        phantom,
+        -1,
+        contactStiffness=PHANTOM_CONTACT_STIFFNESS_N_M,
+        contactDamping=PHANTOM_CONTACT_DAMPING_N_S_M,
+        lateralFriction=0.8,
+    )
+    paper_center = WORKSPACE_CENTER_M - [0.0, 0.0, PAPER_THICKNESS_M / 2]
+    paper_size = [PHANTOM_SIZE_M[0], PHANTOM_SIZE_M[1], PAPER_THICKNESS_M]
+    paper = _box(physics, "paper", paper_size, paper_center, WHITE)
+    physics.client.changeDynamics(paper, -1, lateralFriction=0.5)
+    grid_rows = _printed_grid(physics)
+    receptacle = _receptacle(physics)
+    return SceneBodies(tray, phantom, paper, grid_rows, receptacle)
+
+
+def _box(physics: Physics, name: str, size, center, rgba) -> int:
+    c = physics.client
+    half = [float(s) / 2 for s in size]
+    col = c.createCollisionShape(c.GEOM_BOX, halfExtents=half)
+    vis = c.createVisualShape(c.GEOM_BOX, halfExtents=half, rgbaColor=rgba)
+    body = c.createMultiBody(0.0, col, vis, basePosition=[float(v) for v in center])
+    return physics.add(name, body)
+
+
+def _printed_grid(physics: Physics) -> tuple[int, ...]:
+    """The 35 circles as visual-only bodies (printing adds no collision geometry).
+
+    One body per grid row: pybullet 3.2 segfaults on visual shape arrays of more than
+    16 shapes (measured here: 16 works, 17 crashes).
+    """
+    c = physics.client
+    centers = grid_circle_centers().reshape(GRID_ROWS, GRID_COLUMNS, 3)
+    lift = CIRCLE_PRINT_HEIGHT_M / 2
+    n = GRID_COLUMNS
+    bodies = []
+    for r, row in enumerate(centers):
+        vis = c.createVisualShapeArray(
+            shapeTypes=[c.GEOM_CYLINDER] * n,
+            radii=[CIRCLE_RADIUS_M] * n,
+            lengths=[CIRCLE_PRINT_HEIGHT_M] * n,
+            halfExtents=[[0.0, 0.0, 0.0]] * n,  # unused by cylinders; pybullet crashes without it
+            rgbaColors=[BLACK] * n,
+            visualFramePositions=[[float(p[0]), float(p[1]), float(p[2] + lift)] for p in row],
+        )
+        bodies.append(physics.add(f"grid_row_{r}", c.createMultiBody(0.0, -1, vis)))
+    return tuple(bodies)
+
+
+def _receptacle(physics: Physics) -> int:
+    """An open box: a floor and four walls, as one static body."""
+    c = physics.client
+    inner_x, inner_y = RECEPTACLE_INNER_SIZE_M
+    t, h = RECEPTACLE_WALL_THICKNESS_M, RECEPTACLE_WALL_HEIGHT_M
+    outer_x, outer_y = inner_x + 2 * t, inner_y + 2 * t
+    half_extents = [
+        [outer_x / 2, outer_y / 2, t / 2],  # floor
+        [t / 2, outer_y / 2, h / 2],  # -x wall
+        [t / 2, outer_y / 2, h / 2],  # +x wall
+        [inner_x / 2, t / 2, h / 2],  # -y wall
+        [inner_x / 2, t / 2, h / 2],  # +y wall
+    ]
+    positions = [
+        [0.0, 0.0, -t / 2],
+        [-(inner_x + t) / 2, 0.0, h / 2],
+        [(inner_x + t) / 2, 0.0, h / 2],
+        [0.0, -(inner_y + t) / 2, h / 2],
+        [0.0, (inner_y + t) / 2, h / 2],
+    ]
+    n = len(half_extents)
+    col = c.createCollisionShapeArray(
+        shapeTypes=[c.GEOM_BOX] * n, halfExtents=half_extents, collisionFramePositions=positions
+    )
+    vis = c.createVisualShapeArray(
+        shapeTypes=[c.GEOM_BOX] * n,
+        halfExtents=half_extents,
+        rgbaColors=[RECEPTACLE_BLUE] * n,
+        visualFramePositions=positions,
+    )
+    body = c.createMultiBody(0.0, col, vis, basePosition=[float(v) for v in RECEPTACLE_CENTER_M])
+    return physics.add("receptacle", body)
