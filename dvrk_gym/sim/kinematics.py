@@ -63,16 +63,19 @@ TOOL_TIP_ROTATION: np.ndarray = _frozen([[0, -1, 0], [0, 0, 1], [-1, 0, 0]])
 JOINT_NAMES: tuple[str, ...] = (
     "outer_yaw", "outer_pitch", "insertion", "roll", "wrist_pitch", "wrist_yaw")
 _PRISMATIC_MASK = np.array([row.prismatic for row in PSM_DH])
-JOINT_LOWER: np.ndarray = _frozen(np.deg2rad([-91, -53, 0, -260, -80, -80]) * ~_PRISMATIC_MASK)
+_DEG = np.pi / 180.0
+JOINT_LOWER: np.ndarray = _frozen(
+    [-91 * _DEG, -53 * _DEG, 0.0, -260 * _DEG, -80 * _DEG, -80 * _DEG])
 JOINT_UPPER: np.ndarray = _frozen(
-    np.where(_PRISMATIC_MASK, 0.24, np.deg2rad([91, 53, 0, 260, 80, 80])))
+    [91 * _DEG, 53 * _DEG, 0.24, 260 * _DEG, 80 * _DEG, 80 * _DEG])
 JAW_LOWER_RAD: float = float(np.deg2rad(-20.0))
 JAW_UPPER_RAD: float = float(np.deg2rad(80.0))
 JAW_FULLY_OPEN_RAD: float = float(np.deg2rad(75.0))
 JAW_LENGTH_M: float = 0.0100
 PAPER_YAWS_RAD: np.ndarray = _frozen(np.deg2rad([-90.0, -45.0, 0.0, 45.0, 90.0]))
 
-# Distance from the RCM to the wrist-pitch axis is insertion - this (rows 3 and 4).
+# The wrist-pitch point lies (insertion - 15.6 mm) past the RCM along the shaft; this
+# is that +15.6 mm (sum of the insertion and roll d offsets, negated).
 _INSERTION_TO_WRIST_M = -(PSM_DH[2].d_offset_m + PSM_DH[3].d_offset_m)
 _WRIST_OFFSET_M = PSM_DH[5].a_m
 _LIMIT_TOL = 1e-9  # absorbs round-off when IK recovers a configuration on a limit
@@ -200,7 +203,7 @@ def _solve_branch(p6: np.ndarray, r6: np.ndarray, x5_sign: float, shaft_sign: fl
     r56 = _rot_x(PSM_DH[5].alpha_rad).T @ (r5.T @ r6)
     wrist_yaw = np.arctan2(r56[1, 0], r56[0, 0]) - PSM_DH[5].theta_offset_rad
     wrist_pitch -= PSM_DH[4].theta_offset_rad
-    return np.array([yaw, pitch, insertion, roll, _wrap(wrist_pitch), _wrap(wrist_yaw)])
+    return np.array([yaw, pitch, insertion, _wrap(roll), _wrap(wrist_pitch), _wrap(wrist_yaw)])
 
 
 def _limit_violations(q: np.ndarray, tolerance: float) -> list[str]:
@@ -270,11 +273,16 @@ def inverse_kinematics(pose: np.ndarray, q_ref: np.ndarray | None = None) -> np.
         if not violations:
             return q
         first_violations = first_violations or violations
-    raise UnreachablePoseError("pose needs joints outside their limits: " + "; ".join(first_violations))
+    raise UnreachablePoseError(
+        "pose needs joints outside their limits: " + "; ".join(first_violations))
 
 
 def within_joint_limits(q: np.ndarray, tolerance: float = _LIMIT_TOL) -> bool:
-    """Whether every joint of q (6,), rad / m, lies within its limits (+- tolerance)."""
+    """Whether every joint of q (6,), rad / m, lies within its limits.
+
+    The default tolerance of 1e-9 (rad or m) accepts IK results that sit on a limit
+    up to round-off; pass 0.0 for a strict check.
+    """
     return not _limit_violations(_as_vector(q, 6, "q"), tolerance)
 
 
@@ -289,7 +297,9 @@ def clamp_to_joint_limits(q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return clamped, clamped != q
 
 
-def jaw_tip_positions(q: np.ndarray, jaw_angle_rad: float, dh: tuple[DHRow, ...] = PSM_DH) -> np.ndarray:
+def jaw_tip_positions(
+    q: np.ndarray, jaw_angle_rad: float, dh: tuple[DHRow, ...] = PSM_DH
+) -> np.ndarray:
     """Positions of the two jaw tips.
 
     Args:

@@ -110,4 +110,5 @@ class Physics:
             self._bodies.clear()
 
     def __del__(self) -> None:
-        self.close()
+        if hasattr(self, "_client"):  # __init__ may have failed before the server existed
+            self.close()

@@ -16,6 +16,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from dvrk_gym.sim import kinematics as kin
+from dvrk_gym.sim import meshes
 from dvrk_gym.sim.physics import Physics
 
 SHAFT_RADIUS_M = 0.0042
@@ -25,9 +26,9 @@ WRIST_HALF_EXTENTS_M = np.array([0.0046, 0.0026, 0.0032])
 JAW_THICKNESS_M = 0.0011
 JAW_WIDTH_M = 0.0026
 
-MARKER_HALF_EXTENTS_M = np.array([0.0020, 0.00010, 0.0024])
+MARKER_HALF_EXTENTS_M = np.array([0.0018, 0.00010, 0.0018])
 """Red marker half sizes in the wrist-pitch frame (x along the wrist, y its normal), metres."""
-MARKER_OFFSET_M = np.array([0.0046, WRIST_HALF_EXTENTS_M[1] + MARKER_HALF_EXTENTS_M[1], 0.0])
+MARKER_OFFSET_M = np.array([0.0050, WRIST_HALF_EXTENTS_M[1] + MARKER_HALF_EXTENTS_M[1], 0.0])
 """Centre of the marker patch in the wrist-pitch frame (frame 5), metres."""
 MARKER_NORMAL = np.array([0.0, 1.0, 0.0])
 """Outward normal of the marker patch in frame 5 (unit vector)."""
@@ -80,7 +81,6 @@ def _link_shapes() -> dict[str, list[_Shape]]:
         ],
         "wrist_pitch": [
             _Shape("box", (wx, wy, wz), (wx, 0.0, 0.0), WRIST_GREY),
-            _Shape("cylinder", (0.0016, 2 * wz), (0.0, 0.0, 0.0), WRIST_GREY, collides=False),
             _Shape("box", tuple(float(v) for v in MARKER_HALF_EXTENTS_M), tuple(float(v) for v in MARKER_OFFSET_M), MARKER_RED, collides=False),
         ],
         "jaw_a": [  # jaw A opens towards -x (its angle is q6 + jaw / 2): it sits on the -x side
@@ -89,8 +89,8 @@ def _link_shapes() -> dict[str, list[_Shape]]:
         "jaw_b": [
             _Shape("box", (jaw_x, jaw_len / 2, JAW_WIDTH_M / 2), (jaw_x, jaw_len / 2, 0.0), JAW_STEEL),
         ],
-        "wrist_yaw": [
-            _Shape("cylinder", (0.0012, 2 * JAW_WIDTH_M), (0.0, 0.0, 0.0), WRIST_GREY, collides=False),
+        "wrist_yaw": [  # the jaw pivot pin, along the wrist-yaw axis
+            _Shape("box", (0.0011, 0.0011, JAW_WIDTH_M), (0.0, 0.0, 0.0), WRIST_GREY, collides=False),
         ],
     }
 
@@ -131,12 +131,16 @@ class PSMBody:
                 lengths=[s.size[1] if s.kind == "cylinder" else 0.0 for s in subset],
             )
 
-        vis = c.createVisualShapeArray(
-            **kwargs(shapes),
-            rgbaColors=[list(s.rgba) for s in shapes],
-            visualFramePositions=[list(s.position) for s in shapes],
-            visualFrameOrientations=[list(s.orientation) for s in shapes],
-        )
+        if len(shapes) == 1 and shapes[0].kind == "cylinder":  # pybullet draws cylinders too wide
+            radius, length = shapes[0].size
+            vis = meshes.cylinder(radius, length).visual_shape(c, shapes[0].rgba, shapes[0].position, shapes[0].orientation)
+        else:
+            vis = c.createVisualShapeArray(
+                **kwargs(shapes),
+                rgbaColors=[list(s.rgba) for s in shapes],
+                visualFramePositions=[list(s.position) for s in shapes],
+                visualFrameOrientations=[list(s.orientation) for s in shapes],
+            )
         colliding = [s for s in shapes if s.collides]
         col = -1
         if colliding:

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from dvrk_gym.sim import meshes
 from dvrk_gym.sim.physics import Physics
 
 WORKSPACE_CENTER_M = np.array([0.040, 0.042, -0.164])
@@ -27,7 +28,7 @@ GRID_PITCH_M = np.array([0.0100, 0.0125])
 """Centre-to-centre spacing of the printed circles along (x, y), in metres."""
 CIRCLE_RADIUS_M = 0.0025
 CIRCLE_PRINT_HEIGHT_M = 0.00005
-"""How far the printed discs stand above the paper (keeps them in front in the z-buffer)."""
+"""How far the printed discs are drawn above the paper (keeps them in front in the z-buffer)."""
 
 RECEPTACLE_CENTER_M = np.array([-0.022, 0.042, -0.172])
 """Centre of the receptacle's floor top, (x, y, z) in metres: left of the phantom, in view."""
@@ -70,13 +71,13 @@ class SceneBodies:
     tray: int
     phantom: int
     paper: int
-    grid_rows: tuple[int, ...]
+    grid: int
     receptacle: int
 
 
 def build_scene(physics: Physics) -> SceneBodies:
     """Create the tray, phantom, paper, printed grid and receptacle in ``physics``."""
-    tray = _box(physics, "tray", [0.16, 0.12, 0.004], [0.02, 0.042, TRAY_TOP_Z_M - 0.002], TRAY_GREY)
+    tray = _box(physics, "tray", [0.30, 0.22, 0.004], [0.03, 0.042, TRAY_TOP_Z_M - 0.002], TRAY_GREY)
     phantom_top = WORKSPACE_CENTER_M[2] - PAPER_THICKNESS_M
     phantom_center = WORKSPACE_CENTER_M.copy()
     phantom_center[2] = phantom_top - PHANTOM_SIZE_M[2] / 2
@@ -92,9 +93,9 @@ def build_scene(physics: Physics) -> SceneBodies:
     paper_size = [PHANTOM_SIZE_M[0], PHANTOM_SIZE_M[1], PAPER_THICKNESS_M]
     paper = _box(physics, "paper", paper_size, paper_center, WHITE)
     physics.client.changeDynamics(paper, -1, lateralFriction=0.5)
-    grid_rows = _printed_grid(physics)
+    grid = _printed_grid(physics)
     receptacle = _receptacle(physics)
-    return SceneBodies(tray, phantom, paper, grid_rows, receptacle)
+    return SceneBodies(tray, phantom, paper, grid, receptacle)
 
 
 def _box(physics: Physics, name: str, size, center, rgba) -> int:
@@ -106,28 +107,11 @@ def _box(physics: Physics, name: str, size, center, rgba) -> int:
     return physics.add(name, body)
 
 
-def _printed_grid(physics: Physics) -> tuple[int, ...]:
-    """The 35 circles as visual-only bodies (printing adds no collision geometry).
-
-    One body per grid row: pybullet 3.2 segfaults on visual shape arrays of more than
-    16 shapes (measured here: 16 works, 17 crashes).
-    """
-    c = physics.client
-    centers = grid_circle_centers().reshape(GRID_ROWS, GRID_COLUMNS, 3)
-    lift = CIRCLE_PRINT_HEIGHT_M / 2
-    n = GRID_COLUMNS
-    bodies = []
-    for r, row in enumerate(centers):
-        vis = c.createVisualShapeArray(
-            shapeTypes=[c.GEOM_CYLINDER] * n,
-            radii=[CIRCLE_RADIUS_M] * n,
-            lengths=[CIRCLE_PRINT_HEIGHT_M] * n,
-            halfExtents=[[0.0, 0.0, 0.0]] * n,  # unused by cylinders; pybullet crashes without it
-            rgbaColors=[BLACK] * n,
-            visualFramePositions=[[float(p[0]), float(p[1]), float(p[2] + lift)] for p in row],
-        )
-        bodies.append(physics.add(f"grid_row_{r}", c.createMultiBody(0.0, -1, vis)))
-    return tuple(bodies)
+def _printed_grid(physics: Physics) -> int:
+    """The 35 circles as one visual-only mesh (printing adds no collision geometry)."""
+    centers = grid_circle_centers() + [0.0, 0.0, CIRCLE_PRINT_HEIGHT_M]
+    visual = meshes.discs(centers, CIRCLE_RADIUS_M).visual_shape(physics.client, BLACK)
+    return physics.add("grid", physics.client.createMultiBody(0.0, -1, visual))
 
 
 def _receptacle(physics: Physics) -> int:

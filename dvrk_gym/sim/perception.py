@@ -1,0 +1,134 @@
+"""Perception on rendered pixels with OpenCV: the red marker and the printed circles.
+
+Everything here works on RGB images (uint8, (height, width, 3)) and returns pixel
+coordinates (u right, v down; pixel centres at integers, the OpenCV convention).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+RED_HUE_MAX = 8
+"""Red hue lies in [0, RED_HUE_MAX] or [180 - RED_HUE_MAX, 180) in OpenCV's 0-180 hue scale."""
+RED_MIN_SATURATION = 150
+RED_MIN_VALUE = 50
+MIN_MARKER_AREA_PX = 12
+"""A red blob smaller than this (at any resolution) is noise, not the marker."""
+
+DARK_MAX_VALUE = 45
+"""A printed circle is darker than this (0-255) in grey level."""
+MIN_CIRCULARITY = 0.75
+"""4 pi area / perimeter^2 of a contour accepted as a printed circle (1 for a disc)."""
+
+
+@dataclass(frozen=True)
+class Blob:
+    """A detected image region.
+
+    Attributes:
+        centroid: (u, v) of its pixel-mass centre, in pixels.
+        area_px: its area in pixels.
+        touches_border: whether it reaches the image edge (so it may be cut off).
+    """
+
+    centroid: np.ndarray
+    area_px: float
+    touches_border: bool
+
+
+def red_mask(rgb: np.ndarray) -> np.ndarray:
+    """Binary mask (uint8, 0 or 255) of the strongly red pixels of an RGB image."""
+    hsv = cv2.cvtColor(np.ascontiguousarray(rgb), cv2.COLOR_RGB2HSV)
+    low = cv2.inRange(hsv, (0, RED_MIN_SATURATION, RED_MIN_VALUE), (RED_HUE_MAX, 255, 255))
+    high = cv2.inRange(hsv, (180 - RED_HUE_MAX, RED_MIN_SATURATION, RED_MIN_VALUE), (180, 255, 255))
+    return cv2.bitwise_or(low, high)
+
+
+def detect_marker(rgb: np.ndarray, min_area_px: float = MIN_MARKER_AREA_PX) -> Blob | None:
+    """Find the red marker: the centroid of the largest red region, or None if not seen.
+
+    Args:
+        rgb: the image, uint8 (h, w, 3).
+        min_area_px: the smallest region accepted as the marker, in pixels.
+    """
+    mask = red_mask(rgb)
+    count, labels, stats, centroids = cv2.connectedComponentsWithStats(mask, connectivity=8)
+    if count <= 1:
+        return None
+    largest = 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
+    area = float(stats[largest, cv2.CC_STAT_AREA])
+    if area < min_area_px:
+        return None
+    x, y, w, h = (int(stats[largest, k]) for k in (cv2.CC_STAT_LEFT, cv2.CC_STAT_TOP, cv2.CC_STAT_WIDTH, cv2.CC_STAT_HEIGHT))
+    height, width = mask.shape
+    touches = x == 0 or y == 0 or x + w >= width or y + h >= height
+    return Blob(np.array(centroids[largest], dtype=float), area, touches)
+
+
+def detect_circles(rgb: np.ndarray, min_area_px: float, max_area_px: float) -> np.ndarray:
+    """Centroids of the dark, round regions of an image (the printed grid circles).
+
+    Args:
+        rgb: the image, uint8 (h, w, 3).
+        min_area_px: the smallest accepted circle area, pixels.
+        max_area_px: the largest accepted circle area, pixels.
+
+    Returns:
+        (N, 2) centroids (u, v) in pixels, sorted by v then u (top to bottom, left to right
+        within rows of similar v).
+    """
+    grey = cv2.cvtColor(np.ascontiguousarray(rgb), cv2.COLOR_RGB2GRAY)
+    dark = (grey < DARK_MAX_VALUE).astype(np.uint8) * 255
+    contours, _ = cv2.findContours(dark, cv2.RETR_LIST, cv2.CHAIN_APPROX_NONE)
+    found = []
+    for contour in contours:
+        area = cv2.contourArea(contour)
+        perimeter = cv2.arcLength(contour, closed=True)
+        if not (min_area_px <= area <= max_area_px) or perimeter <= 0:
+            continue
+        if 4.0 * np.pi * area / perimeter**2 < MIN_CIRCULARITY:
+            continue
+        found.append(_mask_centroid(dark, contour))
+    if not found:
+        return np.zeros((0, 2))
+    points = np.array(found)
+    return points[np.lexsort((points[:, 0], np.round(points[:, 1] / 10.0)))]
+
+
+def _mask_centroid(mask: np.ndarray, contour: np.ndarray) -> np.ndarray:
+    """Pixel-mass centroid of the mask inside one contour (more exact than the polygon's)."""
+    x, y, w, h = cv2.boundingRect(contour)
+    local = np.zeros((h, w), np.uint8)
+    cv2.drawContours(local, [contour - [x, y]], -1, 255, thickness=cv2.FILLED)
+    local &= mask[y : y + h, x : x + w]
+    m = cv2.moments(local, binaryImage=True)
+    return np.array([x + m["m10"] / m["m00"], y + m["m01"] / m["m00"]])
+
+
+def match_to_expected(detected: np.ndarray, expected: np.ndarray, max_distance_px: float) -> np.ndarray:
+    """Assign detections to expected points, nearest first.
+
+    Args:
+        detected: (N, 2) detected pixel positions.
+        expected: (M, 2) where each of M known things should appear, pixels.
+        max_distance_px: a detection farther than this from every expected point is ignored.
+
+    Returns:
+        (M, 2) the detection matched to each expected point, NaN where none was.
+    """
+    matched = np.full((len(expected), 2), np.nan)
+    if len(detected) == 0:
+        return matched
+    distances = np.linalg.norm(expected[:, None, :] - detected[None, :, :], axis=2)
+    used: set[int] = set()
+    for flat in np.argsort(distances, axis=None):
+        i, j = np.unravel_index(flat, distances.shape)
+        if distances[i, j] > max_distance_px:
+            break
+        if np.isnan(matched[i, 0]) and j not in used:
+            matched[i] = detected[j]
+            used.add(int(j))
+    return matched

@@ -1,0 +1,232 @@
+"""Tests for dvrk_gym.sim.camera (geometry, GL matrices and TinyRenderer agreement)."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pybullet
+import pytest
+from pybullet_utils import bullet_client
+
+from dvrk_gym.sim.camera import (
+    CAMERA_DISTANCE_M,
+    PAPER_BASELINE_M,
+    PAPER_INTRINSICS,
+    WORKSPACE_CENTER_M,
+    CameraIntrinsics,
+    PixelWindow,
+    StereoCamera,
+    default_camera_pose,
+)
+
+SPHERE_RADIUS_M = 0.0015
+CENTROID_TOL_PX = 0.3  # per point, any resolution; measured max 0.16 px (1920) / 0.23 px (640), silhouette digitisation
+CENTROID_BIAS_TOL_PX = 0.1  # mean signed error (= 0.3 px x scale at 640x360); measured |mean| <= 0.04 px
+TRIANGULATION_MEDIAN_TOL_M = 0.15e-3  # measured median ~0.1 mm
+TRIANGULATION_MAX_TOL_M = 0.5e-3  # measured max 0.37 mm over 40 random points
+# Window vs full-frame crop, measured over 2000 random windows (2.9e7 px): 6.8e-7 of pixels differ by 1 grey
+# level (shading rounding) and 2.0e-7 by more (one box-edge pixel whose coverage test ties; it flips to the
+# neighbouring face's colour, 86 levels). Everything else is bit-identical.
+WINDOW_SHADING_TOL_LEVELS = 1
+WINDOW_ANY_DIFF_FRACTION_TOL = 1e-4
+WINDOW_EDGE_FLIP_FRACTION_TOL = 1e-5
+CENTRE = np.asarray(WORKSPACE_CENTER_M)
+SPHERE_OFFSETS_M = [(0.0, 0.0, 0.003), (-0.035, -0.035, 0.002), (0.035, 0.035, 0.01), (-0.035, 0.035, 0.02),
+                    (0.035, -0.035, 0.005), (0.01, -0.02, 0.015), (-0.02, 0.025, 0.004)]
+
+
+def red_centroid(image: np.ndarray) -> np.ndarray:
+    """Centroid (u, v) in px of the red pixels of an RGB image."""
+    r, g, b = (image[:, :, i].astype(int) for i in range(3))
+    moments = cv2.moments(((r > 100) & (g < 80) & (b < 80)).astype(np.uint8), binaryImage=True)
+    assert moments["m00"] > 0, "no red pixels found"
+    return np.array([moments["m10"] / moments["m00"], moments["m01"] / moments["m00"]])
+
+
+@pytest.fixture(scope="module")
+def scene():
+    """DIRECT client with a white box, black discs, a grey tool shaft and a red sphere; yields (client, sphere)."""
+    client = bullet_client.BulletClient(connection_mode=pybullet.DIRECT)
+    box = client.createVisualShape(pybullet.GEOM_BOX, halfExtents=[0.0375, 0.0375, 0.005], rgbaColor=[1, 1, 1, 1])
+    client.createMultiBody(0, baseVisualShapeIndex=box, basePosition=(CENTRE - [0, 0, 0.005]).tolist())
+    disc = client.createVisualShape(pybullet.GEOM_CYLINDER, radius=0.002, length=0.0002, rgbaColor=[0, 0, 0, 1])
+    for dx, dy in [(-0.026, -0.03), (0.0, -0.03), (0.026, 0.0), (-0.013, 0.02), (0.013, 0.03)]:
+        client.createMultiBody(0, baseVisualShapeIndex=disc, basePosition=(CENTRE + [dx, dy, 0.0001]).tolist())
+    shaft = client.createVisualShape(pybullet.GEOM_CYLINDER, radius=0.004, length=0.06, rgbaColor=[0.6, 0.6, 0.65, 1])
+    client.createMultiBody(0, baseVisualShapeIndex=shaft, basePosition=(CENTRE + [0.065, 0.0, 0.02]).tolist(),
+                           baseOrientation=pybullet.getQuaternionFromEuler([0.0, 0.6, 0.3]))
+    red = client.createVisualShape(pybullet.GEOM_SPHERE, radius=SPHERE_RADIUS_M, rgbaColor=[1, 0, 0, 1])
+    sphere = client.createMultiBody(0, baseVisualShapeIndex=red, basePosition=(CENTRE + [0, 0, 0.003]).tolist())
+    yield client, sphere
+    client.disconnect()
+
+
+@pytest.fixture(scope="module")
+def full_frames(scene):
+    """Full 1920x1080 renders of both sides with the sphere at the workspace centre (+3 mm)."""
+    client, sphere = scene
+    client.resetBasePositionAndOrientation(sphere, (CENTRE + [0, 0, 0.003]).tolist(), [0, 0, 0, 1])
+    camera = StereoCamera()
+    return {side: camera.render(client, side) for side in ("left", "right")}
+
+
+def test_intrinsics_scaling_keeps_pixel_centres_consistent() -> None:
+    small = PAPER_INTRINSICS.scaled(640, 360)
+    assert (small.width, small.height) == (640, 360)
+    np.testing.assert_allclose([small.fx, small.fy, small.cx, small.cy], [2144 / 3, 2144 / 3, 319.5, 179.5])
+    points = np.array([[0.01, -0.02, 0.2], [-0.03, 0.01, 0.15]])
+    full_uv, _ = StereoCamera(PAPER_INTRINSICS).project_camera_frame(points)
+    small_uv, _ = StereoCamera(small).project_camera_frame(points)
+    np.testing.assert_allclose(small_uv, (full_uv + 0.5) / 3.0 - 0.5, atol=1e-9)
+    back = small.scaled(1920, 1080)
+    np.testing.assert_allclose([back.fx, back.cx, back.cy], [2144, 959.5, 539.5])
+
+
+def test_project_triangulate_round_trip_on_random_points() -> None:
+    camera = StereoCamera()
+    rng = np.random.default_rng(0)
+    z = rng.uniform(0.05, 0.6, 2000)
+    points_cam = np.stack([rng.uniform(-0.4, 0.4, z.size) * z, rng.uniform(-0.25, 0.25, z.size) * z, z], axis=1)
+    points_world = camera.to_world(points_cam)
+    np.testing.assert_allclose(camera.to_camera_frame(points_world), points_cam, rtol=0, atol=1e-15)
+    left, right = camera.project(points_world)
+    recovered = camera.triangulate(left, right)
+    expected = camera.to_camera_frame(points_world)
+    assert np.max(np.abs(recovered - expected) / np.linalg.norm(expected, axis=1, keepdims=True)) < 1e-12
+
+
+def test_right_camera_is_offset_by_baseline_along_x() -> None:
+    camera = StereoCamera()
+    points_cam = np.array([[0.0, 0.0, 0.19], [0.02, -0.01, 0.15], [-0.03, 0.02, 0.3]])
+    left, right = camera.project_camera_frame(points_cam)
+    np.testing.assert_allclose(left[:, 1], right[:, 1])
+    np.testing.assert_allclose(left[:, 0] - right[:, 0], PAPER_INTRINSICS.fx * PAPER_BASELINE_M / points_cam[:, 2])
+    right_centre_world = camera.pose @ np.array([PAPER_BASELINE_M, 0.0, 0.0, 1.0])
+    view_right = np.asarray(camera.view_matrix("right")).reshape(4, 4, order="F")
+    np.testing.assert_allclose(view_right @ right_centre_world, [0, 0, 0, 1], atol=1e-15)
+
+
+def test_default_pose_is_0_19_m_from_workspace_centre_and_tilted_10_to_20_deg() -> None:
+    pose = default_camera_pose()
+    np.testing.assert_allclose(pose[:3, :3].T @ pose[:3, :3], np.eye(3), atol=1e-12)
+    assert np.linalg.det(pose[:3, :3]) == pytest.approx(1.0)
+    centre_cam = StereoCamera(pose=pose).to_camera_frame(CENTRE)[0]
+    np.testing.assert_allclose(centre_cam, [0.0, 0.0, CAMERA_DISTANCE_M], atol=1e-12)
+    tilt_deg = np.degrees(np.arccos(-pose[2, 2]))
+    assert 10.0 < tilt_deg < 20.0
+
+
+def test_gl_matrices_reproduce_projection_with_tinyrenderer_sampling() -> None:
+    """TinyRenderer samples column i at viewport x = i and row r at viewport y = h - 1 - r."""
+    camera = StereoCamera()
+    points = CENTRE + np.random.default_rng(1).uniform(-0.03, 0.03, (50, 3))
+    for window in (None, PixelWindow(700, 300, 64, 48)):
+        w, h, u0, v0 = (1920, 1080, 0, 0) if window is None else (window.width, window.height, window.u0, window.v0)
+        proj = np.asarray(camera.projection_matrix(window)).reshape(4, 4, order="F")
+        for side, uv in zip(("left", "right"), camera.project(points)):
+            view = np.asarray(camera.view_matrix(side)).reshape(4, 4, order="F")
+            clip = (proj @ view @ np.c_[points, np.ones(len(points))].T).T
+            ndc = clip[:, :2] / clip[:, 3:]
+            pixels = np.stack([u0 + (ndc[:, 0] + 1) * w / 2, v0 + h - 1 - (ndc[:, 1] + 1) * h / 2], axis=1)
+            np.testing.assert_allclose(pixels, uv, atol=1e-9)
+
+
+def test_rendered_sphere_centroid_matches_projection_full_frame(full_frames) -> None:
+    camera = StereoCamera()
+    sphere_world = CENTRE + [0, 0, 0.003]
+    centroids = {}
+    for side, uv in zip(("left", "right"), camera.project(sphere_world)):
+        centroids[side] = red_centroid(full_frames[side])
+        assert np.linalg.norm(centroids[side] - uv[0]) < CENTROID_TOL_PX, side
+    recovered = camera.to_world(camera.triangulate(centroids["left"], centroids["right"]))[0]
+    assert np.linalg.norm(recovered - sphere_world) < TRIANGULATION_MAX_TOL_M
+
+
+def test_window_render_equals_full_frame_crop(scene, full_frames) -> None:
+    client, _ = scene
+    camera = StereoCamera()
+    rng = np.random.default_rng(2)
+    windows = [PixelWindow(0, 0, 64, 64), PixelWindow(1920 - 65, 1080 - 47, 65, 47), PixelWindow(959, 539, 1, 1),
+               PixelWindow(0, 500, 1920, 3), camera.window_around(camera.project(CENTRE)[0][0], 40)]
+    for size in (48, 64, 96, 128, 37):
+        windows += [PixelWindow(int(rng.integers(0, 1920 - size)), int(rng.integers(0, 1080 - size)), size, size)
+                    for _ in range(4)]
+    n_diff = n_flipped = n_total = 0
+    for side in ("left", "right"):
+        for window in windows:
+            image = camera.render(client, side, window)
+            assert image.shape == (window.height, window.width, 3) and image.dtype == np.uint8
+            crop = full_frames[side][window.v0:window.v0 + window.height, window.u0:window.u0 + window.width]
+            diff = np.abs(image.astype(int) - crop.astype(int)).max(axis=2)
+            n_diff += int(np.count_nonzero(diff))
+            n_flipped += int(np.count_nonzero(diff > WINDOW_SHADING_TOL_LEVELS))
+            n_total += diff.size
+    assert n_diff / n_total <= WINDOW_ANY_DIFF_FRACTION_TOL
+    assert n_flipped / n_total <= WINDOW_EDGE_FLIP_FRACTION_TOL
+
+
+@pytest.mark.parametrize("intrinsics", [PAPER_INTRINSICS, PAPER_INTRINSICS.scaled(640, 360)], ids=["1920", "640"])
+def test_sphere_centroids_across_workspace_match_projection_and_triangulate(scene, intrinsics) -> None:
+    """Full-res uses windows (validated above); 640x360 renders full frames."""
+    client, sphere = scene
+    camera = StereoCamera(intrinsics)
+    scale = intrinsics.width / PAPER_INTRINSICS.width
+    errors, depth_errors = [], []
+    for offset in SPHERE_OFFSETS_M:
+        point = CENTRE + offset
+        client.resetBasePositionAndOrientation(sphere, point.tolist(), [0, 0, 0, 1])
+        centroids = []
+        for side, uv in zip(("left", "right"), camera.project(point)):
+            window = camera.window_around(uv[0], 40) if scale == 1.0 else None
+            origin = np.zeros(2) if window is None else np.array([window.u0, window.v0])
+            centroids.append(red_centroid(camera.render(client, side, window)) + origin)
+            errors.append(centroids[-1] - uv[0])
+        recovered = camera.to_world(camera.triangulate(centroids[0], centroids[1]))[0]
+        depth_errors.append(np.linalg.norm(recovered - point))
+    errors = np.array(errors)
+    assert np.linalg.norm(errors, axis=1).max() < CENTROID_TOL_PX
+    assert np.all(np.abs(errors.mean(axis=0)) < CENTROID_BIAS_TOL_PX)
+    if scale == 1.0:
+        assert np.median(depth_errors) < TRIANGULATION_MEDIAN_TOL_M
+        assert max(depth_errors) < TRIANGULATION_MAX_TOL_M
+
+
+def test_window_around_clips_to_image() -> None:
+    camera = StereoCamera()
+    assert camera.window_around(np.array([959.6, 539.4]), 32) == PixelWindow(928, 507, 65, 65)
+    assert camera.window_around(np.array([3.2, 1075.0]), 10) == PixelWindow(0, 1065, 14, 15)
+
+
+def test_bad_inputs_raise_value_error(scene) -> None:
+    client, _ = scene
+    camera = StereoCamera()
+    with pytest.raises(ValueError, match=r"row\(s\) \[1\]"):
+        camera.triangulate(np.array([[100.0, 50.0], [100.0, 50.0]]), np.array([[90.0, 50.0], [105.0, 50.0]]))
+    with pytest.raises(ValueError, match="disparity"):
+        camera.triangulate(np.array([100.0, 50.0]), np.array([100.0, 50.0]))
+    with pytest.raises(ValueError, match="non-finite"):
+        camera.project(np.array([[0.04, np.nan, -0.16]]))
+    with pytest.raises(ValueError, match="non-finite"):
+        camera.triangulate(np.array([np.inf, 1.0]), np.array([0.0, 1.0]))
+    with pytest.raises(ValueError, match="in front"):
+        camera.project_camera_frame(np.array([0.0, 0.0, -0.1]))
+    with pytest.raises(ValueError, match="shape"):
+        camera.project(np.zeros((4, 2)))
+    with pytest.raises(ValueError, match="not inside"):
+        camera.render(client, "left", PixelWindow(1900, 10, 64, 64))
+    with pytest.raises(ValueError, match="not inside"):
+        camera.projection_matrix(PixelWindow(-1, 0, 8, 8))
+    with pytest.raises(ValueError, match="entirely outside"):
+        camera.window_around(np.array([-100.0, 50.0]), 20)
+    with pytest.raises(ValueError, match="side"):
+        camera.view_matrix("centre")
+    with pytest.raises(ValueError):
+        PixelWindow(0, 0, 0, 10)
+    with pytest.raises(ValueError):
+        CameraIntrinsics(1920, 1080, -1.0, 2144.0, 959.5, 539.5)
+    with pytest.raises(ValueError):
+        CameraIntrinsics(1920, 1080, 2144.0, 2144.0, float("nan"), 539.5)
+    with pytest.raises(ValueError):
+        StereoCamera(baseline_m=0.0)
+    with pytest.raises(ValueError, match="rigid"):
+        StereoCamera(pose=np.diag([2.0, 1.0, 1.0, 1.0]))
