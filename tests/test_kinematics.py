@@ -334,3 +334,17 @@ def test_nearest_paper_yaw_scalar_and_vectorised() -> None:
     assert kin.nearest_paper_yaw(np.deg2rad(30.0)) == pytest.approx(np.deg2rad(45.0))
     result = kin.nearest_paper_yaw(np.deg2rad([-100.0, -50.0, 10.0, 80.0, -170.0]))
     np.testing.assert_allclose(np.rad2deg(result), [-90.0, -45.0, 0.0, 90.0, -90.0])
+
+
+def test_clamped_inverse_kinematics_equals_exact_ik_when_reachable_and_clamps_otherwise():
+    from dvrk_gym.sim.kinematics import inverse_kinematics_clamped
+
+    pose = kin.pose_from_euler([0.04, 0.04, -0.154], 0.0, np.radians(5), np.radians(-167))
+    q, mask = inverse_kinematics_clamped(pose)
+    np.testing.assert_array_equal(q, kin.inverse_kinematics(pose))
+    assert not mask.any()
+    far = kin.pose_from_euler([0.04, 0.04, -0.154], 0.0, np.radians(5), np.radians(-60))
+    with pytest.raises(kin.UnreachablePoseError):
+        kin.inverse_kinematics(far)
+    q, mask = inverse_kinematics_clamped(far)
+    assert mask.any() and kin.within_joint_limits(q, tolerance=0.0)

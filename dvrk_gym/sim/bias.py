@@ -49,7 +49,13 @@ _DEG = np.pi / 180.0
 # Cable stretch saturates: wire rope is soft while its strands bed in and stiffer under
 # load, so stretch ~ scale * tanh(deflection / scale). These scales (rad) are where the
 # stretch curve bends over.
-OUTER_STRETCH_SCALE_RAD = 15.0 * _DEG
+OUTER_STRETCH_SCALE_RAD = 8.0 * _DEG
+# Outer (yaw, pitch) pose where the arm, as mounted, loads its outer cables least, rad.
+# It lies near the corner of the paper's workspace nearest the RCM's vertical (the
+# workspace spans about 1-27 deg of outer yaw and -28-0 deg of outer pitch), so the
+# stretch grows across the workspace, and differently for each tool yaw (the wrist,
+# and with it the shaft, sits on a different side of the jaw tip for each).
+OUTER_UNLOADED_RAD = np.array([5.0, -22.0]) * _DEG
 WRIST_STRETCH_SCALE_RAD = 30.0 * _DEG
 INSERTION_MAX_M = float(kin.JOINT_UPPER[2])
 # Lever arms (m) from each joint's motion to the jaw tip in the paper's workspace, used
@@ -68,7 +74,7 @@ PLAY_FRACTIONS = np.array([0.25, 0.5, 0.75, 1.0])
 NOMINAL_WRIST_COUPLING = np.array([[0.15, 0.15], [1.0, 0.0], [0.5, 1.0]])
 # Cable routing, pretension and wear differ between instruments: each stretch gain and
 # coupling entry of one instrument is its nominal value times ~ N(1, this sd).
-INSTRUMENT_SPREAD = 0.2
+INSTRUMENT_SPREAD = 0.1
 
 
 @dataclass(frozen=True)
@@ -206,16 +212,18 @@ def wrist_coupling(rng: np.random.Generator) -> np.ndarray:
 def outer_stretch(q: np.ndarray, config: BiasConfig, gains: np.ndarray) -> np.ndarray:
     """Outer yaw / pitch errors from the stretch of their drive cables, (2,) rad.
 
-    The outer joints are driven by capstans and cables loaded by the arm's unbalanced
-    weight, which grows as the joint leaves its balanced zero; the cable stiffens under
-    load, so the error grows and then saturates: gain * A * tanh(q / s).
+    The outer joints are driven by capstans and cables loaded by the arm's imperfectly
+    balanced weight. The load, and so the stretch, is zero at OUTER_UNLOADED_RAD and
+    grows either side of it; the cable stiffens under load, so the error grows and then
+    saturates: gain * A * tanh((q - q_unloaded) / s). A smooth, position-dependent
+    distortion of the workspace: the part of the error a rigid fit cannot remove.
 
     Args:
         q: (6,) joint values, rad / m.
         config: Supplies A = outer_stretch_rad.
         gains: (2,) per-instrument factors near 1.
     """
-    deflection = q[_OUTER] / OUTER_STRETCH_SCALE_RAD
+    deflection = (q[_OUTER] - OUTER_UNLOADED_RAD) / OUTER_STRETCH_SCALE_RAD
     return gains * config.outer_stretch_rad * np.tanh(deflection)
 
 

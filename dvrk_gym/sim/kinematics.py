@@ -277,6 +277,30 @@ def inverse_kinematics(pose: np.ndarray, q_ref: np.ndarray | None = None) -> np.
         "pose needs joints outside their limits: " + "; ".join(first_violations))
 
 
+def inverse_kinematics_clamped(pose: np.ndarray, q_ref: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Inverse kinematics that clamps into the joint limits instead of refusing.
+
+    For a reachable pose this equals :func:`inverse_kinematics`. Otherwise the physical
+    branch's solution is clamped joint by joint, so the tool goes as near as its limits
+    allow (the pose is then not reached exactly).
+
+    Returns:
+        (q (6,) within the limits, boolean mask (6,) of the joints that were clamped).
+
+    Raises:
+        ValueError: pose or q_ref is malformed or non-finite.
+        UnreachablePoseError: the pose is singular (e.g. at the RCM).
+    """
+    try:
+        q = inverse_kinematics(pose, q_ref)
+        return q, np.zeros(6, dtype=bool)
+    except UnreachablePoseError:
+        pose = _validate_pose(pose)
+        q_ref = None if q_ref is None else _as_vector(q_ref, 6, "q_ref")
+        q = _choose_roll(_solve_branch(pose[:3, 3], pose[:3, :3] @ TOOL_TIP_ROTATION.T, 1.0, 1.0), q_ref)
+        return clamp_to_joint_limits(q)
+
+
 def within_joint_limits(q: np.ndarray, tolerance: float = _LIMIT_TOL) -> bool:
     """Whether every joint of q (6,), rad / m, lies within its limits.
 

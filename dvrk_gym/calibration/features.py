@@ -1,0 +1,112 @@
+"""Input checks and encodings shared by the calibration models.
+
+A calibration input row is ``(cx, cy, cz, yaw, pitch, roll)``: the camera-frame position in
+metres and the dVRK/tfx Euler angles (intrinsic ZYX) in radians; a target row is the base
+position ``(bx, by, bz)`` in metres. Angles are encoded by their sines and cosines so that
+roll's wrap at +-pi (the paper's roll is drawn from [-180, -150] deg and some readings wrap
+to +180) is invisible to the models.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from dvrk_gym.sim.kinematics import PAPER_YAWS_RAD
+
+__all__ = [
+    "INPUT_COLUMNS",
+    "PAPER_YAWS_RAD",
+    "check_inputs",
+    "check_targets",
+    "encode_euler",
+    "encode_quaternion",
+    "nearest_yaw_index",
+]
+
+INPUT_COLUMNS = ("cx_m", "cy_m", "cz_m", "yaw_rad", "pitch_rad", "roll_rad")
+# The quaternion sign is chosen on the side of this orientation (yaw 0, pitch 0, roll pi:
+# the paper's tool points down), so the encoding is continuous over the whole workspace.
+_QUATERNION_REFERENCE_XYZW = np.array([1.0, 0.0, 0.0, 0.0])
+
+
+def check_inputs(X: object, name: str = "X", columns: int = 6) -> np.ndarray:
+    """Validate a 2-D array of finite numbers with a fixed number of columns.
+
+    Args:
+        X: Array-like of shape (N, columns).
+        name: Name used in error messages.
+        columns: Required number of columns (6 for calibration inputs).
+
+    Returns:
+        The array as float64, shape (N, columns).
+
+    Raises:
+        ValueError: If it is not numeric, not 2-D with ``columns`` columns, empty or not finite.
+    """
+    try:
+        array = np.asarray(X, dtype=np.float64)
+    except (TypeError, ValueError) as error:
+        raise ValueError(f"{name} is not a numeric array: {error}") from None
+    if array.ndim != 2 or array.shape[1] != columns:
+        raise ValueError(f"{name} has shape {array.shape}; expected (N, {columns})")
+    if array.shape[0] == 0:
+        raise ValueError(f"{name} has no rows; expected at least one")
+    if not np.all(np.isfinite(array)):
+        row = int(np.argwhere(~np.isfinite(array))[0, 0])
+        raise ValueError(f"{name} row {row} is not finite ({array[row]}); expected finite values")
+    return array
+
+
+def check_targets(y: object, rows: int, name: str = "y") -> np.ndarray:
+    """Validate base positions (N, 3) in metres, with N equal to the inputs' row count."""
+    array = check_inputs(y, name=name, columns=3)
+    if array.shape[0] != rows:
+        raise ValueError(f"{name} has {array.shape[0]} rows but the inputs have {rows}")
+    return array
+
+
+def encode_euler(X: np.ndarray) -> np.ndarray:
+    """Position plus the sine and cosine of each angle.
+
+    Args:
+        X: (N, 6) calibration inputs (metres, radians).
+
+    Returns:
+        (N, 9): cx, cy, cz in metres, then sin(yaw), sin(pitch), sin(roll), cos(yaw),
+        cos(pitch), cos(roll).
+    """
+    angles = X[:, 3:6]
+    return np.concatenate([X[:, :3], np.sin(angles), np.cos(angles)], axis=1)
+
+
+def encode_quaternion(X: np.ndarray) -> np.ndarray:
+    """Position plus the orientation as a unit quaternion.
+
+    Args:
+        X: (N, 6) calibration inputs (metres, radians).
+
+    Returns:
+        (N, 7): cx, cy, cz in metres, then the quaternion (x, y, z, w) of
+        Rz(yaw) Ry(pitch) Rx(roll), signed to lie on the hemisphere of a tool pointing down.
+    """
+    quaternions = Rotation.from_euler("ZYX", X[:, 3:6]).as_quat()
+    signs = np.where(quaternions @ _QUATERNION_REFERENCE_XYZW < 0.0, -1.0, 1.0)
+    return np.concatenate([X[:, :3], quaternions * signs[:, None]], axis=1)
+
+
+def nearest_yaw_index(yaw_rad: object) -> np.ndarray:
+    """Index of the nearest of the paper's five yaws (-90, -45, 0, 45, 90 deg).
+
+    Distances are wrapped, so a yaw of 179 deg is 1 deg from -180 deg; ties go to the lower
+    index.
+
+    Args:
+        yaw_rad: Scalar or array of yaws in radians.
+
+    Returns:
+        Integer array of the input's shape with values in 0..4 (into ``PAPER_YAWS_RAD``).
+    """
+    yaw = np.asarray(yaw_rad, dtype=np.float64)
+    difference = np.angle(np.exp(1j * (yaw[..., None] - PAPER_YAWS_RAD)))
+    return np.argmin(np.abs(difference), axis=-1)

@@ -1,0 +1,188 @@
+"""Phase I data collection: the paper's random exploration and its cleaning rule.
+
+The paper ran 57 trajectories from the four workspace corners, pausing about every
+millimetre to take three random rotations (yaw U[-90, 90], pitch U[-15, 25], roll
+U[-180, -150] degrees), and kept the samples where both cameras saw the red marker at the
+same place: 1,939 of 5,256 (37%); the rest the wrist hid.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+
+import gymnasium as gym
+import numpy as np
+from tqdm.auto import tqdm
+
+from dvrk_gym.envs.exploration import PITCH_RANGE_RAD, ROLL_RANGE_RAD, SAFE_X_M, SAFE_Y_M, SAFE_Z_M, YAW_RANGE_RAD
+
+ROW_TOLERANCE_PX = 2.0
+"""Rectified views agree when their rows differ by at most this, at 1920 x 1080."""
+DEPTH_RANGE_M = (0.10, 0.30)
+"""A triangulated depth outside this range is a mismatched pair, not the marker."""
+
+
+class PaperExplorationPolicy:
+    """The paper's Phase I protocol as a policy from observation to action.
+
+    Each trajectory heads for a random target in the safe ranges in steps of about
+    ``step_m``; at every pause it commands ``rotations_per_pause`` random orientations.
+    On reaching a target it draws another.
+
+    Args:
+        seed: seeds the policy's own generator (targets and rotations).
+        step_m: distance between pauses, metres (the paper: about 1 mm).
+        rotations_per_pause: random orientations commanded at each pause (the paper: 3).
+    """
+
+    def __init__(self, seed: int | None = None, step_m: float = 0.001, rotations_per_pause: int = 3) -> None:
+        if not step_m > 0:
+            raise ValueError(f"step_m must be > 0, got {step_m}")
+        if rotations_per_pause < 1:
+            raise ValueError(f"rotations_per_pause must be >= 1, got {rotations_per_pause}")
+        self.rng = np.random.default_rng(seed)
+        self.step_m = float(step_m)
+        self.rotations_per_pause = int(rotations_per_pause)
+        self._position: np.ndarray | None = None
+        self._target = np.zeros(3)
+        self._rotations_left = 0
+
+    def reset(self, observation: dict[str, np.ndarray]) -> None:
+        """Start a new trajectory from the reported position in ``observation``."""
+        self._position = np.asarray(observation["reported_pose"][:3], dtype=float)
+        self._target = self._draw_target()
+        self._rotations_left = self.rotations_per_pause
+
+    def __call__(self, observation: dict[str, np.ndarray]) -> np.ndarray:
+        """The next action (bx, by, bz, yaw, pitch, roll), base frame, metres and radians."""
+        if self._position is None:
+            self.reset(observation)
+        if self._rotations_left == 0:
+            self._advance()
+            self._rotations_left = self.rotations_per_pause
+        self._rotations_left -= 1
+        yaw = self.rng.uniform(*YAW_RANGE_RAD)
+        pitch = self.rng.uniform(*PITCH_RANGE_RAD)
+        roll = self.rng.uniform(*ROLL_RANGE_RAD)
+        return np.concatenate([self._position, [yaw, pitch, roll]]).astype(np.float32)
+
+    def _draw_target(self) -> np.ndarray:
+        return np.array([self.rng.uniform(*SAFE_X_M), self.rng.uniform(*SAFE_Y_M), self.rng.uniform(*SAFE_Z_M)])
+
+    def _advance(self) -> None:
+        offset = self._target - self._position
+        distance = float(np.linalg.norm(offset))
+        if distance <= self.step_m:
+            self._position = self._target
+            self._target = self._draw_target()
+        else:
+            self._position = self._position + offset * (self.step_m / distance)
+
+
+@dataclass(frozen=True)
+class Phase1Data:
+    """Phase I samples, one row per commanded pose (SI units).
+
+    Attributes:
+        reported_position: (N, 3) the robot's reported base position, m.
+        orientation: (N, 3) the commanded (yaw, pitch, roll), rad.
+        left_px: (N, 2) the marker in the left image, px (NaN when unseen).
+        right_px: (N, 2) the marker in the right image, px (NaN when unseen).
+        camera_position: (N, 3) triangulated marker position, left camera frame, m (NaN
+            unless both cameras saw it).
+        trajectory: (N,) which trajectory each row came from.
+        kept: (N,) whether the row passes the cleaning rule (:func:`clean_mask`).
+    """
+
+    reported_position: np.ndarray
+    orientation: np.ndarray
+    left_px: np.ndarray
+    right_px: np.ndarray
+    camera_position: np.ndarray
+    trajectory: np.ndarray
+    kept: np.ndarray
+
+    @property
+    def n_raw(self) -> int:
+        return int(len(self.kept))
+
+    @property
+    def n_kept(self) -> int:
+        return int(self.kept.sum())
+
+    def cleaned(self) -> "Phase1Data":
+        """Only the kept rows."""
+        return Phase1Data(**{f.name: getattr(self, f.name)[self.kept] for f in fields(self)})
+
+    @property
+    def X(self) -> np.ndarray:
+        """Calibration inputs (N, 6): camera position (m) and yaw, pitch, roll (rad)."""
+        return np.hstack([self.camera_position, self.orientation])
+
+    @property
+    def y(self) -> np.ndarray:
+        """Calibration targets (N, 3): reported base position, m."""
+        return self.reported_position
+
+    def save(self, path) -> None:
+        """Write the rows to an ``.npz`` file (plain arrays, no pickles)."""
+        np.savez(path, **{f.name: getattr(self, f.name) for f in fields(self)})
+
+    @classmethod
+    def load(cls, path) -> "Phase1Data":
+        """Read rows written by :meth:`save`."""
+        with np.load(path, allow_pickle=False) as data:
+            names = {f.name for f in fields(cls)}
+            if set(data.files) != names:
+                raise ValueError(f"{path} is not Phase I data: arrays {sorted(data.files)}, expected {sorted(names)}")
+            return cls(**{name: data[name] for name in names})
+
+
+def clean_mask(left_px: np.ndarray, right_px: np.ndarray, camera_position: np.ndarray, image_width: int) -> np.ndarray:
+    """The paper's cleaning rule: both cameras saw the marker, at the same place.
+
+    A row is kept when both detections exist, their rows agree within
+    ``ROW_TOLERANCE_PX`` (scaled to the image width; a rectified pair sees a point on the
+    same row), and the triangulated depth lies in ``DEPTH_RANGE_M``.
+    """
+    tolerance = ROW_TOLERANCE_PX * image_width / 1920.0
+    seen = np.isfinite(left_px).all(axis=1) & np.isfinite(right_px).all(axis=1) & np.isfinite(camera_position).all(axis=1)
+    rows_agree = np.abs(np.nan_to_num(left_px[:, 1] - right_px[:, 1], nan=np.inf)) <= tolerance
+    depth = np.nan_to_num(camera_position[:, 2], nan=-1.0)
+    return seen & rows_agree & (depth >= DEPTH_RANGE_M[0]) & (depth <= DEPTH_RANGE_M[1])
+
+
+def collect_phase1(env: gym.Env, policy: PaperExplorationPolicy, n_trajectories: int, seed: int = 0, progress: bool = True) -> Phase1Data:
+    """Run the paper's Phase I: ``n_trajectories`` episodes of CalibrationExploration-v0.
+
+    Args:
+        env: a CalibrationExploration-v0 environment (wrapped or not).
+        policy: chooses the commanded poses.
+        n_trajectories: how many trajectories (episodes) to run (the paper: 57).
+        seed: episode ``k`` is reset with seed ``seed + k``.
+        progress: show a progress bar.
+
+    Returns:
+        Every commanded pose as a raw row, with the cleaning rule's verdict in ``kept``.
+    """
+    if n_trajectories < 1:
+        raise ValueError(f"n_trajectories must be >= 1, got {n_trajectories}")
+    rows: dict[str, list] = {name: [] for name in ("reported_position", "orientation", "left_px", "right_px", "camera_position", "trajectory")}
+    for k in tqdm(range(n_trajectories), desc="Phase I trajectories", disable=not progress):
+        observation, _ = env.reset(seed=seed + k)
+        policy.reset(observation)
+        done = False
+        while not done:
+            action = policy(observation)
+            observation, _, terminated, truncated, info = env.step(action)
+            done = terminated or truncated
+            rows["reported_position"].append(info["reported_position"])
+            rows["orientation"].append(info["reported_orientation"])
+            rows["left_px"].append(info["marker_left_uv"])
+            rows["right_px"].append(info["marker_right_uv"])
+            rows["camera_position"].append(info["marker_camera_position"])
+            rows["trajectory"].append(k)
+    arrays = {name: np.array(values) for name, values in rows.items()}
+    width = env.unwrapped.config.camera_resolution[0]
+    kept = clean_mask(arrays["left_px"], arrays["right_px"], arrays["camera_position"], width)
+    return Phase1Data(**arrays, kept=kept)

@@ -1,0 +1,227 @@
+"""Model files that cannot run code when loaded: plain ``.npz`` with a JSON header and digest.
+
+A model file is an ``np.savez`` archive holding
+
+- the model's numeric arrays (float, integer or bool; never object arrays),
+- ``__metadata__``: a 0-d unicode array with JSON ``{"kind", "format_version", "params",
+  "arrays": {name: {"shape", "dtype"}}}``,
+- ``__digest__``: a 0-d unicode array, the SHA-256 (hex) of the metadata and every array.
+
+Loading uses ``np.load(..., allow_pickle=False)`` and refuses, with ``ModelFileError``,
+anything that is not exactly such a file. The digest detects corruption and careless edits;
+it is not a signature (anyone can recompute it), so the models also check their arrays'
+shapes, finiteness and index ranges after loading.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import zipfile
+from typing import Any, ClassVar, Mapping, TypeVar
+
+import numpy as np
+
+__all__ = [
+    "FORMAT_VERSION",
+    "ModelFileError",
+    "SavableModel",
+    "read_model_file",
+    "require_array",
+    "require_names",
+    "write_model_file",
+]
+
+FORMAT_VERSION = 1
+_METADATA = "__metadata__"
+_DIGEST = "__digest__"
+_ALLOWED_KINDS = "fiub"  # float, signed and unsigned integer, bool
+
+PathLike = str | os.PathLike
+_Model = TypeVar("_Model", bound="SavableModel")
+
+
+class ModelFileError(ValueError):
+    """A model file is missing, corrupt, tampered with or of the wrong kind."""
+
+
+def _digest(metadata_json: str, arrays: Mapping[str, np.ndarray]) -> str:
+    """SHA-256 over the metadata and each array's name, dtype, shape and bytes, in name order."""
+    sha = hashlib.sha256()
+
+    def update(chunk: bytes) -> None:
+        sha.update(len(chunk).to_bytes(8, "little"))  # length prefix: no ambiguous joins
+        sha.update(chunk)
+
+    update(metadata_json.encode("utf-8"))
+    for name in sorted(arrays):
+        array = np.ascontiguousarray(arrays[name])
+        update(name.encode("utf-8"))
+        update(array.dtype.str.encode("ascii"))
+        update(json.dumps(list(array.shape)).encode("ascii"))
+        update(array.tobytes())
+    return sha.hexdigest()
+
+
+def write_model_file(path: PathLike, kind: str, params: Mapping[str, Any],
+                     arrays: Mapping[str, np.ndarray]) -> None:
+    """Write a model file.
+
+    Args:
+        path: Destination; written as given (``np.savez`` adds ``.npz`` if missing).
+        kind: Model kind, checked on load.
+        params: JSON-serialisable hyper-parameters.
+        arrays: Numeric arrays by name (names must not start with ``__``).
+
+    Raises:
+        ValueError: If an array is not numeric or a name is reserved.
+    """
+    arrays = {name: np.ascontiguousarray(value) for name, value in arrays.items()}
+    for name, value in arrays.items():
+        if name.startswith("__") or value.dtype.kind not in _ALLOWED_KINDS:
+            raise ValueError(f"array {name!r} ({value.dtype}) cannot be saved: names must not "
+                             f"start with '__' and dtypes must be numeric or bool")
+    metadata = {
+        "kind": kind,
+        "format_version": FORMAT_VERSION,
+        "params": dict(params),
+        "arrays": {name: {"shape": list(value.shape), "dtype": value.dtype.str}
+                   for name, value in sorted(arrays.items())},
+    }
+    metadata_json = json.dumps(metadata, sort_keys=True)
+    np.savez(path, **arrays, **{_METADATA: np.array(metadata_json),
+                                _DIGEST: np.array(_digest(metadata_json, arrays))})
+
+
+def _read_all(path: PathLike) -> dict[str, np.ndarray]:
+    if not os.path.isfile(path):
+        raise ModelFileError(f"{path}: no such model file")
+    if not zipfile.is_zipfile(path):
+        raise ModelFileError(f"{path}: not an .npz model file (not a zip archive)")
+    try:
+        with np.load(path, allow_pickle=False) as archive:
+            return {name: archive[name] for name in archive.files}
+    except (ValueError, OSError, EOFError, zipfile.BadZipFile, KeyError) as error:
+        # Object arrays (pickles) raise ValueError here because allow_pickle is False.
+        raise ModelFileError(f"{path}: unreadable model file: {error}") from None
+
+
+def _string(arrays: Mapping[str, np.ndarray], name: str, path: PathLike) -> str:
+    value = arrays.get(name)
+    if value is None:
+        raise ModelFileError(f"{path}: missing {name!r}; not a dvrk_gym model file")
+    if value.shape != () or value.dtype.kind != "U":
+        raise ModelFileError(f"{path}: {name!r} is {value.dtype} {value.shape}; expected a string")
+    return str(value)
+
+
+def _check_declared(path: PathLike, declared: Mapping[str, Any],
+                    arrays: Mapping[str, np.ndarray]) -> None:
+    missing = sorted(set(declared) - set(arrays))
+    extra = sorted(set(arrays) - set(declared))
+    if missing or extra:
+        raise ModelFileError(f"{path}: arrays do not match the metadata: "
+                             f"missing {missing}, unexpected {extra}")
+    for name, spec in declared.items():
+        array = arrays[name]
+        if list(array.shape) != spec.get("shape") or array.dtype.str != spec.get("dtype"):
+            raise ModelFileError(
+                f"{path}: array {name!r} is {array.dtype.str} {list(array.shape)}; "
+                f"metadata says {spec.get('dtype')} {spec.get('shape')}")
+        if array.dtype.kind not in _ALLOWED_KINDS:
+            raise ModelFileError(f"{path}: array {name!r} has dtype {array.dtype}; "
+                                 f"expected numeric or bool")
+        if array.dtype.kind == "f" and not np.all(np.isfinite(array)):
+            raise ModelFileError(f"{path}: array {name!r} holds non-finite values")
+
+
+def read_model_file(path: PathLike, kind: str) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+    """Read and verify a model file written by :func:`write_model_file`.
+
+    Args:
+        path: The ``.npz`` file.
+        kind: The model kind the caller expects.
+
+    Returns:
+        ``(params, arrays)``: the hyper-parameters and the numeric arrays by name.
+
+    Raises:
+        ModelFileError: If the file is not a zip/npz, holds object (pickled) arrays, has a
+            bad or missing header, the wrong kind or version, missing or extra arrays,
+            shapes or dtypes unlike the header, non-finite floats, or a digest mismatch.
+    """
+    arrays = _read_all(path)
+    metadata_json = _string(arrays, _METADATA, path)
+    digest = _string(arrays, _DIGEST, path)
+    data = {name: value for name, value in arrays.items() if name not in (_METADATA, _DIGEST)}
+    try:
+        metadata = json.loads(metadata_json)
+    except json.JSONDecodeError as error:
+        raise ModelFileError(f"{path}: metadata is not valid JSON: {error}") from None
+    if not isinstance(metadata, dict) or not isinstance(metadata.get("arrays"), dict) \
+            or not isinstance(metadata.get("params"), dict):
+        raise ModelFileError(f"{path}: metadata lacks 'params' and 'arrays' objects")
+    if metadata.get("kind") != kind:
+        raise ModelFileError(f"{path}: holds a {metadata.get('kind')!r} model; expected {kind!r}")
+    if metadata.get("format_version") != FORMAT_VERSION:
+        raise ModelFileError(f"{path}: format version {metadata.get('format_version')!r}; "
+                             f"this dvrk_gym reads version {FORMAT_VERSION}")
+    _check_declared(path, metadata["arrays"], data)
+    if _digest(metadata_json, data) != digest:
+        raise ModelFileError(f"{path}: SHA-256 digest mismatch: the file is corrupt or was edited")
+    return metadata["params"], data
+
+
+def require_array(arrays: Mapping[str, np.ndarray], name: str, shape: tuple[int, ...],
+                  dtype: np.dtype | type) -> np.ndarray:
+    """An array of a model file with an exact shape and dtype, else ``ValueError``."""
+    if name not in arrays:
+        raise ValueError(f"missing array {name!r}")
+    array = arrays[name]
+    if array.shape != tuple(shape) or array.dtype != np.dtype(dtype):
+        raise ValueError(f"array {name!r} is {array.dtype} {array.shape}; "
+                         f"expected {np.dtype(dtype)} {tuple(shape)}")
+    return array
+
+
+def require_names(arrays: Mapping[str, np.ndarray], names: set[str] | frozenset[str]) -> None:
+    """Raise ``ValueError`` unless the file holds exactly the arrays ``names``."""
+    missing, extra = sorted(set(names) - set(arrays)), sorted(set(arrays) - set(names))
+    if missing or extra:
+        raise ValueError(f"arrays do not fit the parameters: missing {missing}, unexpected {extra}")
+
+
+class SavableModel:
+    """Mixin: ``save``/``load`` through :func:`write_model_file` and :func:`read_model_file`.
+
+    Subclasses set ``KIND`` and implement ``_export`` and ``_restore``. ``_restore`` raises
+    ``ValueError`` (or ``KeyError``) on arrays that do not fit the parameters; ``load`` turns
+    those into ``ModelFileError`` naming the file.
+    """
+
+    KIND: ClassVar[str] = ""
+
+    def _export(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+        raise NotImplementedError
+
+    @classmethod
+    def _restore(cls: type[_Model], params: Mapping[str, Any],
+                 arrays: Mapping[str, np.ndarray]) -> _Model:
+        raise NotImplementedError
+
+    def save(self, path: PathLike) -> None:
+        """Save the fitted model to ``path`` (an ``.npz`` file; no pickle)."""
+        params, arrays = self._export()
+        write_model_file(path, self.KIND, params, arrays)
+
+    @classmethod
+    def load(cls: type[_Model], path: PathLike) -> _Model:
+        """Load a model saved by ``save``; raises ``ModelFileError`` on any bad file."""
+        params, arrays = read_model_file(path, cls.KIND)
+        try:
+            return cls._restore(params, arrays)
+        except (ValueError, KeyError, TypeError) as error:
+            if isinstance(error, ModelFileError):
+                raise
+            raise ModelFileError(f"{path}: invalid {cls.KIND} model: {error}") from None

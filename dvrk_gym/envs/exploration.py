@@ -1,0 +1,166 @@
+"""CalibrationExploration-v0: the paper's Phase I, random exploration with a red marker.
+
+An episode is one trajectory. It starts at one of the four workspace corners; each step
+commands the next tool pose ``(bx, by, bz, yaw, pitch, roll)`` (base frame, metres and
+radians, the dVRK's Euler convention) and observes what the robot reports and what the
+endoscope sees of the red marker on the wrist.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from gymnasium import spaces
+
+from dvrk_gym.envs.base import DvrkEnv, EnvConfig
+from dvrk_gym.sim import kinematics as kin
+from dvrk_gym.sim.world import StereoDetection
+
+DEG = np.pi / 180.0
+SAFE_X_M = (0.005, 0.070)
+SAFE_Y_M = (0.011, 0.074)
+"""The paper's safe exploration ranges in the base frame, metres (its data span these)."""
+SAFE_Z_M = (-0.153, -0.147)
+"""Heights of the reported point that keep the 10 mm jaws 1-8 mm above the paper, metres."""
+YAW_RANGE_RAD = (-90.0 * DEG, 90.0 * DEG)
+PITCH_RANGE_RAD = (-15.0 * DEG, 25.0 * DEG)
+ROLL_RANGE_RAD = (-180.0 * DEG, -150.0 * DEG)
+
+ACTION_NAMES = ("bx", "by", "bz", "yaw", "pitch", "roll")
+ACTION_LOW = np.array([0.0, 0.0, -0.170, YAW_RANGE_RAD[0], PITCH_RANGE_RAD[0], ROLL_RANGE_RAD[0]])
+ACTION_HIGH = np.array([0.080, 0.085, -0.130, YAW_RANGE_RAD[1], PITCH_RANGE_RAD[1], ROLL_RANGE_RAD[1]])
+
+CAMERA_BOX_LOW_M = np.array([-0.2, -0.2, 0.0])
+CAMERA_BOX_HIGH_M = np.array([0.2, 0.2, 0.5])
+"""Bounds of triangulated camera-frame positions in observations, metres (clipped)."""
+
+
+def workspace_corners() -> np.ndarray:
+    """The four corners where Phase I trajectories start, (4, 3) base frame, metres."""
+    z = float(np.mean(SAFE_Z_M))
+    return np.array([[x, y, z] for y in SAFE_Y_M for x in SAFE_X_M])
+
+
+def home_orientation() -> tuple[float, float, float]:
+    """(yaw, pitch, roll) in radians of the paper's rest orientation: yaw 0, the paper's rule."""
+    pitch, roll = kin.paper_pitch_roll(0.0)
+    return 0.0, float(pitch), float(roll)
+
+
+@dataclass(frozen=True)
+class ExplorationConfig(EnvConfig):
+    """Settings of CalibrationExploration-v0.
+
+    Attributes:
+        max_steps: commanded poses per trajectory (the paper: 5,256 samples over 57
+            trajectories, about 92 each: 31 pauses x 3 rotations).
+    """
+
+    max_steps: int = 93
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if int(self.max_steps) < 1:
+            raise ValueError(f"max_steps must be >= 1, got {self.max_steps}")
+
+
+def marker_observation_space(width: int, height: int) -> dict[str, spaces.Space]:
+    """Observation entries for a stereo detection of the red marker."""
+    pixel_high = np.array([width, height, width, height], dtype=np.float32)
+    return {
+        "marker_seen": spaces.MultiBinary(2),
+        "marker_pixels": spaces.Box(-1.0, pixel_high, dtype=np.float32),
+        "marker_camera_position": spaces.Box(CAMERA_BOX_LOW_M.astype(np.float32), CAMERA_BOX_HIGH_M.astype(np.float32), dtype=np.float32),
+    }
+
+
+def reported_observation_space() -> dict[str, spaces.Space]:
+    """Observation entries for what the robot reports: its pose and jaw."""
+    pose_low = np.array([-0.3, -0.3, -0.3, -np.pi, -np.pi, -np.pi], dtype=np.float32)
+    return {
+        "reported_pose": spaces.Box(pose_low, -pose_low, dtype=np.float32),
+        "jaw_angle": spaces.Box(np.float32(kin.JAW_LOWER_RAD), np.float32(kin.JAW_UPPER_RAD), shape=(1,), dtype=np.float32),
+    }
+
+
+def encode_detection(detection: StereoDetection) -> dict[str, np.ndarray]:
+    """A stereo detection as observation arrays: unseen pixels are -1, unseen positions 0."""
+    pixels = np.concatenate([detection.left_uv, detection.right_uv])
+    position = detection.camera_position if detection.seen_both else np.zeros(3)
+    return {
+        "marker_seen": np.array([detection.seen_left, detection.seen_right], dtype=np.int8),
+        "marker_pixels": np.where(np.isfinite(pixels), pixels, -1.0).astype(np.float32),
+        "marker_camera_position": np.clip(position, CAMERA_BOX_LOW_M, CAMERA_BOX_HIGH_M).astype(np.float32),
+    }
+
+
+def encode_reported(reported_pose: np.ndarray, jaw_angle_rad: float) -> dict[str, np.ndarray]:
+    """The robot's reported pose as (bx, by, bz, yaw, pitch, roll) and its jaw angle."""
+    yaw, pitch, roll = kin.euler_from_pose(reported_pose)
+    pose = np.concatenate([reported_pose[:3, 3], [yaw, pitch, roll]])
+    return {"reported_pose": pose.astype(np.float32), "jaw_angle": np.array([jaw_angle_rad], dtype=np.float32)}
+
+
+class CalibrationExplorationEnv(DvrkEnv):
+    """Phase I of the paper: command poses, observe the reported pose and the red marker.
+
+    Observation (a Dict): ``reported_pose`` (bx, by, bz in m; yaw, pitch, roll in rad),
+    ``jaw_angle`` (rad), ``marker_seen`` (left, right), ``marker_pixels`` (u, v left then
+    right, px; -1 when unseen), ``marker_camera_position`` (x, y, z in the left camera
+    frame, m; 0 unless both cameras saw the marker). Reward is always 0: this is data
+    collection. ``info`` carries the truth for evaluation under ``true_*`` names.
+    """
+
+    config_class = ExplorationConfig
+    action_names = ACTION_NAMES
+    option_names = ("corner",)
+
+    def __init__(self, render_mode: str | None = None, **kwargs: Any) -> None:
+        super().__init__(render_mode=render_mode, **kwargs)
+        width, height = self.config.camera_resolution
+        self.action_space = spaces.Box(ACTION_LOW.astype(np.float32), ACTION_HIGH.astype(np.float32), dtype=np.float32)
+        self.observation_space = spaces.Dict({**reported_observation_space(), **marker_observation_space(width, height)})
+        self._steps = 0
+
+    def _reset_episode(self, options: dict[str, Any]) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+        corner = options.get("corner")
+        if corner is None:
+            corner = int(self.np_random.integers(4))
+        elif corner not in (0, 1, 2, 3):
+            raise ValueError(f"option 'corner' must be 0, 1, 2 or 3, got {corner!r}")
+        start = kin.pose_from_euler(workspace_corners()[corner], *home_orientation())
+        self.world.reset_robot(kin.inverse_kinematics(start))
+        self._steps = 0
+        observation = self._observe()
+        return observation, self._info(np.zeros(6, dtype=bool), np.zeros(6, dtype=bool), corner=corner)
+
+    def _step_episode(self, action: np.ndarray, clamped: np.ndarray):
+        pose = kin.pose_from_euler(action[:3], *action[3:])
+        move = self.world.move_to(pose, noise_rng=self.np_random, clamp_to_limits=True)
+        self._steps += 1
+        truncated = self._steps >= self.config.max_steps
+        observation = self._observe()
+        return observation, 0.0, False, truncated, self._info(clamped, move.joints_clamped)
+
+    def _observe(self) -> dict[str, np.ndarray]:
+        detection = self.world.observe_marker(noise_rng=self.np_random)
+        self._last_detection = detection
+        return {**encode_reported(self.world.reported_pose(), self.world.jaw_angle), **encode_detection(detection)}
+
+    def _info(self, clamped: np.ndarray, joints_clamped: np.ndarray, **extra: Any) -> dict[str, Any]:
+        detection = self._last_detection
+        reported = self.world.reported_pose()
+        return {
+            "clamped": self._clamped_names(clamped, joints_clamped),
+            "reported_position": reported[:3, 3].copy(),
+            "reported_orientation": np.array(kin.euler_from_pose(reported)),
+            "marker_left_uv": detection.left_uv,
+            "marker_right_uv": detection.right_uv,
+            "marker_camera_position": detection.camera_position,
+            "sim_time_s": self.world.clock.time_s,
+            "true_marker_position": self.world.true_marker_position(),
+            "true_tip_position": self.world.true_touch_point(),
+            **extra,
+        }

@@ -1,0 +1,257 @@
+"""GridTouch-v0: touch the 35 printed circles (the paper's Phase II and its benchmark).
+
+Goal-conditioned: the desired goal is a circle's centre as the endoscope sees it
+(triangulated, left camera frame, metres); the achieved goal is the touch point of the
+closed jaws as the endoscope sees it. The action is the base-frame command
+``(bx, by, bz, yaw)`` of the closed gripper (metres, radians; pitch and roll follow from
+yaw by the paper's rule). A step goes above the target, moves down until the jaws touch
+the paper (or the command is reached), and records the touch.
+
+An episode is one touch of one circle, and successive episodes tour the 35 circles in
+grid order (a seeded reset starts the tour again), so the goal stays fixed within an
+episode, as HER's relabelling and stable-baselines3's GoalEnv check require. The paper's
+35-circle pass for one yaw is 35 consecutive episodes.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from gymnasium import spaces
+
+from dvrk_gym.envs.base import DvrkEnv, EnvConfig
+from dvrk_gym.envs.exploration import CAMERA_BOX_HIGH_M, CAMERA_BOX_LOW_M, encode_reported
+from dvrk_gym.sim import kinematics as kin
+from dvrk_gym.sim.scene import GRID_COLUMNS, GRID_ROWS, WORKSPACE_CENTER_M, grid_circle_centers
+
+N_CIRCLES = GRID_ROWS * GRID_COLUMNS
+ACTION_NAMES = ("bx", "by", "bz", "yaw")
+ACTION_LOW = np.array([0.0, 0.0, -0.175, -np.pi / 2])
+ACTION_HIGH = np.array([0.080, 0.085, -0.130, np.pi / 2])
+SURFACE_Z_M = float(WORKSPACE_CENTER_M[2])
+CONTACT_TOLERANCE_M = 1e-7
+"""How exactly the descent finds the height where the jaws meet the paper, metres."""
+REWARD_TYPES = ("dense", "sparse")
+HOME_POSITION_M = np.array([0.040, 0.042, -0.130])
+"""Where every episode starts: the reported point 34 mm above the middle of the grid, metres."""
+
+
+@dataclass(frozen=True)
+class GridTouchConfig(EnvConfig):
+    """Settings of GridTouch-v0.
+
+    Attributes:
+        reward_type: "dense" (minus the goal distance in millimetres) or "sparse" (0 when
+            within ``distance_threshold_m``, else -1).
+        distance_threshold_m: success radius around the circle centre, metres.
+        approach_height_m: how far above the target the tool goes before descending, m.
+        correction_noise_m: standard deviation of a person's correction, per axis, metres
+            (the paper's Phase II corrections were made by hand).
+    """
+
+    reward_type: str = "dense"
+    distance_threshold_m: float = 0.001
+    approach_height_m: float = 0.008
+    correction_noise_m: float = 0.0002
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if self.reward_type not in REWARD_TYPES:
+            raise ValueError(f"reward_type must be one of {REWARD_TYPES}, got {self.reward_type!r}")
+        for name in ("distance_threshold_m", "approach_height_m", "correction_noise_m"):
+            value = getattr(self, name)
+            if not (np.isfinite(value) and value >= 0):
+                raise ValueError(f"{name} must be finite and >= 0, got {value}")
+
+
+def _check_yaw_option(yaw: Any) -> float | str:
+    message = f"option 'yaw' must be a number in [-pi/2, pi/2] or 'random', got {yaw!r}"
+    if isinstance(yaw, str):
+        if yaw != "random":
+            raise ValueError(message)
+        return yaw
+    try:
+        value = float(yaw)
+    except (TypeError, ValueError):
+        raise ValueError(message) from None
+    if not (np.isfinite(value) and abs(value) <= np.pi / 2 + 1e-9):
+        raise ValueError(message)
+    return value
+
+
+def _clip_camera(position: np.ndarray) -> np.ndarray:
+    return np.clip(position, CAMERA_BOX_LOW_M, CAMERA_BOX_HIGH_M).astype(np.float32)
+
+
+def tool_pose(position: np.ndarray, yaw_rad: float) -> np.ndarray:
+    """The tool pose at ``position`` (reported frame, m) with ``yaw`` and the paper's pitch and roll."""
+    pitch, roll = kin.paper_pitch_roll(yaw_rad)
+    return kin.pose_from_euler(position, yaw_rad, float(pitch), float(roll))
+
+
+class GridTouchEnv(DvrkEnv):
+    """Touch a grid circle; successive episodes tour all 35 (the paper's Phase II and benchmark).
+
+    Observation (a Dict, as HER wants): ``observation`` = reported (bx, by, bz) m,
+    (yaw, pitch, roll) rad, jaw angle rad, and the yaw to use for this circle, rad;
+    ``desired_goal`` = the circle's centre seen by the endoscope, (x, y, z) left camera
+    frame, m; ``achieved_goal`` = the touch point of the closed jaws seen by the endoscope
+    (before the touch: where the jaws are).
+
+    Reset options:
+        ``"yaw"``: a yaw (rad, in [-pi/2, pi/2]) for this and later circles, or
+            ``"random"``: a random yaw per circle (the paper's sixth setting). Default 0;
+            the setting persists until changed.
+        ``"circle"``: which circle (0-34, row-major) to touch; default: the next one of
+            the tour (circle 0 after a seeded reset).
+    """
+
+    config_class = GridTouchConfig
+    action_names = ACTION_NAMES
+    option_names = ("yaw", "circle")
+
+    def __init__(self, render_mode: str | None = None, **kwargs: Any) -> None:
+        super().__init__(render_mode=render_mode, **kwargs)
+        self.action_space = spaces.Box(ACTION_LOW.astype(np.float32), ACTION_HIGH.astype(np.float32), dtype=np.float32)
+        goal = spaces.Box(CAMERA_BOX_LOW_M.astype(np.float32), CAMERA_BOX_HIGH_M.astype(np.float32), dtype=np.float32)
+        obs_low = np.array([-0.3, -0.3, -0.3, -np.pi, -np.pi, -np.pi, kin.JAW_LOWER_RAD, -np.pi / 2], dtype=np.float32)
+        obs_high = np.array([0.3, 0.3, 0.3, np.pi, np.pi, np.pi, kin.JAW_UPPER_RAD, np.pi / 2], dtype=np.float32)
+        self.observation_space = spaces.Dict(
+            {"observation": spaces.Box(obs_low, obs_high, dtype=np.float32), "achieved_goal": goal, "desired_goal": goal}
+        )
+        self.circle_centers = grid_circle_centers()
+        self._next_circle = 0
+        self._yaw_setting: float | str = 0.0
+        self._circle = 0
+        self._yaw = 0.0
+        self._achieved = np.zeros(3)
+
+    # ------------------------------------------------------------------ episode
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        if seed is not None:
+            self._next_circle = 0
+        return super().reset(seed=seed, options=options)
+
+    def _reset_episode(self, options: dict[str, Any]) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+        if "yaw" in options:
+            self._yaw_setting = _check_yaw_option(options["yaw"])
+        circle = options.get("circle", self._next_circle)
+        if isinstance(circle, bool) or not isinstance(circle, (int, np.integer)) or not 0 <= circle < N_CIRCLES:
+            raise ValueError(f"option 'circle' must be an int in [0, {N_CIRCLES - 1}], got {circle!r}")
+        self._circle = int(circle)
+        self._next_circle = (self._circle + 1) % N_CIRCLES
+        if self._yaw_setting == "random":
+            self._yaw = float(self.np_random.uniform(-np.pi / 2, np.pi / 2))
+        else:
+            self._yaw = float(self._yaw_setting)
+        self.world.reset_robot(kin.inverse_kinematics(tool_pose(HOME_POSITION_M, 0.0)))
+        self._achieved = self._seen_touch_point()
+        info = {"circle_index": self._circle, "target_yaw": self._yaw, "sim_time_s": 0.0}
+        return self._observation(), info
+
+    def _step_episode(self, action: np.ndarray, clamped: np.ndarray):
+        target, yaw = action[:3], float(action[3])
+        above = target + [0.0, 0.0, self.config.approach_height_m]
+        first = self.world.move_to(tool_pose(above, yaw), noise_rng=self.np_random, clamp_to_limits=True)
+        touch_z = self._contact_height(target, yaw)
+        touch = self.world.move_to(tool_pose([target[0], target[1], touch_z], yaw), noise_rng=self.np_random, clamp_to_limits=True)
+        self._achieved = self._seen_touch_point()
+        info = self._touch_info(yaw, clamped, first.joints_clamped | touch.joints_clamped)
+        observation = self._observation()
+        reward = float(self.compute_reward(observation["achieved_goal"], observation["desired_goal"], info))
+        distance = float(np.linalg.norm(observation["achieved_goal"] - observation["desired_goal"]))
+        info["is_success"] = distance <= self.config.distance_threshold_m
+        info["sim_time_s"] = self.world.clock.time_s
+        return observation, reward, True, False, info
+
+    def compute_reward(self, achieved_goal: np.ndarray, desired_goal: np.ndarray, info: Any) -> np.ndarray:
+        """Reward for goals (..., 3) in metres, vectorised over leading axes (for HER).
+
+        Dense: minus the distance in millimetres. Sparse: 0 within the success radius, else -1.
+        """
+        distance = np.linalg.norm(np.asarray(achieved_goal) - np.asarray(desired_goal), axis=-1)
+        if self.config.reward_type == "sparse":
+            return -(distance > self.config.distance_threshold_m).astype(np.float64)
+        return -1e3 * distance
+
+    # ------------------------------------------------------------------ physics of a touch
+    def _true_tip_for(self, position: np.ndarray, yaw: float) -> np.ndarray:
+        """Where the jaws would truly be if commanded to ``position`` now (state untouched)."""
+        cable = self.world.cable
+        state = cable.get_state()
+        q_cmd, _ = kin.inverse_kinematics_clamped(tool_pose(position, yaw), q_ref=self.world.q_cmd)
+        tip = kin.touch_point(cable.true_joints(q_cmd), cable.true_dh)
+        cable.set_state(state)
+        return tip
+
+    def _contact_height(self, target: np.ndarray, yaw: float) -> float:
+        """The commanded height at which the descent stops: the command, or first contact.
+
+        The true tip height moves one for one with the commanded height, so a fixed-point
+        iteration finds where the jaws meet the paper in a few steps.
+        """
+        z = float(target[2])
+        if self._true_tip_for(target, yaw)[2] >= SURFACE_Z_M:
+            return z
+        for _ in range(8):
+            gap = self._true_tip_for(np.array([target[0], target[1], z]), yaw)[2] - SURFACE_Z_M
+            if abs(gap) < CONTACT_TOLERANCE_M:
+                break
+            z -= gap
+        return z
+
+    def _human_correction(self, circle: np.ndarray, yaw: float) -> np.ndarray:
+        """The change in reported position after a person pushes the jaws onto ``circle``."""
+        reported = self.world.reported_pose()[:3, 3]
+        command = reported.copy()
+        for _ in range(8):
+            error = circle - self._true_tip_for(command, yaw)
+            command = command + error
+            if np.linalg.norm(error) < CONTACT_TOLERANCE_M:
+                break
+        noise = self.np_random.normal(0.0, self.config.correction_noise_m, size=3)
+        return command - reported + noise
+
+    # ------------------------------------------------------------------ what is seen
+    def _seen_touch_point(self) -> np.ndarray:
+        """The jaws' touch point as the endoscope sees it (projected, with pixel noise)."""
+        camera = self.world.camera
+        left, right = camera.project(self.world.true_touch_point())
+        sigma = self.config.pixel_noise_px * camera.intrinsics.width / 1920.0
+        if sigma > 0:
+            left = left + self.np_random.normal(0.0, sigma, size=2)
+            right = right + self.np_random.normal(0.0, sigma, size=2)
+        return camera.triangulate(left, right)[0]
+
+    def _desired(self, index: int) -> np.ndarray:
+        return self.world.observe_grid()[index].camera_position
+
+    def _observation(self) -> dict[str, np.ndarray]:
+        reported = encode_reported(self.world.reported_pose(), self.world.jaw_angle)
+        observation = np.concatenate([reported["reported_pose"], reported["jaw_angle"], [self._yaw]])
+        return {
+            "observation": observation.astype(np.float32),
+            "achieved_goal": _clip_camera(self._achieved),
+            "desired_goal": _clip_camera(self._desired(self._circle)),
+        }
+
+    def _touch_info(self, yaw: float, clamped: np.ndarray, joints_clamped: np.ndarray) -> dict[str, Any]:
+        index = self._circle
+        circle = self.circle_centers[index]
+        tip = self.world.true_touch_point()
+        circle_px = self.world.observe_grid()[index].left_uv
+        tip_px = self.world.camera.project(tip)[0][0]
+        return {
+            "circle_index": index,
+            "target_yaw": self._yaw,
+            "commanded_yaw": yaw,
+            "pixel_error": float(np.linalg.norm(tip_px - circle_px)),
+            "mm_error": float(1e3 * np.linalg.norm((tip - circle)[:2])),
+            "true_tip_position": tip,
+            "true_circle_position": circle.copy(),
+            "reported_position": self.world.reported_pose()[:3, 3].copy(),
+            "human_correction": self._human_correction(circle, yaw),
+            "clamped": self._clamped_names(clamped, joints_clamped),
+        }

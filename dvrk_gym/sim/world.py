@@ -1,0 +1,321 @@
+"""The simulated experiment: one PSM, its cables, the workspace and the stereo endoscope.
+
+:class:`DvrkWorld` is what every environment wraps. It keeps the two truths of a
+cable-driven robot apart:
+
+* what the robot *reports*: ``FK_nominal(q_cmd)``, the pose its encoders imply, and
+* where it *is*: ``FK(q_true, true_dh)``, after the cables have had their say
+  (:mod:`dvrk_gym.sim.bias`); this drives the PyBullet body, and the cameras see it.
+
+Agents may use the reported pose and what the cameras see (pixels, triangulated
+positions); the truth accessors are named ``true_*`` and are for evaluation only.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from dvrk_gym.sim import kinematics as kin
+from dvrk_gym.sim.bias import BiasConfig, CableModel, resolve_bias
+from dvrk_gym.sim.camera import PAPER_INTRINSICS, StereoCamera, default_camera_pose
+from dvrk_gym.sim.motion import CartesianMove, MotionLimits, SimClock
+from dvrk_gym.sim.perception import Blob, detect_circles, detect_marker, match_to_expected
+from dvrk_gym.sim.physics import Physics
+from dvrk_gym.sim.robot import PSMBody, marker_position
+from dvrk_gym.sim.scene import CIRCLE_RADIUS_M, SceneBodies, build_scene, grid_circle_centers
+
+HOME_JOINTS = np.array([0.0, 0.0, 0.05, 0.0, 0.0, 0.0])
+"""A retracted configuration: the tool is 34 mm below the RCM, far outside the camera's view."""
+
+JAW_SPEED_RAD_S = math.radians(150.0)
+"""How fast the jaws open or close, rad/s."""
+
+MARKER_WINDOW_HALF_SIZE_PX = 30
+"""Half size of the window rendered around the marker, at 1920 x 1080 (scaled with width)."""
+
+
+@dataclass(frozen=True)
+class WorldConfig:
+    """How to build a world.
+
+    Attributes:
+        camera_resolution: (width, height) of each endoscope image in pixels; the paper's
+            intrinsics are scaled to it.
+        bias: the cable bias, a preset name ("none", "paper", "severe") or a BiasConfig.
+        bias_seed: which instrument to draw from the bias distribution.
+        gui: open the PyBullet GUI (needs a display).
+        motion: the tool's speed and acceleration limits.
+        camera_pose: T_base_leftcam (4x4, metres); None for the paper's set-up. Hidden
+            from agents: they only see pixels.
+        pixel_noise_px: standard deviation of the noise added to every detected pixel
+            coordinate, at 1920 x 1080 (scaled with the resolution); models the sub-pixel
+            jitter of a real endoscope's detections.
+    """
+
+    camera_resolution: tuple[int, int] = (PAPER_INTRINSICS.width, PAPER_INTRINSICS.height)
+    bias: str | BiasConfig = "paper"
+    bias_seed: int = 0
+    gui: bool = False
+    motion: MotionLimits = field(default_factory=MotionLimits)
+    camera_pose: np.ndarray | None = None
+    pixel_noise_px: float = 0.0
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.pixel_noise_px) and self.pixel_noise_px >= 0):
+            raise ValueError(f"pixel_noise_px must be finite and >= 0, got {self.pixel_noise_px}")
+        width, height = self.camera_resolution
+        if not (isinstance(width, (int, np.integer)) and isinstance(height, (int, np.integer))):
+            raise ValueError(f"camera_resolution must be two ints (width, height), got {self.camera_resolution!r}")
+        if not (16 <= width <= 7680 and 16 <= height <= 4320):
+            raise ValueError(f"camera_resolution {self.camera_resolution} is outside 16x16 to 7680x4320 pixels")
+
+
+@dataclass(frozen=True)
+class StereoDetection:
+    """A thing seen (or not) by both cameras.
+
+    Attributes:
+        left_uv: (u, v) in the left image, pixels; NaN when not seen.
+        right_uv: (u, v) in the right image, pixels; NaN when not seen.
+        camera_position: triangulated (x, y, z) in the left camera frame, metres; NaN
+            unless both cameras saw it with a positive disparity.
+    """
+
+    left_uv: np.ndarray
+    right_uv: np.ndarray
+    camera_position: np.ndarray
+
+    @property
+    def seen_left(self) -> bool:
+        return bool(np.isfinite(self.left_uv).all())
+
+    @property
+    def seen_right(self) -> bool:
+        return bool(np.isfinite(self.right_uv).all())
+
+    @property
+    def seen_both(self) -> bool:
+        return bool(np.isfinite(self.camera_position).all())
+
+
+@dataclass(frozen=True)
+class MoveResult:
+    """What one commanded move did.
+
+    Attributes:
+        duration_s: simulated seconds the move took (including settling).
+        q_cmd: the commanded (and reported) joints after the move.
+        q_true: the joints the cables actually produced.
+        joints_clamped: which joints had to be clamped into their limits (bool, (6,)).
+    """
+
+    duration_s: float
+    q_cmd: np.ndarray
+    q_true: np.ndarray
+    joints_clamped: np.ndarray
+
+
+class DvrkWorld:
+    """The PSM, its cable bias, the workspace and the stereo endoscope in one physics server.
+
+    Args:
+        config: how to build the world.
+    """
+
+    def __init__(self, config: WorldConfig | None = None) -> None:
+        self.config = config or WorldConfig()
+        self.bias_config = resolve_bias(self.config.bias)
+        self.cable = CableModel(self.bias_config, bias_seed=self.config.bias_seed)
+        width, height = self.config.camera_resolution
+        self.camera = StereoCamera(
+            intrinsics=PAPER_INTRINSICS.scaled(int(width), int(height)),
+            pose=default_camera_pose() if self.config.camera_pose is None else self.config.camera_pose,
+        )
+        self.physics = Physics(gui=self.config.gui)
+        self.scene: SceneBodies = build_scene(self.physics)
+        self.robot = PSMBody(self.physics, dh=self.cable.true_dh)
+        self.clock = SimClock()
+        self.q_cmd = HOME_JOINTS.copy()
+        self.q_true = HOME_JOINTS.copy()
+        self.jaw_angle = 0.0
+        self._grid_cache: tuple[StereoDetection, ...] | None = None
+        self.reset_robot(HOME_JOINTS)
+
+    # ----------------------------------------------------------------- robot state
+    def reset_robot(self, q: np.ndarray, jaw_angle_rad: float = 0.0) -> None:
+        """Put the robot at rest at joints ``q``: cables relaxed, clock at zero."""
+        q = np.array(q, dtype=float)
+        self.cable.reset(q)
+        self.q_cmd = q.copy()
+        self.q_true = self.cable.true_joints(q)
+        self.jaw_angle = float(jaw_angle_rad)
+        self.robot.set_joints(self.q_true, self.jaw_angle)
+        self.clock.reset()
+
+    def reported_pose(self) -> np.ndarray:
+        """The pose the robot reports: nominal FK of its encoders (4x4, base frame, m)."""
+        return kin.forward_kinematics(self.q_cmd)
+
+    def true_pose(self) -> np.ndarray:
+        """Where the tool frame really is (4x4, base frame, m). For evaluation only."""
+        return kin.forward_kinematics(self.q_true, self.cable.true_dh)
+
+    def true_touch_point(self) -> np.ndarray:
+        """Where the lowest point of the closed jaws really is, base frame, m. Evaluation only."""
+        return kin.touch_point(self.q_true, self.cable.true_dh)
+
+    def true_marker_position(self) -> np.ndarray:
+        """Where the red marker's centre really is, base frame, m. Evaluation only."""
+        return marker_position(self.q_true, self.cable.true_dh)
+
+    def move_to(
+        self,
+        pose: np.ndarray,
+        jaw_angle_rad: float | None = None,
+        noise_rng: np.random.Generator | None = None,
+        clamp_to_limits: bool = False,
+    ) -> MoveResult:
+        """Move the tool frame in a straight line to ``pose`` and let it settle.
+
+        The nominal inverse kinematics gives the joint command (what the encoders will
+        report); the cable model turns it into the true joints.
+
+        Args:
+            pose: the commanded tool pose (4x4, base frame, metres).
+            jaw_angle_rad: the jaw opening to end with; None keeps the current one.
+            noise_rng: the generator for this move's repeatability noise (None: no noise).
+            clamp_to_limits: clamp joints that would leave their limits (and report them
+                in the result) instead of raising.
+
+        Raises:
+            kinematics.UnreachablePoseError: if ``pose`` needs joints outside their limits
+                (and ``clamp_to_limits`` is False), or is singular.
+        """
+        if clamp_to_limits:
+            q_target, clamped = kin.inverse_kinematics_clamped(pose, q_ref=self.q_cmd)
+        else:
+            q_target, clamped = kin.inverse_kinematics(pose, q_ref=self.q_cmd), np.zeros(6, dtype=bool)
+        move = CartesianMove.plan(self.reported_pose(), kin.forward_kinematics(q_target), self.config.motion)
+        return self._finish_move(q_target, move.duration_s, jaw_angle_rad, noise_rng, clamped)
+
+    def move_joints(self, q: np.ndarray, jaw_angle_rad: float | None = None, noise_rng: np.random.Generator | None = None) -> MoveResult:
+        """Command joints directly (within limits); timed as the straight move between the poses."""
+        q = np.asarray(q, dtype=float)
+        if not kin.within_joint_limits(q):
+            raise kin.UnreachablePoseError(f"joints {np.round(q, 4).tolist()} are outside the joint limits")
+        move = CartesianMove.plan(self.reported_pose(), kin.forward_kinematics(q), self.config.motion)
+        return self._finish_move(q, move.duration_s, jaw_angle_rad, noise_rng, np.zeros(6, dtype=bool))
+
+    def _finish_move(
+        self,
+        q_target: np.ndarray,
+        duration_s: float,
+        jaw_angle_rad: float | None,
+        noise_rng: np.random.Generator | None,
+        clamped: np.ndarray,
+    ) -> MoveResult:
+        jaw_time = 0.0
+        if jaw_angle_rad is not None:
+            jaw_time = abs(float(jaw_angle_rad) - self.jaw_angle) / JAW_SPEED_RAD_S
+            self.jaw_angle = float(jaw_angle_rad)
+        self.q_cmd = np.array(q_target, dtype=float)
+        self.q_true = self.cable.true_joints(self.q_cmd, noise_rng)
+        self.robot.set_joints(self.q_true, self.jaw_angle)
+        elapsed = max(duration_s, jaw_time) + self.config.motion.settle_time_s
+        self.clock.advance(elapsed)
+        return MoveResult(elapsed, self.q_cmd.copy(), self.q_true.copy(), clamped)
+
+    # ----------------------------------------------------------------- cameras
+    def render(self, side: str = "left") -> np.ndarray:
+        """The full endoscope image of ``side`` ("left" or "right"), RGB uint8 (h, w, 3)."""
+        return self.camera.render(self.physics.client, side)
+
+    def observe_marker(self, noise_rng: np.random.Generator | None = None) -> StereoDetection:
+        """Find the red marker in both endoscope images.
+
+        Args:
+            noise_rng: draws the configured pixel noise (None: exact detections).
+
+        The detection runs on rendered pixels. Only a window around where the marker
+        really is gets rendered (a speed-up that gives the same pixels as the full frame
+        there); the marker is the only red thing in the scene, so the result is that of a
+        full-frame search. A blob cut by the window edge is searched again in a larger one.
+        """
+        left_uv, right_uv = self.camera.project(self.true_marker_position())
+        scale = self.camera.intrinsics.width / PAPER_INTRINSICS.width
+        half = max(6, int(math.ceil(MARKER_WINDOW_HALF_SIZE_PX * scale)))
+        left = self._detect_in_window("left", left_uv[0], half)
+        right = self._detect_in_window("right", right_uv[0], half)
+        return self._stereo(self._with_noise(left, noise_rng), self._with_noise(right, noise_rng))
+
+    def _with_noise(self, blob: Blob | None, noise_rng: np.random.Generator | None) -> Blob | None:
+        sigma = self.config.pixel_noise_px * self.camera.intrinsics.width / PAPER_INTRINSICS.width
+        if blob is None or noise_rng is None or sigma == 0.0:
+            return blob
+        return Blob(blob.centroid + noise_rng.normal(0.0, sigma, size=2), blob.area_px, blob.touches_border)
+
+    def _detect_in_window(self, side: str, uv: np.ndarray, half_size_px: int) -> Blob | None:
+        k = self.camera.intrinsics
+        while True:
+            try:
+                window = self.camera.window_around(uv, half_size_px)
+            except ValueError:  # entirely outside the image
+                return None
+            blob = detect_marker(self.camera.render(self.physics.client, side, window))
+            covers_image = window.width == k.width and window.height == k.height
+            if blob is None or not blob.touches_border or covers_image:
+                break
+            half_size_px *= 2
+        if blob is None:
+            return None
+        return Blob(blob.centroid + [window.u0, window.v0], blob.area_px, blob.touches_border)
+
+    def _stereo(self, left: Blob | None, right: Blob | None) -> StereoDetection:
+        nan2 = np.full(2, np.nan)
+        left_uv = nan2 if left is None else left.centroid
+        right_uv = nan2 if right is None else right.centroid
+        position = np.full(3, np.nan)
+        if left is not None and right is not None and left_uv[0] - right_uv[0] > 0:
+            position = self.camera.triangulate(left_uv, right_uv)[0]
+        return StereoDetection(left_uv.copy(), right_uv.copy(), position)
+
+    def observe_grid(self) -> tuple[StereoDetection, ...]:
+        """Detect the 35 printed circles in both images, in grid order (row-major).
+
+        Computed once per world with the tool retracted out of view (the grid does not
+        move) from two full-frame renders, then cached. Each detection is assigned to the
+        circle it belongs to by where that circle should appear, as a person reading the
+        grid would; a circle that was not found gets NaN.
+        """
+        if self._grid_cache is None:
+            self._grid_cache = self._detect_grid()
+        return self._grid_cache
+
+    def _detect_grid(self) -> tuple[StereoDetection, ...]:
+        saved_q, saved_jaw = self.q_true.copy(), self.jaw_angle
+        self.robot.set_joints(HOME_JOINTS, 0.0)
+        k = self.camera.intrinsics
+        radius_px = CIRCLE_RADIUS_M * k.fx / 0.19
+        area = math.pi * radius_px**2
+        expected_left, expected_right = self.camera.project(grid_circle_centers())
+        found = []
+        for side, expected in (("left", expected_left), ("right", expected_right)):
+            detected = detect_circles(self.render(side), min_area_px=0.4 * area, max_area_px=2.0 * area)
+            found.append(match_to_expected(detected, expected, max_distance_px=radius_px))
+        self.robot.set_joints(saved_q, saved_jaw)
+        detections = []
+        for left_uv, right_uv in zip(*found):
+            detections.append(self._stereo(_blob_or_none(left_uv), _blob_or_none(right_uv)))
+        return tuple(detections)
+
+    # ----------------------------------------------------------------- lifetime
+    def close(self) -> None:
+        """Free the physics server; safe to call more than once."""
+        self.physics.close()
+
+
+def _blob_or_none(uv: np.ndarray) -> Blob | None:
+    return None if not np.isfinite(uv).all() else Blob(uv, 0.0, False)

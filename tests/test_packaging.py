@@ -1,0 +1,37 @@
+"""The package as users get it: the wheel carries its data, the README and CI agree."""
+
+import subprocess
+import sys
+import zipfile
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+DATA_FILES = [
+    "dvrk_gym/data/seita2018_phase1/X_train.npy",
+    "dvrk_gym/data/seita2018_phase1/y_train.npy",
+    "dvrk_gym/data/seita2018_phase1/LICENSE",
+    "dvrk_gym/data/seita2018_phase1/README.md",
+]
+
+
+@pytest.mark.slow
+def test_built_wheel_contains_data_files_and_console_script(tmp_path):
+    subprocess.run(
+        [sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation", "-q", "-w", str(tmp_path), str(ROOT)],
+        check=True,
+        capture_output=True,
+    )
+    (wheel,) = tmp_path.glob("dvrk_gym-*.whl")
+    names = zipfile.ZipFile(wheel).namelist()
+    for data_file in DATA_FILES:
+        assert data_file in names
+    entry_points = next(n for n in names if n.endswith("entry_points.txt"))
+    assert "dvrk-gym = dvrk_gym.cli:main" in zipfile.ZipFile(wheel).read(entry_points).decode()
+
+
+def test_readme_test_command_is_the_one_ci_runs():
+    ci_lines = (ROOT / ".ci" / "run").read_text().splitlines()
+    command = next(line for line in ci_lines if "pytest" in line and not line.startswith("#"))
+    assert command.strip() in (ROOT / "README.md").read_text()
