@@ -152,6 +152,10 @@ def clean_mask(left_px: np.ndarray, right_px: np.ndarray, camera_position: np.nd
     return seen & rows_agree & (depth >= DEPTH_RANGE_M[0]) & (depth <= DEPTH_RANGE_M[1])
 
 
+def _or_nan(value: np.ndarray | None, size: int) -> np.ndarray:
+    return np.full(size, np.nan) if value is None else np.asarray(value, dtype=float)
+
+
 def collect_phase1(env: gym.Env, policy: PaperExplorationPolicy, n_trajectories: int, seed: int = 0, progress: bool = True) -> Phase1Data:
     """Run the paper's Phase I: ``n_trajectories`` episodes of CalibrationExploration-v0.
 
@@ -178,9 +182,9 @@ def collect_phase1(env: gym.Env, policy: PaperExplorationPolicy, n_trajectories:
             done = terminated or truncated
             rows["reported_position"].append(info["reported_position"])
             rows["orientation"].append(info["reported_orientation"])
-            rows["left_px"].append(info["marker_left_uv"])
-            rows["right_px"].append(info["marker_right_uv"])
-            rows["camera_position"].append(info["marker_camera_position"])
+            rows["left_px"].append(_or_nan(info["marker_left_uv"], 2))
+            rows["right_px"].append(_or_nan(info["marker_right_uv"], 2))
+            rows["camera_position"].append(_or_nan(info["marker_camera_position"], 3))
             rows["trajectory"].append(k)
     arrays = {name: np.array(values) for name, values in rows.items()}
     width = env.unwrapped.config.camera_resolution[0]

@@ -156,9 +156,10 @@ class CalibrationExplorationEnv(DvrkEnv):
             "clamped": self._clamped_names(clamped, joints_clamped),
             "reported_position": reported[:3, 3].copy(),
             "reported_orientation": np.array(kin.euler_from_pose(reported)),
-            "marker_left_uv": detection.left_uv,
-            "marker_right_uv": detection.right_uv,
-            "marker_camera_position": detection.camera_position,
+            # None, not NaN, when unseen: NaN != NaN would make equal episodes look different.
+            "marker_left_uv": detection.left_uv if detection.seen_left else None,
+            "marker_right_uv": detection.right_uv if detection.seen_right else None,
+            "marker_camera_position": detection.camera_position if detection.seen_both else None,
             "sim_time_s": self.world.clock.time_s,
             "true_marker_position": self.world.true_marker_position(),
             "true_tip_position": self.world.true_touch_point(),

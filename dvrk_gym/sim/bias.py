@@ -124,26 +124,17 @@ class BiasConfig:
         return BiasConfig(**{f.name: getattr(self, f.name) * factor for f in dataclasses.fields(self)})
 
 
-# Why these magnitudes (see the module's tuning notes in bias_statistics):
-# - homing 0.5 deg / 0.5 mm: potentiometer homing of the dVRK is good to about a degree.
-# - tool 0.3 mm / 0.2 deg: machining and assembly tolerance of a reusable instrument.
-# - wrist stretch 0.10 rad/rad: about 1 deg of joint error per 10 deg of wrist
-#   deflection at small angles, saturating near 3 deg; measured dVRK wrist errors from
-#   cable stretch and coupling reach several degrees.
-# - outer stretch and sag: see the values; they are the main source of the
-#   non-rigid, position-dependent error that a rigid fit cannot remove.
-# - backlash 0.1 deg outer, 0.1 mm insertion, 0.4 deg wrist; repeatability 0.15 mm.
 _PAPER = BiasConfig(
     homing_offset_rad=0.5 * _DEG,
     homing_offset_m=0.5e-3,
     tool_length_m=0.3e-3,
     tool_twist_rad=0.2 * _DEG,
-    outer_stretch_rad=1.0 * _DEG,
-    wrist_stretch=0.10,
+    outer_stretch_rad=3.2 * _DEG,
+    wrist_stretch=0.05,
     sag_m=1.0e-3,
-    backlash_outer_rad=0.10 * _DEG,
-    backlash_insertion_m=0.1e-3,
-    backlash_wrist_rad=0.4 * _DEG,
+    backlash_outer_rad=0.4 * _DEG,
+    backlash_insertion_m=0.4e-3,
+    backlash_wrist_rad=0.5 * _DEG,
     repeatability_m=0.15e-3,
 )
 BIAS_PRESETS: dict[str, BiasConfig] = {

@@ -26,7 +26,7 @@ WRIST_HALF_EXTENTS_M = np.array([0.0046, 0.0026, 0.0032])
 JAW_THICKNESS_M = 0.0011
 JAW_WIDTH_M = 0.0026
 
-MARKER_HALF_EXTENTS_M = np.array([0.0018, 0.00010, 0.0018])
+MARKER_HALF_EXTENTS_M = np.array([0.0018, 0.00005, 0.0018])
 """Red marker half sizes in the wrist-pitch frame (x along the wrist, y its normal), metres."""
 MARKER_OFFSET_M = np.array([0.0050, WRIST_HALF_EXTENTS_M[1] + MARKER_HALF_EXTENTS_M[1], 0.0])
 """Centre of the marker patch in the wrist-pitch frame (frame 5), metres."""
@@ -50,6 +50,14 @@ def marker_position(q: np.ndarray, dh: tuple[kin.DHRow, ...] = kin.PSM_DH) -> np
     """Centre of the red marker's outer face for joints ``q``, base frame, metres."""
     frame5 = kin.link_frames(q, dh)[4]
     return frame5[:3, :3] @ MARKER_OFFSET_M + frame5[:3, 3]
+
+
+def marker_face_points(q: np.ndarray, dh: tuple[kin.DHRow, ...] = kin.PSM_DH) -> np.ndarray:
+    """The centre and four corners of the marker's outer face, (5, 3) base frame, metres."""
+    frame5 = kin.link_frames(q, dh)[4]
+    hx, _, hz = MARKER_HALF_EXTENTS_M
+    local = MARKER_OFFSET_M + np.array([[0, 0, 0], [hx, 0, hz], [hx, 0, -hz], [-hx, 0, hz], [-hx, 0, -hz]])
+    return local @ frame5[:3, :3].T + frame5[:3, 3]
 
 
 def marker_normal(q: np.ndarray, dh: tuple[kin.DHRow, ...] = kin.PSM_DH) -> np.ndarray:

@@ -24,7 +24,7 @@ from dvrk_gym.sim.camera import PAPER_INTRINSICS, StereoCamera, default_camera_p
 from dvrk_gym.sim.motion import CartesianMove, MotionLimits, SimClock
 from dvrk_gym.sim.perception import Blob, detect_circles, detect_marker, match_to_expected
 from dvrk_gym.sim.physics import Physics
-from dvrk_gym.sim.robot import PSMBody, marker_position
+from dvrk_gym.sim.robot import PSMBody, marker_face_points, marker_normal, marker_position
 from dvrk_gym.sim.scene import CIRCLE_RADIUS_M, SceneBodies, build_scene, grid_circle_centers
 
 HOME_JOINTS = np.array([0.0, 0.0, 0.05, 0.0, 0.0, 0.0])
@@ -34,6 +34,8 @@ JAW_SPEED_RAD_S = math.radians(150.0)
 """How fast the jaws open or close, rad/s."""
 
 MARKER_WINDOW_HALF_SIZE_PX = 30
+MARKER_RAY_STANDOFF_M = 0.0003
+"""Visibility rays stop this far in front of the marker's face, metres."""
 """Half size of the window rendered around the marker, at 1920 x 1080 (scaled with width)."""
 
 
@@ -256,6 +258,23 @@ class DvrkWorld:
         if blob is None or noise_rng is None or sigma == 0.0:
             return blob
         return Blob(blob.centroid + noise_rng.normal(0.0, sigma, size=2), blob.area_px, blob.touches_border)
+
+    def marker_fully_visible(self, side: str) -> bool:
+        """Geometric visibility of the marker from one camera (no rendering).
+
+        True when the marker faces the camera and a ray from the camera's optical centre
+        to every corner and the centre of its face meets nothing on the way. This is the
+        fast geometric check; :meth:`observe_marker` is the pixel path (tests compare them).
+        """
+        points = marker_face_points(self.q_true, self.cable.true_dh)
+        normal = marker_normal(self.q_true, self.cable.true_dh)
+        origin = self.camera.pose[:3, 3] + (self.camera.baseline_m * self.camera.pose[:3, 0] if side == "right" else 0.0)
+        if normal @ (origin - points[0]) <= 0.0:
+            return False
+        # Stop each ray just short of the face, so it cannot hit the wrist the marker is on.
+        ends = points + MARKER_RAY_STANDOFF_M * normal
+        hits = self.physics.client.rayTestBatch([list(origin)] * len(ends), ends.tolist())
+        return all(hit[0] == -1 for hit in hits)
 
     def _detect_in_window(self, side: str, uv: np.ndarray, half_size_px: int) -> Blob | None:
         k = self.camera.intrinsics

@@ -1,0 +1,208 @@
+"""The paper's Phase I network: an MLP from camera position and angles to base position.
+
+Inputs are encoded as position plus sine and cosine of each angle, then standardised;
+outputs are centred and divided by one common scale, so the training loss is the squared
+L2 distance in (scaled) metres, the paper's loss. Training is Adam on shuffled mini-batches,
+in float32 on the CPU, with every random draw from a ``torch.Generator`` seeded by ``seed``:
+the same seed, data and thread count give bit-identical weights.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from typing import Any, Mapping
+
+import numpy as np
+import torch
+from torch import nn
+from tqdm import tqdm
+
+from dvrk_gym.calibration.features import check_inputs, check_targets, encode_euler
+from dvrk_gym.calibration.serialization import SavableModel, require_array, require_names
+
+__all__ = ["ACTIVATIONS", "DEFAULT_BATCH_SIZE", "DEFAULT_LEARNING_RATE", "DNNCalibrator"]
+
+_LOGGER = logging.getLogger(__name__)
+
+ACTIVATIONS: dict[str, type[nn.Module]] = {"relu": nn.ReLU, "sigmoid": nn.Sigmoid, "tanh": nn.Tanh}
+# Chosen by measurement on the authors' 1939 rows (benchmarks/bench_models.py): the
+# largest batch whose 10-fold CV stays well inside the paper's figure; larger batches
+# mean fewer optimiser steps and less Python overhead per epoch.
+DEFAULT_BATCH_SIZE = 256
+DEFAULT_LEARNING_RATE = 1e-3
+_INPUT_FEATURES = 9
+_OUTPUTS = 3
+_PROGRESS_EVERY_EPOCHS = 25
+
+
+def _build_network(hidden_layers: int, units: int, activation: str) -> nn.Sequential:
+    """An uninitialised MLP (parameters allocated, values unset)."""
+    layers: list[nn.Module] = []
+    width = _INPUT_FEATURES
+    for _ in range(hidden_layers):
+        # Built on the meta device so construction draws nothing from torch's global RNG.
+        layers += [nn.Linear(width, units, device="meta"), ACTIVATIONS[activation]()]
+        width = units
+    layers.append(nn.Linear(width, _OUTPUTS, device="meta"))
+    return nn.Sequential(*layers).to_empty(device="cpu")
+
+
+def _initialise(network: nn.Sequential, generator: torch.Generator) -> None:
+    """PyTorch's default ``nn.Linear`` initialisation, drawn from ``generator``."""
+    with torch.no_grad():
+        for layer in network:
+            if isinstance(layer, nn.Linear):
+                bound = 1.0 / math.sqrt(layer.in_features)
+                layer.weight.uniform_(-bound, bound, generator=generator)
+                layer.bias.uniform_(-bound, bound, generator=generator)
+
+
+class DNNCalibrator(SavableModel):
+    """Phase I: an MLP mapping (position, yaw, pitch, roll) to base position.
+
+    Args:
+        hidden_layers: Number of hidden layers (paper's choice: 3).
+        units: Units per hidden layer (paper: 300).
+        activation: ``"relu"``, ``"sigmoid"`` or ``"tanh"``.
+        epochs: Passes over the training data (paper: 1000).
+        batch_size: Rows per Adam step.
+        learning_rate: Adam's step size.
+        seed: Seeds the weight initialisation and the shuffling.
+        progress: Show a tqdm bar over epochs.
+    """
+
+    KIND = "dnn_calibrator"
+
+    def __init__(self, hidden_layers: int = 3, units: int = 300, activation: str = "relu",
+                 epochs: int = 1000, batch_size: int = DEFAULT_BATCH_SIZE,
+                 learning_rate: float = DEFAULT_LEARNING_RATE, seed: int = 0,
+                 progress: bool = True) -> None:
+        for name, value in (("hidden_layers", hidden_layers), ("units", units),
+                            ("epochs", epochs), ("batch_size", batch_size)):
+            if isinstance(value, bool) or int(value) != value or value < 1:
+                raise ValueError(f"{name} is {value!r}; expected a positive integer")
+        if activation not in ACTIVATIONS:
+            raise ValueError(f"activation is {activation!r}; expected one of {sorted(ACTIVATIONS)}")
+        if not (math.isfinite(learning_rate) and learning_rate > 0.0):
+            raise ValueError(f"learning_rate is {learning_rate!r}; expected a finite positive number")
+        self.hidden_layers = int(hidden_layers)
+        self.units = int(units)
+        self.activation = activation
+        self.epochs = int(epochs)
+        self.batch_size = int(batch_size)
+        self.learning_rate = float(learning_rate)
+        self.seed = int(seed)
+        self.progress = bool(progress)
+        self.network_: nn.Sequential | None = None
+        self.x_mean_: np.ndarray | None = None  # (9,) encoded-input mean
+        self.x_scale_: np.ndarray | None = None  # (9,) encoded-input standard deviation
+        self.y_mean_: np.ndarray | None = None  # (3,) base-position mean, metres
+        self.y_scale_: np.ndarray | None = None  # (3,) output scale, metres (all equal)
+        self.loss_history_: np.ndarray | None = None  # (epochs,) mean scaled training loss
+
+    def _params(self) -> dict[str, Any]:
+        return {"hidden_layers": self.hidden_layers, "units": self.units,
+                "activation": self.activation, "epochs": self.epochs,
+                "batch_size": self.batch_size, "learning_rate": self.learning_rate,
+                "seed": self.seed}
+
+    def fit(self, X: np.ndarray, y: np.ndarray) -> "DNNCalibrator":
+        """Train on inputs X (N, 6: metres, radians) and base positions y (N, 3, metres)."""
+        X = check_inputs(X)
+        y = check_targets(y, X.shape[0])
+        features = encode_euler(X)
+        self.x_mean_ = features.mean(axis=0)
+        # Constant features (e.g. one yaw only) are left unscaled instead of divided by zero.
+        spread = features.std(axis=0)
+        self.x_scale_ = np.where(spread > 0.0, spread, 1.0)
+        self.y_mean_ = y.mean(axis=0)
+        # One scale for all three outputs keeps the loss an (isotropic) squared L2 distance.
+        output_spread = float(np.sqrt(np.mean((y - self.y_mean_) ** 2)))
+        self.y_scale_ = np.full(_OUTPUTS, output_spread if output_spread > 0.0 else 1.0)
+        inputs = torch.from_numpy(((features - self.x_mean_) / self.x_scale_).astype(np.float32))
+        targets = torch.from_numpy(((y - self.y_mean_) / self.y_scale_).astype(np.float32))
+        generator = torch.Generator().manual_seed(self.seed)
+        self.network_ = _build_network(self.hidden_layers, self.units, self.activation)
+        _initialise(self.network_, generator)
+        self.loss_history_ = self._train(inputs, targets, generator)
+        return self
+
+    def _train(self, inputs: torch.Tensor, targets: torch.Tensor,
+               generator: torch.Generator) -> np.ndarray:
+        network = self.network_
+        optimizer = torch.optim.Adam(network.parameters(), lr=self.learning_rate)
+        rows = inputs.shape[0]
+        history = np.empty(self.epochs)
+        network.train()
+        bar = tqdm(range(self.epochs), desc=f"DNN {self.hidden_layers}x{self.units} "
+                   f"{self.activation}", unit="epoch", disable=not self.progress, leave=False)
+        for epoch in bar:
+            order = torch.randperm(rows, generator=generator)
+            shuffled_inputs, shuffled_targets = inputs[order], targets[order]
+            total = torch.zeros(())
+            for start in range(0, rows, self.batch_size):
+                batch = slice(start, start + self.batch_size)
+                optimizer.zero_grad(set_to_none=True)
+                error = network(shuffled_inputs[batch]) - shuffled_targets[batch]
+                loss = error.square().sum(dim=1).mean()
+                loss.backward()
+                optimizer.step()
+                total += loss.detach() * error.shape[0]
+            history[epoch] = float(total) / rows
+            if epoch % _PROGRESS_EVERY_EPOCHS == 0:
+                bar.set_postfix(loss=f"{history[epoch]:.3g}")
+        network.eval()
+        _LOGGER.debug("trained %s: final scaled loss %.4g", self._params(), history[-1])
+        return history
+
+    def predict(self, X: np.ndarray) -> np.ndarray:
+        """Base positions (N, 3) in metres for inputs X (N, 6: metres, radians)."""
+        if self.network_ is None:
+            raise ValueError("DNNCalibrator.predict called before fit")
+        features = encode_euler(check_inputs(X))
+        inputs = torch.from_numpy(((features - self.x_mean_) / self.x_scale_).astype(np.float32))
+        with torch.inference_mode():
+            outputs = self.network_(inputs).numpy().astype(np.float64)
+        return outputs * self.y_scale_ + self.y_mean_
+
+    def _layer_names(self) -> list[str]:
+        return [f"layer{i}" for i in range(self.hidden_layers + 1)]
+
+    def _export(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+        if self.network_ is None:
+            raise ValueError("DNNCalibrator.save called before fit")
+        linears = [layer for layer in self.network_ if isinstance(layer, nn.Linear)]
+        arrays = {"x_mean": self.x_mean_, "x_scale": self.x_scale_,
+                  "y_mean": self.y_mean_, "y_scale": self.y_scale_}
+        for name, layer in zip(self._layer_names(), linears):
+            arrays[f"{name}_weight"] = layer.weight.detach().numpy().copy()
+            arrays[f"{name}_bias"] = layer.bias.detach().numpy().copy()
+        return self._params(), arrays
+
+    @classmethod
+    def _restore(cls, params: Mapping[str, Any],
+                 arrays: Mapping[str, np.ndarray]) -> "DNNCalibrator":
+        model = cls(**params, progress=False)
+        names = model._layer_names()
+        require_names(arrays, {"x_mean", "x_scale", "y_mean", "y_scale"}
+                      | {f"{n}_{part}" for n in names for part in ("weight", "bias")})
+        model.x_mean_ = require_array(arrays, "x_mean", (_INPUT_FEATURES,), np.float64)
+        model.x_scale_ = require_array(arrays, "x_scale", (_INPUT_FEATURES,), np.float64)
+        model.y_mean_ = require_array(arrays, "y_mean", (_OUTPUTS,), np.float64)
+        model.y_scale_ = require_array(arrays, "y_scale", (_OUTPUTS,), np.float64)
+        if np.any(model.x_scale_ <= 0.0) or np.any(model.y_scale_ <= 0.0):
+            raise ValueError("x_scale and y_scale must be positive")
+        network = _build_network(model.hidden_layers, model.units, model.activation)
+        linears = [layer for layer in network if isinstance(layer, nn.Linear)]
+        state = {}
+        for index, (name, layer) in enumerate(zip(names, linears)):
+            shape = (layer.out_features, layer.in_features)
+            state[f"{2 * index}.weight"] = torch.from_numpy(
+                require_array(arrays, f"{name}_weight", shape, np.float32).copy())
+            state[f"{2 * index}.bias"] = torch.from_numpy(
+                require_array(arrays, f"{name}_bias", shape[:1], np.float32).copy())
+        network.load_state_dict(state)
+        network.eval()
+        model.network_ = network
+        return model

@@ -1,0 +1,112 @@
+"""The paper's rigid-body baseline: one rotation and translation per yaw group.
+
+For each of the five paper yaws (-90, -45, 0, 45, 90 deg), the rows whose yaw is nearest to
+it give a least-squares rigid transform ``b = R c + t`` from camera position ``c`` to base
+position ``b`` (Kabsch / orthogonal Procrustes, a proper rotation, det R = +1). Pitch and
+roll are not used, as in the paper.
+"""
+
+from __future__ import annotations
+
+import logging
+from typing import Any, Mapping
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from dvrk_gym.calibration.features import PAPER_YAWS_RAD, check_inputs, check_targets, nearest_yaw_index
+from dvrk_gym.calibration.serialization import SavableModel, require_array, require_names
+
+__all__ = ["RigidBodyCalibrator", "fit_rigid_transform"]
+
+_LOGGER = logging.getLogger(__name__)
+MIN_GROUP_ROWS = 3  # a rigid transform needs three non-collinear points
+_ROTATION_TOL = 1e-9
+
+
+def fit_rigid_transform(source: np.ndarray, target: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Least-squares rotation and translation with ``target ~= R @ source + t``.
+
+    Args:
+        source: (N, 3) points (metres), N >= 3, not all collinear.
+        target: (N, 3) corresponding points (metres).
+
+    Returns:
+        ``(R, t)``: (3, 3) proper rotation and (3,) translation in metres.
+    """
+    source_mean, target_mean = source.mean(axis=0), target.mean(axis=0)
+    rotation, _ = Rotation.align_vectors(target - target_mean, source - source_mean)
+    matrix = rotation.as_matrix()
+    return matrix, target_mean - matrix @ source_mean
+
+
+class RigidBodyCalibrator(SavableModel):
+    """Per-yaw rigid transforms from camera position to base position.
+
+    A yaw group with fewer than three training rows uses the transform fitted to all rows.
+    """
+
+    KIND = "rigid_body_calibrator"
+
+    def __init__(self) -> None:
+        self.rotations_: np.ndarray | None = None  # (5, 3, 3)
+        self.translations_: np.ndarray | None = None  # (5, 3), metres
+        self.group_rows_: np.ndarray | None = None  # (5,) training rows per group
+
+    def fit(self, X: np.ndarray, y: np.ndarray) -> "RigidBodyCalibrator":
+        """Fit on inputs X (N, 6: metres, radians) and base positions y (N, 3, metres).
+
+        Raises:
+            ValueError: On bad shapes or values, or fewer than three rows in all.
+        """
+        X = check_inputs(X)
+        y = check_targets(y, X.shape[0])
+        if X.shape[0] < MIN_GROUP_ROWS:
+            raise ValueError(f"X has {X.shape[0]} rows; a rigid fit needs at least {MIN_GROUP_ROWS}")
+        groups = nearest_yaw_index(X[:, 3])
+        fallback = fit_rigid_transform(X[:, :3], y)
+        rotations, translations = [], []
+        for g in range(len(PAPER_YAWS_RAD)):
+            rows = groups == g
+            if np.count_nonzero(rows) >= MIN_GROUP_ROWS:
+                rotation, translation = fit_rigid_transform(X[rows, :3], y[rows])
+            else:
+                _LOGGER.info("yaw group %d has %d rows; using the all-data rigid transform",
+                             g, np.count_nonzero(rows))
+                rotation, translation = fallback
+            rotations.append(rotation)
+            translations.append(translation)
+        self.rotations_ = np.stack(rotations)
+        self.translations_ = np.stack(translations)
+        self.group_rows_ = np.bincount(groups, minlength=len(PAPER_YAWS_RAD)).astype(np.int64)
+        return self
+
+    def predict(self, X: np.ndarray) -> np.ndarray:
+        """Base positions (N, 3) in metres for inputs X (N, 6: metres, radians)."""
+        if self.rotations_ is None or self.translations_ is None:
+            raise ValueError("RigidBodyCalibrator.predict called before fit")
+        X = check_inputs(X)
+        groups = nearest_yaw_index(X[:, 3])
+        rotated = np.einsum("nij,nj->ni", self.rotations_[groups], X[:, :3])
+        return rotated + self.translations_[groups]
+
+    def _export(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+        if self.rotations_ is None:
+            raise ValueError("RigidBodyCalibrator.save called before fit")
+        return {}, {"rotations": self.rotations_, "translations": self.translations_,
+                    "group_rows": self.group_rows_}
+
+    @classmethod
+    def _restore(cls, params: Mapping[str, Any],
+                 arrays: Mapping[str, np.ndarray]) -> "RigidBodyCalibrator":
+        groups = len(PAPER_YAWS_RAD)
+        require_names(arrays, {"rotations", "translations", "group_rows"})
+        rotations = require_array(arrays, "rotations", (groups, 3, 3), np.float64)
+        orthogonality = np.abs(rotations @ rotations.transpose(0, 2, 1) - np.eye(3)).max()
+        if orthogonality > _ROTATION_TOL or np.any(np.linalg.det(rotations) < 0.0):
+            raise ValueError("rotations are not proper rotation matrices")
+        model = cls()
+        model.rotations_ = rotations
+        model.translations_ = require_array(arrays, "translations", (groups, 3), np.float64)
+        model.group_rows_ = require_array(arrays, "group_rows", (groups,), np.int64)
+        return model

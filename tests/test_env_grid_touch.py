@@ -1,0 +1,109 @@
+"""GridTouch-v0: goals, touches, the paper's error measures and Phase II corrections."""
+
+import numpy as np
+import pytest
+
+from dvrk_gym.envs.grid_touch import N_CIRCLES, SURFACE_Z_M, tool_pose
+from dvrk_gym.sim import kinematics as kin
+
+
+def _nominal_action(env, circle_index: int, yaw: float = 0.0) -> np.ndarray:
+    """The command an uncalibrated robot would send: its own kinematics aimed at the circle."""
+    target = env.unwrapped.circle_centers[circle_index]
+    pose = tool_pose(np.zeros(3), yaw)
+    command = target - pose[:3, 2] * kin.JAW_LENGTH_M
+    return np.array([*command, yaw], dtype=np.float32)
+
+
+def test_goal_spaces_and_info_keys(make_env):
+    env = make_env("dvrk_gym/GridTouch-v0")
+    obs, info = env.reset(seed=0)
+    assert set(obs) == {"observation", "achieved_goal", "desired_goal"}
+    assert info["circle_index"] == 0
+    obs, reward, terminated, truncated, info = env.step(_nominal_action(env, 0))
+    assert terminated and not truncated
+    for key in ("pixel_error", "mm_error", "true_tip_position", "reported_position", "human_correction", "is_success"):
+        assert key in info
+
+
+def test_successive_episodes_tour_the_35_circles_and_seed_restarts_the_tour(make_env):
+    env = make_env("dvrk_gym/GridTouch-v0")
+    _, info = env.reset(seed=0)
+    seen = [info["circle_index"]]
+    for _ in range(N_CIRCLES):
+        env.step(_nominal_action(env, seen[-1]))
+        _, info = env.reset()
+        seen.append(info["circle_index"])
+    assert seen == list(range(N_CIRCLES)) + [0]
+    env.reset()
+    _, info = env.reset(seed=1)
+    assert info["circle_index"] == 0
+    _, info = env.reset(options={"circle": 17})
+    assert info["circle_index"] == 17
+
+
+def test_yaw_option_fixed_random_and_invalid(make_env):
+    env = make_env("dvrk_gym/GridTouch-v0")
+    obs, info = env.reset(seed=0, options={"yaw": np.pi / 4})
+    assert info["target_yaw"] == pytest.approx(np.pi / 4)
+    assert obs["observation"][-1] == pytest.approx(np.pi / 4)
+    yaws = set()
+    for seed in range(5):
+        _, info = env.reset(seed=seed, options={"yaw": "random"})
+        yaws.add(round(info["target_yaw"], 6))
+    assert len(yaws) == 5 and all(abs(y) <= np.pi / 2 for y in yaws)
+    for bad in ("sideways", 3.0, float("nan")):
+        with pytest.raises(ValueError, match="yaw"):
+            env.reset(options={"yaw": bad})
+    with pytest.raises(ValueError, match="circle"):
+        env.reset(options={"circle": 35})
+
+
+def test_perfect_robot_touches_the_centre(make_env):
+    env = make_env("dvrk_gym/GridTouch-v0", bias="none", camera_resolution=(1920, 1080))
+    for circle in (0, 17, 34):
+        env.reset(seed=0, options={"circle": circle})
+        _, reward, _, _, info = env.step(_nominal_action(env, circle))
+        assert info["mm_error"] < 1e-3  # millimetres
+        assert info["pixel_error"] < 1.0  # the circle's detected centre vs the projected tip
+        assert info["true_tip_position"][2] == pytest.approx(SURFACE_Z_M, abs=1e-6)
+        assert info["is_success"] and reward > -0.5
+        np.testing.assert_allclose(info["human_correction"], 0.0, atol=1e-3)
+
+
+def test_biased_robot_misses_and_the_correction_puts_it_right(make_env):
+    env = make_env("dvrk_gym/GridTouch-v0", bias="paper", correction_noise_m=0.0)
+    env.reset(seed=0, options={"circle": 10})
+    action = _nominal_action(env, 10)
+    _, reward, _, _, info = env.step(action)
+    assert info["mm_error"] > 0.5
+    corrected = action.copy()
+    corrected[:3] += info["human_correction"]
+    env.reset(seed=0, options={"circle": 10})
+    _, _, _, _, after = env.step(corrected)
+    assert after["mm_error"] < 0.35 * info["mm_error"]
+
+
+def test_descent_stops_when_the_jaws_meet_the_paper(make_env):
+    env = make_env("dvrk_gym/GridTouch-v0", bias="none")
+    env.reset(seed=0, options={"circle": 3})
+    action = _nominal_action(env, 3)
+    action[2] -= 0.004  # command 4 mm into the phantom
+    _, _, _, _, info = env.step(action)
+    assert info["true_tip_position"][2] == pytest.approx(SURFACE_Z_M, abs=1e-6)
+
+
+def test_compute_reward_is_vectorised_for_her(make_env):
+    env = make_env("dvrk_gym/GridTouch-v0", reward_type="sparse", distance_threshold_m=0.001).unwrapped
+    achieved = np.zeros((5, 3))
+    desired = np.array([[0, 0, 0], [0.0005, 0, 0], [0.002, 0, 0], [0, 0.01, 0], [0, 0, 0.0009]])
+    np.testing.assert_array_equal(env.compute_reward(achieved, desired, [{}] * 5), [0, 0, -1, -1, 0])
+    dense = make_env("dvrk_gym/GridTouch-v0").unwrapped
+    np.testing.assert_allclose(dense.compute_reward(achieved, desired, None), -1e3 * np.linalg.norm(desired, axis=1))
+
+
+def test_bad_config_values_are_clear_errors(make_env):
+    with pytest.raises(ValueError, match="reward_type"):
+        make_env("dvrk_gym/GridTouch-v0", reward_type="shaped")
+    with pytest.raises(ValueError, match="approach_height_m"):
+        make_env("dvrk_gym/GridTouch-v0", approach_height_m=-1.0)

@@ -1,0 +1,200 @@
+"""Behaviour every environment shares: API conformance, seeding, strict inputs, vector envs."""
+
+import json
+import subprocess
+import sys
+import warnings
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.error import ResetNeeded
+from gymnasium.utils.env_checker import check_env
+from stable_baselines3.common.env_checker import check_env as sb3_check_env
+
+from conftest import ENV_IDS, SMALL
+
+
+def _rollout(env, seed: int, n: int, action_seed: int = 123):
+    actions = np.random.default_rng(action_seed)
+    space = env.action_space
+    observations = []
+    obs, _ = env.reset(seed=seed)
+    observations.append(obs)
+    for _ in range(n):
+        action = actions.uniform(space.low, space.high).astype(np.float32)
+        obs, reward, terminated, truncated, _ = env.step(action)
+        observations.append(obs)
+        if terminated or truncated:
+            obs, _ = env.reset()
+            observations.append(obs)
+    return observations
+
+
+def _flatten(observations) -> list[float]:
+    return [float(v) for obs in observations for key in sorted(obs) for v in np.ravel(obs[key])]
+
+
+@pytest.mark.parametrize("env_id", ENV_IDS)
+def test_passes_gymnasium_and_sb3_checkers(make_env, env_id):
+    env = make_env(env_id)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # both checkers advise a [-1, 1] action box; ours is SI
+        check_env(env.unwrapped, skip_render_check=True)
+        sb3_check_env(env.unwrapped)
+
+
+@pytest.mark.parametrize("env_id", ENV_IDS)
+def test_same_seed_and_actions_give_bit_identical_observations(make_env, env_id):
+    env = make_env(env_id)
+    first = _flatten(_rollout(env, seed=7, n=4))
+    _rollout(env, seed=99, n=3)  # something else in between
+    second = _flatten(_rollout(env, seed=7, n=4))
+    assert first == second
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("env_id", ENV_IDS)
+def test_observations_are_identical_across_processes(make_env, env_id):
+    here = _flatten(_rollout(make_env(env_id), seed=3, n=3))
+    code = (
+        "import json, gymnasium as gym, dvrk_gym, test_envs_common as t\n"
+        f"env = gym.make({env_id!r}, camera_resolution={SMALL!r})\n"
+        "print(json.dumps(t._flatten(t._rollout(env, seed=3, n=3))))\n"
+    )
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=__file__.rsplit("/", 1)[0])
+    there = json.loads(result.stdout.strip().splitlines()[-1])
+    assert here == there
+
+
+@pytest.mark.parametrize("env_id", ENV_IDS)
+def test_different_seeds_give_different_episodes(make_env, env_id):
+    env = make_env(env_id)
+    assert _flatten(_rollout(env, seed=1, n=2)) != _flatten(_rollout(env, seed=2, n=2))
+
+
+@pytest.mark.parametrize("env_id", ENV_IDS)
+def test_step_before_reset_is_a_clear_error(make_env, env_id):
+    env = make_env(env_id).unwrapped
+    with pytest.raises(ResetNeeded, match="reset"):
+        env.step(env.action_space.sample())
+
+
+@pytest.mark.parametrize("env_id", ENV_IDS)
+@pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
+def test_non_finite_action_names_the_element_and_leaves_the_world_intact(make_env, env_id, bad):
+    env = make_env(env_id).unwrapped
+    env.reset(seed=0)
+    action = env.action_space.sample()
+    action[2] = bad
+    with pytest.raises(ValueError, match=r"action\[2\] \(bz\)"):
+        env.step(action)
+    obs, *_ = env.step(env.action_space.sample())  # the world still works
+    assert env.observation_space.contains(obs)
+
+
+@pytest.mark.parametrize("env_id", ENV_IDS)
+def test_wrong_action_shape_is_a_clear_error(make_env, env_id):
+    env = make_env(env_id).unwrapped
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match="shape"):
+        env.step(np.zeros(9))
+
+
+@pytest.mark.parametrize("env_id", ENV_IDS)
+def test_out_of_range_action_is_clamped_and_reported(make_env, env_id):
+    env = make_env(env_id).unwrapped
+    env.reset(seed=0)
+    action = env.action_space.sample()
+    action[0] = 5.0  # five metres: far outside the space
+    obs, _, _, _, info = env.step(action)
+    assert "bx" in info["clamped"]
+    assert env.observation_space.contains(obs)
+
+
+@pytest.mark.parametrize("env_id", ENV_IDS)
+def test_unknown_reset_option_lists_the_valid_ones(make_env, env_id):
+    env = make_env(env_id).unwrapped
+    with pytest.raises(ValueError, match="unknown reset option.*valid options"):
+        env.reset(seed=0, options={"colour": "red"})
+
+
+@pytest.mark.parametrize("env_id", ENV_IDS)
+def test_unknown_constructor_argument_and_bias_preset_are_clear_errors(env_id):
+    with pytest.raises(ValueError, match="unknown argument"):
+        gym.make(env_id, camera_resolution=SMALL, biass="paper")
+    with pytest.raises(ValueError, match="paper"):
+        gym.make(env_id, camera_resolution=SMALL, bias="no-such-preset")
+
+
+@pytest.mark.parametrize("env_id", ENV_IDS)
+def test_render_modes(make_env, env_id):
+    env = make_env(env_id, render_mode="rgb_array")
+    env.reset(seed=0)
+    frame = env.render()
+    assert frame.shape == (SMALL[1], SMALL[0], 3) and frame.dtype == np.uint8
+    quiet = make_env(env_id)
+    quiet.reset(seed=0)
+    assert quiet.render() is None
+    with pytest.raises(ValueError, match="render_mode"):
+        gym.make(env_id, render_mode="movie")
+
+
+@pytest.mark.parametrize("env_id", ENV_IDS)
+def test_human_render_mode_without_display_is_a_clear_error(env_id, monkeypatch):
+    monkeypatch.delenv("DISPLAY", raising=False)
+    with pytest.raises(RuntimeError, match="display"):
+        gym.make(env_id, render_mode="human", camera_resolution=SMALL)
+
+
+@pytest.mark.parametrize("env_id", ENV_IDS)
+def test_metadata_is_class_level_and_not_mutated(make_env, env_id):
+    env = make_env(env_id)
+    cls = type(env.unwrapped)
+    before = json.dumps(cls.metadata, sort_keys=True)
+    env.reset(seed=0)
+    env.step(env.action_space.sample())
+    assert json.dumps(cls.metadata, sort_keys=True) == before
+    assert "metadata" not in vars(env.unwrapped)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("env_id", ENV_IDS)
+@pytest.mark.parametrize("mode", ["sync", "async"])
+def test_vector_envs_work(env_id, mode):
+    envs = gym.make_vec(env_id, num_envs=4, vectorization_mode=mode, camera_resolution=SMALL)
+    try:
+        obs, _ = envs.reset(seed=0)
+        for _ in range(2):
+            obs, rewards, terminated, truncated, _ = envs.step(envs.action_space.sample())
+        assert rewards.shape == (4,)
+        assert all(np.all(np.isfinite(v)) for v in obs.values())
+    finally:
+        envs.close()
+
+
+@pytest.mark.parametrize("env_id", ENV_IDS)
+def test_truth_is_only_in_info(make_env, env_id):
+    env = make_env(env_id, bias="paper")
+    obs, _ = env.reset(seed=0)
+    obs, _, _, _, info = env.step(env.action_space.sample())
+    truths = {k: v for k, v in info.items() if k.startswith("true_")}
+    assert truths, "info must carry the truth under true_* names"
+    assert not any("true" in key for key in obs)
+    flat = np.concatenate([np.ravel(v).astype(float) for v in obs.values()])
+    for name, value in truths.items():
+        for component in np.ravel(value):
+            assert not np.any(np.abs(flat - component) < 1e-7), f"{name} leaks into the observation"
+
+
+@pytest.mark.parametrize("env_id", ENV_IDS)
+def test_two_envs_in_one_process_are_independent(make_env, env_id):
+    a, b = make_env(env_id), make_env(env_id)
+    reference = _flatten(_rollout(a, seed=5, n=2))
+    b.reset(seed=11)
+    b.step(b.action_space.sample())
+    assert _flatten(_rollout(a, seed=5, n=2)) == reference
+    a.close()
+    b.reset(seed=1)  # b survives a's close
+    obs, *_ = b.step(b.action_space.sample())
+    assert b.observation_space.contains(obs)
