@@ -52,6 +52,18 @@ def marker_position(q: np.ndarray, dh: tuple[kin.DHRow, ...] = kin.PSM_DH) -> np
     return frame5[:3, :3] @ MARKER_OFFSET_M + frame5[:3, 3]
 
 
+def marker_corners(q: np.ndarray, dh: tuple[kin.DHRow, ...] = kin.PSM_DH) -> np.ndarray:
+    """The 8 corners of the red marker (a thin box), (8, 3) base frame, metres.
+
+    Its image lies inside the bounding box of these corners' projections, which is how
+    the world sizes the window it renders to find the marker.
+    """
+    frame5 = kin.link_frames(q, dh)[4]
+    signs = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
+    local = MARKER_OFFSET_M + signs * MARKER_HALF_EXTENTS_M
+    return local @ frame5[:3, :3].T + frame5[:3, 3]
+
+
 def marker_face_points(q: np.ndarray, dh: tuple[kin.DHRow, ...] = kin.PSM_DH) -> np.ndarray:
     """The centre and four corners of the marker's outer face, (5, 3) base frame, metres."""
     frame5 = kin.link_frames(q, dh)[4]

@@ -20,11 +20,11 @@ import numpy as np
 
 from dvrk_gym.sim import kinematics as kin
 from dvrk_gym.sim.bias import BiasConfig, CableModel, resolve_bias
-from dvrk_gym.sim.camera import PAPER_INTRINSICS, StereoCamera, default_camera_pose
+from dvrk_gym.sim.camera import PAPER_INTRINSICS, PixelWindow, StereoCamera, default_camera_pose
 from dvrk_gym.sim.motion import CartesianMove, MotionLimits, SimClock
 from dvrk_gym.sim.perception import Blob, detect_circles, detect_marker, match_to_expected
 from dvrk_gym.sim.physics import Physics
-from dvrk_gym.sim.robot import PSMBody, marker_face_points, marker_normal, marker_position
+from dvrk_gym.sim.robot import PSMBody, marker_corners, marker_face_points, marker_normal, marker_position
 from dvrk_gym.sim.scene import CIRCLE_RADIUS_M, SceneBodies, build_scene, grid_circle_centers
 
 HOME_JOINTS = np.array([0.0, 0.0, 0.05, 0.0, 0.0, 0.0])
@@ -33,10 +33,10 @@ HOME_JOINTS = np.array([0.0, 0.0, 0.05, 0.0, 0.0, 0.0])
 JAW_SPEED_RAD_S = math.radians(150.0)
 """How fast the jaws open or close, rad/s."""
 
-MARKER_WINDOW_HALF_SIZE_PX = 30
+MARKER_WINDOW_MARGIN_PX = 2
+"""Pixels added around the marker's projected bounding box when rendering its window."""
 MARKER_RAY_STANDOFF_M = 0.0003
 """Visibility rays stop this far in front of the marker's face, metres."""
-"""Half size of the window rendered around the marker, at 1920 x 1080 (scaled with width)."""
 
 
 @dataclass(frozen=True)
@@ -241,16 +241,15 @@ class DvrkWorld:
         Args:
             noise_rng: draws the configured pixel noise (None: exact detections).
 
-        The detection runs on rendered pixels. Only a window around where the marker
-        really is gets rendered (a speed-up that gives the same pixels as the full frame
-        there); the marker is the only red thing in the scene, so the result is that of a
-        full-frame search. A blob cut by the window edge is searched again in a larger one.
+        The detection runs on rendered pixels. Only the window where the marker can
+        appear gets rendered: the bounding box of its corners' projections plus a margin,
+        so every red pixel of a full-frame render lies inside it and the pixels there are
+        the full frame's. The marker is the only red thing in the scene, so the result is
+        that of a full-frame search, at a fraction of the cost.
         """
-        left_uv, right_uv = self.camera.project(self.true_marker_position())
-        scale = self.camera.intrinsics.width / PAPER_INTRINSICS.width
-        half = max(6, int(math.ceil(MARKER_WINDOW_HALF_SIZE_PX * scale)))
-        left = self._detect_in_window("left", left_uv[0], half)
-        right = self._detect_in_window("right", right_uv[0], half)
+        left_uv, right_uv = self.camera.project(marker_corners(self.q_true, self.cable.true_dh))
+        left = self._detect_in_window("left", left_uv)
+        right = self._detect_in_window("right", right_uv)
         return self._stereo(self._with_noise(left, noise_rng), self._with_noise(right, noise_rng))
 
     def _with_noise(self, blob: Blob | None, noise_rng: np.random.Generator | None) -> Blob | None:
@@ -276,18 +275,16 @@ class DvrkWorld:
         hits = self.physics.client.rayTestBatch([list(origin)] * len(ends), ends.tolist())
         return all(hit[0] == -1 for hit in hits)
 
-    def _detect_in_window(self, side: str, uv: np.ndarray, half_size_px: int) -> Blob | None:
+    def _detect_in_window(self, side: str, corners_uv: np.ndarray) -> Blob | None:
         k = self.camera.intrinsics
-        while True:
-            try:
-                window = self.camera.window_around(uv, half_size_px)
-            except ValueError:  # entirely outside the image
-                return None
-            blob = detect_marker(self.camera.render(self.physics.client, side, window))
-            covers_image = window.width == k.width and window.height == k.height
-            if blob is None or not blob.touches_border or covers_image:
-                break
-            half_size_px *= 2
+        low = np.floor(corners_uv.min(axis=0)).astype(int) - MARKER_WINDOW_MARGIN_PX
+        high = np.ceil(corners_uv.max(axis=0)).astype(int) + MARKER_WINDOW_MARGIN_PX
+        low = np.maximum(low, 0)
+        high = np.minimum(high, [k.width - 1, k.height - 1])
+        if np.any(high < low):  # entirely outside the image
+            return None
+        window = PixelWindow(int(low[0]), int(low[1]), int(high[0] - low[0] + 1), int(high[1] - low[1] + 1))
+        blob = detect_marker(self.camera.render(self.physics.client, side, window))
         if blob is None:
             return None
         return Blob(blob.centroid + [window.u0, window.v0], blob.area_px, blob.touches_border)

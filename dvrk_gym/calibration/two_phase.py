@@ -1,0 +1,117 @@
+"""The paper's two-phase calibration: a DNN (Phase I) plus per-yaw residual forests (Phase II).
+
+    x_b = f_DNN(x_c, phi) + f_RF^(yaw)(f_DNN(x_c, phi))
+
+Phase I fits the network on the coarse exploration data; Phase II moves the gripper to known
+targets via the network, records where a human (or a simulated one) pushed it, and fits one
+forest per yaw to the residual between that corrected position and the network's prediction.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Mapping
+
+import numpy as np
+
+from dvrk_gym.calibration.dnn import DNNCalibrator
+from dvrk_gym.calibration.features import check_inputs, check_targets
+from dvrk_gym.calibration.forests import ResidualForests
+from dvrk_gym.calibration.serialization import SavableModel
+
+__all__ = ["TwoPhaseCalibrator"]
+
+_DNN_PREFIX = "dnn_"
+_FORESTS_PREFIX = "rf_"
+
+
+class TwoPhaseCalibrator(SavableModel):
+    """DNN plus per-yaw residual forests; with only Phase I fitted it equals the DNN.
+
+    Args:
+        dnn: The Phase I network (default: the paper's 3 x 300 ReLU, 1000 epochs).
+        forests: The Phase II residual forests (default: 100 trees, default depth).
+        seed: Seed for the default components (ignored for components passed in).
+    """
+
+    KIND = "two_phase_calibrator"
+
+    def __init__(self, dnn: DNNCalibrator | None = None, forests: ResidualForests | None = None,
+                 seed: int = 0) -> None:
+        self.dnn = dnn if dnn is not None else DNNCalibrator(seed=seed)
+        self.forests = forests if forests is not None else ResidualForests(seed=seed)
+        self.phase2_fitted_ = False
+
+    def fit_phase1(self, X: np.ndarray, y: np.ndarray) -> "TwoPhaseCalibrator":
+        """Fit the network on Phase I inputs X (N, 6: m, rad) and base positions y (N, 3, m).
+
+        Any Phase II fit is discarded, since its residuals were relative to the old network.
+        """
+        self.dnn.fit(X, y)
+        self.phase2_fitted_ = False
+        return self
+
+    fit = fit_phase1
+
+    def fit_phase2(self, X_c_phase2: np.ndarray, y_corrected: np.ndarray) -> "TwoPhaseCalibrator":
+        """Fit the residual forests on Phase II data.
+
+        Args:
+            X_c_phase2: (M, 6) inputs at the Phase II targets (camera position in metres,
+                commanded yaw, pitch, roll in radians).
+            y_corrected: (M, 3) base positions in metres after the human correction.
+
+        Returns:
+            self.
+
+        Raises:
+            ValueError: If Phase I is not fitted or the arrays are malformed.
+        """
+        X_c_phase2 = check_inputs(X_c_phase2, name="X_c_phase2")
+        y_corrected = check_targets(y_corrected, X_c_phase2.shape[0], name="y_corrected")
+        if self.dnn.network_ is None:
+            raise ValueError("fit_phase2 called before fit_phase1")
+        predicted = self.dnn.predict(X_c_phase2)
+        self.forests.fit(predicted, X_c_phase2[:, 3], y_corrected - predicted)
+        self.phase2_fitted_ = True
+        return self
+
+    def predict(self, X: np.ndarray) -> np.ndarray:
+        """Base positions (N, 3) in metres for inputs X (N, 6: metres, radians)."""
+        if self.dnn.network_ is None:
+            raise ValueError("TwoPhaseCalibrator.predict called before fit_phase1")
+        X = check_inputs(X)
+        base = self.dnn.predict(X)
+        if self.phase2_fitted_:
+            base = base + self.forests.predict(base, X[:, 3])
+        return base
+
+    def _export(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+        dnn_params, dnn_arrays = self.dnn._export()
+        params: dict[str, Any] = {"dnn": dnn_params, "forests": None}
+        arrays = {_DNN_PREFIX + name: value for name, value in dnn_arrays.items()}
+        if self.phase2_fitted_:
+            params["forests"], forest_arrays = self.forests._export()
+            arrays.update({_FORESTS_PREFIX + name: value for name, value in forest_arrays.items()})
+        return params, arrays
+
+    @classmethod
+    def _restore(cls, params: Mapping[str, Any],
+                 arrays: Mapping[str, np.ndarray]) -> "TwoPhaseCalibrator":
+        unknown = sorted(name for name in arrays
+                         if not name.startswith((_DNN_PREFIX, _FORESTS_PREFIX)))
+        if unknown:
+            raise ValueError(f"unexpected arrays {unknown}")
+
+        def part(prefix: str) -> dict[str, np.ndarray]:
+            return {name[len(prefix):]: value for name, value in arrays.items()
+                    if name.startswith(prefix)}
+
+        dnn = DNNCalibrator._restore(params["dnn"], part(_DNN_PREFIX))
+        if params["forests"] is None:
+            if part(_FORESTS_PREFIX):
+                raise ValueError("forest arrays present but params say Phase II is not fitted")
+            return cls(dnn=dnn)
+        model = cls(dnn=dnn, forests=ResidualForests._restore(params["forests"],
+                                                              part(_FORESTS_PREFIX)))
+        model.phase2_fitted_ = True
+        return model

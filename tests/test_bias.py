@@ -1,0 +1,223 @@
+"""Tests for dvrk_gym.sim.bias (the cable model: why the dVRK misses)."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+from scipy.stats import f_oneway
+
+from dvrk_gym.sim import bias
+from dvrk_gym.sim import kinematics as kin
+
+MM = 1e-3
+STATISTICS_SAMPLES = 1500  # enough for stable means, fast enough (about a second)
+
+
+def _commands(n: int, seed: int = 0) -> np.ndarray:
+    q_cmd, _ = bias.sample_paper_commands(np.random.default_rng(seed), n)
+    return q_cmd
+
+
+def _tip_error(model: bias.CableModel, q_cmd: np.ndarray) -> np.ndarray:
+    """True minus reported touch point (m) of one noiseless move from rest."""
+    model.reset(q_cmd)
+    return kin.touch_point(model.true_joints(q_cmd), model.true_dh) - kin.touch_point(q_cmd)
+
+
+@pytest.fixture(scope="module")
+def paper_statistics() -> dict:
+    model = bias.CableModel(bias.resolve_bias("paper"), bias_seed=0)
+    return bias.bias_statistics(model, np.random.default_rng(1), STATISTICS_SAMPLES)
+
+
+def test_none_preset_goes_exactly_where_told() -> None:
+    model = bias.CableModel(bias.resolve_bias("none"), bias_seed=7)
+    assert model.true_dh == kin.PSM_DH
+    noise = np.random.default_rng(3)
+    for q_cmd in _commands(50):
+        q_true = model.true_joints(q_cmd, noise)
+        np.testing.assert_array_equal(q_true, q_cmd)
+    statistics = bias.bias_statistics(model, np.random.default_rng(4), 200)
+    assert statistics["raw_mean_m"] == 0.0
+    assert statistics["hysteresis_gap_m"] == 0.0
+
+
+def test_unknown_preset_lists_the_valid_names() -> None:
+    with pytest.raises(ValueError, match="unknown bias preset 'papr'") as error:
+        bias.resolve_bias("papr")
+    for name in ("none", "paper", "severe"):
+        assert repr(name) in str(error.value)
+
+
+def test_resolve_bias_returns_a_config_unchanged() -> None:
+    config = bias.BiasConfig(sag_m=2e-3)
+    assert bias.resolve_bias(config) is config
+    assert bias.resolve_bias("paper") is bias.BIAS_PRESETS["paper"]
+
+
+def test_negative_or_nan_magnitude_is_rejected() -> None:
+    with pytest.raises(ValueError, match="sag_m"):
+        bias.BiasConfig(sag_m=-1e-3)
+    with pytest.raises(ValueError, match="wrist_stretch"):
+        bias.BiasConfig(wrist_stretch=float("nan"))
+
+
+def test_severe_is_about_twice_paper() -> None:
+    paper, severe = bias.BIAS_PRESETS["paper"], bias.BIAS_PRESETS["severe"]
+    for field in dataclasses.fields(paper):
+        assert getattr(severe, field.name) == pytest.approx(2 * getattr(paper, field.name))
+
+
+def test_paper_rigid_fit_leaves_the_papers_residual(paper_statistics: dict) -> None:
+    # The paper's per-yaw rigid-body calibration left 4.55 mm.
+    assert 3.5 * MM <= paper_statistics["rigid_mean_m"] <= 5.5 * MM
+    assert paper_statistics["raw_mean_m"] > paper_statistics["rigid_mean_m"]
+
+
+def test_paper_smooth_model_removes_most_but_not_all(paper_statistics: dict) -> None:
+    # The paper's two-phase calibration left 1.08 mm: hysteresis and noise remain.
+    assert 0.7 * MM <= paper_statistics["smooth_mean_m"] <= 1.5 * MM
+    assert paper_statistics["smooth_mean_m"] < 0.3 * paper_statistics["rigid_mean_m"]
+
+
+def test_paper_rigid_residual_differs_between_yaw_groups() -> None:
+    model = bias.CableModel(bias.BIAS_PRESETS["paper"], bias_seed=0)
+    # The differences are about 15% of a residual whose sd is half its mean: it takes
+    # a few thousand samples to show them clearly.
+    samples = bias.sample_bias(model, np.random.default_rng(1), 3000)
+    norms = np.linalg.norm(bias.per_yaw_rigid_residuals(samples), axis=1)
+    groups = [norms[samples.yaw_group == g] for g in range(len(kin.PAPER_YAWS_RAD))]
+    # Positions are drawn alike for every yaw, so only orientation can separate them.
+    assert f_oneway(*groups).pvalue < 1e-4
+    means = np.array([group.mean() for group in groups])
+    assert means.max() - means.min() > 0.08 * means.mean()
+
+
+@pytest.mark.parametrize("euler_a_deg, euler_b_deg", [
+    ((-60.0, 5.0, -165.0), (60.0, 5.0, -165.0)),  # yaw alone
+    ((0.0, -15.0, -165.0), (0.0, 25.0, -165.0)),  # pitch alone
+    ((0.0, 5.0, -180.0), (0.0, 5.0, -150.0)),  # roll alone
+])
+def test_paper_tip_error_depends_on_orientation_not_only_position(
+        euler_a_deg: tuple[float, float, float], euler_b_deg: tuple[float, float, float]) -> None:
+    model = bias.CableModel(bias.BIAS_PRESETS["paper"], bias_seed=0)
+    position = np.array([0.04, 0.04, -0.16])
+    error_a, error_b = (
+        _tip_error(model, kin.inverse_kinematics(kin.pose_from_euler(position, *np.deg2rad(euler))))
+        for euler in (euler_a_deg, euler_b_deg))
+    assert np.linalg.norm(error_a - error_b) > 0.15 * MM
+
+
+def test_paper_hysteresis_gap_is_at_least_0_3_mm(paper_statistics: dict) -> None:
+    model = bias.CableModel(bias.BIAS_PRESETS["paper"], bias_seed=0)
+    all_joints, _ = bias.hysteresis_gaps(model, _commands(50))
+    assert all_joints.min() >= 0.3 * MM
+    assert paper_statistics["hysteresis_gap_min_m"] >= 0.3 * MM
+
+
+def test_opposite_approaches_land_on_opposite_sides() -> None:
+    model = bias.CableModel(bias.BIAS_PRESETS["paper"], bias_seed=0)
+    q_cmd = _commands(1)[0]
+    delta = bias.APPROACH_DELTA
+    model.reset(q_cmd - delta)
+    from_below = model.true_joints(q_cmd)
+    model.reset(q_cmd + delta)
+    from_above = model.true_joints(q_cmd)
+    assert np.all(from_below < from_above)  # each joint lags behind its approach
+    # Having come down onto q_cmd, a small move back up stays inside every play: the
+    # joints do not move at all.
+    nudge = 0.05 * bias._play_radii(model.config).min(axis=0)
+    np.testing.assert_allclose(model.true_joints(q_cmd + nudge), from_above, rtol=0, atol=1e-12)
+
+
+def test_same_seed_gives_same_instrument_and_noise() -> None:
+    config = bias.BIAS_PRESETS["paper"]
+    first, second = bias.CableModel(config, bias_seed=11), bias.CableModel(config, bias_seed=11)
+    assert first.true_dh == second.true_dh
+    noise_a, noise_b = np.random.default_rng(5), np.random.default_rng(5)
+    for q_cmd in _commands(20):
+        np.testing.assert_array_equal(first.true_joints(q_cmd, noise_a), second.true_joints(q_cmd, noise_b))
+
+
+def test_another_seed_gives_another_instrument() -> None:
+    config = bias.BIAS_PRESETS["paper"]
+    first, other = bias.CableModel(config, bias_seed=11), bias.CableModel(config, bias_seed=12)
+    assert first.true_dh != other.true_dh
+    q_cmd = _commands(1)[0]
+    first.reset(q_cmd)
+    other.reset(q_cmd)
+    assert np.abs(first.true_joints(q_cmd) - other.true_joints(q_cmd)).max() > 1e-4
+
+
+def test_noise_is_drawn_once_per_move_from_the_passed_generator() -> None:
+    model = bias.CableModel(bias.BIAS_PRESETS["paper"], bias_seed=0)
+    q_cmd = _commands(1)[0]
+    model.reset(q_cmd)
+    quiet = model.true_joints(q_cmd)
+    noisy = [model.true_joints(q_cmd, np.random.default_rng(s)) for s in range(2)]
+    assert not np.array_equal(noisy[0], noisy[1])
+    assert np.array_equal(model.true_joints(q_cmd), quiet)  # no generator, no noise
+    tip_scatter = [np.linalg.norm(kin.touch_point(q, model.true_dh) - kin.touch_point(quiet, model.true_dh))
+                   for q in noisy]
+    assert max(tip_scatter) < 1.0 * MM
+
+
+def test_reported_pose_is_never_the_truth_under_paper() -> None:
+    model = bias.CableModel(bias.BIAS_PRESETS["paper"], bias_seed=0)
+    noise = np.random.default_rng(2)
+    q_cmd = _commands(300)
+    model.reset(q_cmd[0])
+    for q in q_cmd:
+        q_true = model.true_joints(q, noise)
+        reported, true = kin.forward_kinematics(q), kin.forward_kinematics(q_true, model.true_dh)
+        assert np.linalg.norm(true[:3, 3] - reported[:3, 3]) > 0.5 * MM
+
+
+def test_state_round_trip_reproduces_the_next_move_bit_for_bit() -> None:
+    model = bias.CableModel(bias.BIAS_PRESETS["paper"], bias_seed=0)
+    q_cmd = _commands(12)
+    model.reset(q_cmd[0])
+    for q in q_cmd[:10]:
+        model.true_joints(q)
+    saved = model.get_state()
+    expected = model.true_joints(q_cmd[10], np.random.default_rng(9))
+    model.true_joints(q_cmd[11])  # wander off
+    model.set_state(saved)
+    np.testing.assert_array_equal(model.true_joints(q_cmd[10], np.random.default_rng(9)), expected)
+
+
+def test_first_move_without_reset_starts_at_rest() -> None:
+    config = bias.BIAS_PRESETS["paper"]
+    fresh, rested = bias.CableModel(config), bias.CableModel(config)
+    q_cmd = _commands(1)[0]
+    rested.reset(q_cmd)
+    np.testing.assert_array_equal(fresh.true_joints(q_cmd), rested.true_joints(q_cmd))
+
+
+def test_set_state_rejects_a_malformed_state() -> None:
+    model = bias.CableModel(bias.BIAS_PRESETS["paper"])
+    with pytest.raises(ValueError, match="shape"):
+        model.set_state(np.zeros(6))
+    half_nan = model.get_state()
+    half_nan[0] = 0.0
+    with pytest.raises(ValueError, match="NaN"):
+        model.set_state(half_nan)
+
+
+@pytest.mark.parametrize("index", range(6))
+def test_nan_command_raises_naming_the_element(index: int) -> None:
+    model = bias.CableModel(bias.BIAS_PRESETS["paper"])
+    q_cmd = _commands(1)[0]
+    q_cmd[index] = np.nan
+    pattern = rf"q_cmd\[{index}\] \({kin.JOINT_NAMES[index]}\) is nan"
+    with pytest.raises(ValueError, match=pattern):
+        model.true_joints(q_cmd)
+    with pytest.raises(ValueError, match=pattern):
+        model.reset(q_cmd)
+
+
+def test_wrong_shaped_command_raises() -> None:
+    with pytest.raises(ValueError, match=r"shape \(6,\)"):
+        bias.CableModel(bias.BIAS_PRESETS["paper"]).true_joints(np.zeros(5))
