@@ -61,7 +61,11 @@ def test_cleaning_rule_keeps_only_agreeing_stereo_pairs():
     left = np.array([[100.0, 50.0], [100.0, 50.0], [np.nan, np.nan], [100.0, 50.0]])
     right = np.array([[90.0, 50.5], [90.0, 58.0], [90.0, 50.0], [90.0, 50.0]])
     position = np.array([[0.0, 0.0, 0.18], [0.0, 0.0, 0.18], [np.nan] * 3, [0.0, 0.0, 5.0]])
-    np.testing.assert_array_equal(clean_mask(left, right, position, image_width=1920), [True, False, False, False])
+    areas = np.array([[900.0, 880.0], [900.0, 900.0], [0.0, 900.0], [900.0, 900.0]])
+    np.testing.assert_array_equal(clean_mask(left, right, position, areas, image_width=1920), [True, False, False, False])
+    slivers = np.tile(left[:1], (4, 1)), np.tile(right[:1], (4, 1)), np.tile(position[:1], (4, 1))
+    areas = np.array([[1000.0, 1000.0], [990.0, 1010.0], [1000.0, 150.0], [120.0, 130.0]])
+    np.testing.assert_array_equal(clean_mask(*slivers, areas, image_width=1920), [True, True, False, False])
 
 
 @pytest.mark.slow

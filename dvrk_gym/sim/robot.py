@@ -21,17 +21,46 @@ from dvrk_gym.sim.physics import Physics
 
 SHAFT_RADIUS_M = 0.0042
 SHAFT_LENGTH_M = 0.25
-WRIST_HALF_EXTENTS_M = np.array([0.0046, 0.0026, 0.0032])
-"""Wrist-pitch link (clevis) half sizes along its frame's (x, y, z), in metres."""
+WRIST_START_M = -0.0015
+WRIST_END_M = 0.0100
+"""The clevis spans x in [WRIST_START_M, WRIST_END_M] of the wrist-pitch frame: from around
+the wrist-pitch pin to just past the wrist-yaw axis (at x = 9.1 mm), metres."""
+WRIST_HALF_EXTENTS_M = np.array([(WRIST_END_M - WRIST_START_M) / 2, SHAFT_RADIUS_M, SHAFT_RADIUS_M])
+"""Wrist-pitch link (clevis) half sizes along its frame's (x, y, z): as wide as the shaft, metres."""
+SHAFT_GAP_M = 0.0020
+"""The shaft ends this far above the wrist-pitch axis (the clevis turns in the gap), metres."""
 JAW_THICKNESS_M = 0.0011
 JAW_WIDTH_M = 0.0026
 
-MARKER_HALF_EXTENTS_M = np.array([0.0018, 0.00005, 0.0018])
-"""Red marker half sizes in the wrist-pitch frame (x along the wrist, y its normal), metres."""
-MARKER_OFFSET_M = np.array([0.0050, WRIST_HALF_EXTENTS_M[1] + MARKER_HALF_EXTENTS_M[1], 0.0])
-"""Centre of the marker patch in the wrist-pitch frame (frame 5), metres."""
-MARKER_NORMAL = np.array([0.0, 1.0, 0.0])
-"""Outward normal of the marker patch in frame 5 (unit vector)."""
+
+@dataclass(frozen=True)
+class MarkerSpec:
+    """Where the red marker (the paper's red tape) sits on the tool.
+
+    Attributes:
+        link: "jaw_a" (a jaw, moves with the jaw angle) or "wrist_pitch" (the clevis).
+        offset_m: centre of the thin marker box in that link's frame, metres.
+        half_extents_m: half sizes of the box in that link's frame, metres (the thin one
+            along the normal).
+        normal: the outward normal of its visible face in the link frame (unit, axis-aligned).
+    """
+
+    link: str
+    offset_m: tuple[float, float, float]
+    half_extents_m: tuple[float, float, float]
+    normal: tuple[float, float, float]
+
+
+MARKER = MarkerSpec(
+    # Tape on one side of the clevis, between the wrist-pitch and wrist-yaw axes. Measured
+    # alternatives: on a jaw's faces the jaws themselves hide all but slivers (centroid
+    # errors of 10-20 px); here a 0.1 mm patch is seen whole or not at all, and under the
+    # paper's rotations both cameras see it 39% of the time (the paper kept 37%).
+    link="wrist_pitch",
+    offset_m=(0.0060, float(WRIST_HALF_EXTENTS_M[1]) + 0.00005, 0.0),
+    half_extents_m=(0.0018, 0.00005, 0.0018),
+    normal=(0.0, 1.0, 0.0),
+)
 
 MARKER_RED = (0.85, 0.04, 0.04, 1.0)
 SHAFT_GREY = (0.55, 0.56, 0.58, 1.0)
@@ -46,35 +75,52 @@ JAW_B_INDEX = 7
 WRIST_YAW_INDEX = 5
 
 
-def marker_position(q: np.ndarray, dh: tuple[kin.DHRow, ...] = kin.PSM_DH) -> np.ndarray:
+def marker_frame(q: np.ndarray, dh: tuple[kin.DHRow, ...] = kin.PSM_DH, jaw_angle_rad: float = 0.0, marker: MarkerSpec = MARKER) -> np.ndarray:
+    """The pose (4x4, base frame, metres) of the link that carries the marker."""
+    frames = kin.link_frames(q, dh)
+    if marker.link == "wrist_pitch":
+        return frames[4]
+    half = max(jaw_angle_rad, 0.0) / 2  # jaw A turns by +jaw/2 about the wrist-yaw axis
+    turn = np.eye(4)
+    turn[:2, :2] = [[np.cos(half), -np.sin(half)], [np.sin(half), np.cos(half)]]
+    return frames[5] @ turn
+
+
+def _in_base(local: np.ndarray, frame: np.ndarray) -> np.ndarray:
+    return local @ frame[:3, :3].T + frame[:3, 3]
+
+
+def marker_position(q: np.ndarray, dh: tuple[kin.DHRow, ...] = kin.PSM_DH, jaw_angle_rad: float = 0.0) -> np.ndarray:
     """Centre of the red marker's outer face for joints ``q``, base frame, metres."""
-    frame5 = kin.link_frames(q, dh)[4]
-    return frame5[:3, :3] @ MARKER_OFFSET_M + frame5[:3, 3]
+    face = np.array(MARKER.offset_m) + np.array(MARKER.normal) * np.array(MARKER.half_extents_m)
+    return _in_base(face, marker_frame(q, dh, jaw_angle_rad))
 
 
-def marker_corners(q: np.ndarray, dh: tuple[kin.DHRow, ...] = kin.PSM_DH) -> np.ndarray:
+def marker_corners(q: np.ndarray, dh: tuple[kin.DHRow, ...] = kin.PSM_DH, jaw_angle_rad: float = 0.0) -> np.ndarray:
     """The 8 corners of the red marker (a thin box), (8, 3) base frame, metres.
 
     Its image lies inside the bounding box of these corners' projections, which is how
     the world sizes the window it renders to find the marker.
     """
-    frame5 = kin.link_frames(q, dh)[4]
     signs = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
-    local = MARKER_OFFSET_M + signs * MARKER_HALF_EXTENTS_M
-    return local @ frame5[:3, :3].T + frame5[:3, 3]
+    local = np.array(MARKER.offset_m) + signs * np.array(MARKER.half_extents_m)
+    return _in_base(local, marker_frame(q, dh, jaw_angle_rad))
 
 
-def marker_face_points(q: np.ndarray, dh: tuple[kin.DHRow, ...] = kin.PSM_DH) -> np.ndarray:
+def marker_face_points(q: np.ndarray, dh: tuple[kin.DHRow, ...] = kin.PSM_DH, jaw_angle_rad: float = 0.0) -> np.ndarray:
     """The centre and four corners of the marker's outer face, (5, 3) base frame, metres."""
-    frame5 = kin.link_frames(q, dh)[4]
-    hx, _, hz = MARKER_HALF_EXTENTS_M
-    local = MARKER_OFFSET_M + np.array([[0, 0, 0], [hx, 0, hz], [hx, 0, -hz], [-hx, 0, hz], [-hx, 0, -hz]])
-    return local @ frame5[:3, :3].T + frame5[:3, 3]
+    normal = np.array(MARKER.normal)
+    half = np.array(MARKER.half_extents_m)
+    in_face = np.diag(half * (1 - np.abs(normal)))  # the two in-face half axes (one row is zero)
+    a, b = [row for row in in_face if np.any(row)]
+    centre = np.array(MARKER.offset_m) + normal * half
+    local = centre + np.array([[0, 0, 0], a + b, a - b, -a + b, -a - b])
+    return _in_base(local, marker_frame(q, dh, jaw_angle_rad))
 
 
-def marker_normal(q: np.ndarray, dh: tuple[kin.DHRow, ...] = kin.PSM_DH) -> np.ndarray:
-    """Outward unit normal of the red marker for joints ``q``, base frame."""
-    return kin.link_frames(q, dh)[4][:3, :3] @ MARKER_NORMAL
+def marker_normal(q: np.ndarray, dh: tuple[kin.DHRow, ...] = kin.PSM_DH, jaw_angle_rad: float = 0.0) -> np.ndarray:
+    """Outward unit normal of the red marker's face for joints ``q``, base frame."""
+    return marker_frame(q, dh, jaw_angle_rad)[:3, :3] @ np.array(MARKER.normal)
 
 
 @dataclass(frozen=True)
@@ -94,14 +140,13 @@ def _link_shapes() -> dict[str, list[_Shape]]:
     wx, wy, wz = (float(v) for v in WRIST_HALF_EXTENTS_M)
     jaw_x = JAW_THICKNESS_M / 2
     jaw_len = kin.JAW_LENGTH_M
-    return {
+    shapes = {
         "roll": [
             # The shaft rolls with the roll joint; it ends just above the wrist-pitch axis.
-            _Shape("cylinder", (SHAFT_RADIUS_M, SHAFT_LENGTH_M), (0.0, 0.0, -wx - SHAFT_LENGTH_M / 2), SHAFT_GREY),
+            _Shape("cylinder", (SHAFT_RADIUS_M, SHAFT_LENGTH_M), (0.0, 0.0, -SHAFT_GAP_M - SHAFT_LENGTH_M / 2), SHAFT_GREY),
         ],
         "wrist_pitch": [
-            _Shape("box", (wx, wy, wz), (wx, 0.0, 0.0), WRIST_GREY),
-            _Shape("box", tuple(float(v) for v in MARKER_HALF_EXTENTS_M), tuple(float(v) for v in MARKER_OFFSET_M), MARKER_RED, collides=False),
+            _Shape("box", (wx, wy, wz), (WRIST_START_M + wx, 0.0, 0.0), WRIST_GREY),
         ],
         "jaw_a": [  # jaw A opens towards -x (its angle is q6 + jaw / 2): it sits on the -x side
             _Shape("box", (jaw_x, jaw_len / 2, JAW_WIDTH_M / 2), (-jaw_x, jaw_len / 2, 0.0), JAW_STEEL),
@@ -113,6 +158,8 @@ def _link_shapes() -> dict[str, list[_Shape]]:
             _Shape("box", (0.0011, 0.0011, JAW_WIDTH_M), (0.0, 0.0, 0.0), WRIST_GREY, collides=False),
         ],
     }
+    shapes[MARKER.link].append(_Shape("box", MARKER.half_extents_m, MARKER.offset_m, MARKER_RED, collides=False))
+    return shapes
 
 
 def _pose_to_pybullet(t: np.ndarray) -> tuple[list[float], list[float]]:

@@ -84,11 +84,15 @@ class StereoDetection:
         right_uv: (u, v) in the right image, pixels; NaN when not seen.
         camera_position: triangulated (x, y, z) in the left camera frame, metres; NaN
             unless both cameras saw it with a positive disparity.
+        left_area_px: the detected region's area in the left image, pixels (0 when unseen).
+        right_area_px: the same in the right image.
     """
 
     left_uv: np.ndarray
     right_uv: np.ndarray
     camera_position: np.ndarray
+    left_area_px: float = 0.0
+    right_area_px: float = 0.0
 
     @property
     def seen_left(self) -> bool:
@@ -171,7 +175,7 @@ class DvrkWorld:
 
     def true_marker_position(self) -> np.ndarray:
         """Where the red marker's centre really is, base frame, m. Evaluation only."""
-        return marker_position(self.q_true, self.cable.true_dh)
+        return marker_position(self.q_true, self.cable.true_dh, self.jaw_angle)
 
     def move_to(
         self,
@@ -247,7 +251,7 @@ class DvrkWorld:
         the full frame's. The marker is the only red thing in the scene, so the result is
         that of a full-frame search, at a fraction of the cost.
         """
-        left_uv, right_uv = self.camera.project(marker_corners(self.q_true, self.cable.true_dh))
+        left_uv, right_uv = self.camera.project(marker_corners(self.q_true, self.cable.true_dh, self.jaw_angle))
         left = self._detect_in_window("left", left_uv)
         right = self._detect_in_window("right", right_uv)
         return self._stereo(self._with_noise(left, noise_rng), self._with_noise(right, noise_rng))
@@ -265,8 +269,8 @@ class DvrkWorld:
         to every corner and the centre of its face meets nothing on the way. This is the
         fast geometric check; :meth:`observe_marker` is the pixel path (tests compare them).
         """
-        points = marker_face_points(self.q_true, self.cable.true_dh)
-        normal = marker_normal(self.q_true, self.cable.true_dh)
+        points = marker_face_points(self.q_true, self.cable.true_dh, self.jaw_angle)
+        normal = marker_normal(self.q_true, self.cable.true_dh, self.jaw_angle)
         origin = self.camera.pose[:3, 3] + (self.camera.baseline_m * self.camera.pose[:3, 0] if side == "right" else 0.0)
         if normal @ (origin - points[0]) <= 0.0:
             return False
@@ -296,7 +300,8 @@ class DvrkWorld:
         position = np.full(3, np.nan)
         if left is not None and right is not None and left_uv[0] - right_uv[0] > 0:
             position = self.camera.triangulate(left_uv, right_uv)[0]
-        return StereoDetection(left_uv.copy(), right_uv.copy(), position)
+        areas = [0.0 if blob is None else blob.area_px for blob in (left, right)]
+        return StereoDetection(left_uv.copy(), right_uv.copy(), position, *areas)
 
     def observe_grid(self) -> tuple[StereoDetection, ...]:
         """Detect the 35 printed circles in both images, in grid order (row-major).
