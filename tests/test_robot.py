@@ -7,7 +7,7 @@ import pytest
 
 from dvrk_gym.sim import kinematics as kin
 from dvrk_gym.sim.physics import Physics
-from dvrk_gym.sim.robot import JAW_A_INDEX, JAW_B_INDEX, MARKER, PSMBody, marker_corners, marker_frame, marker_normal, marker_position
+from dvrk_gym.sim.robot import JAW_A_INDEX, JAW_B_INDEX, MARKER, WRIST_YAW_INDEX, PSMBody, marker_corners, marker_face_samples, marker_frame, marker_position
 
 
 @pytest.fixture
@@ -66,20 +66,25 @@ def test_negative_jaw_angle_keeps_jaws_closed(physics):
     np.testing.assert_allclose(a, b, atol=1e-9)
 
 
-@pytest.mark.parametrize("jaw_deg", [0.0, 40.0])
-def test_marker_sits_on_its_link_surface(physics, jaw_deg):
+def test_marker_is_tape_on_the_closed_jaws_near_the_tips(physics):
     body = PSMBody(physics)
     q = np.array([0.1, 0.2, 0.16, -0.4, 0.2, 0.3])
-    jaw = np.radians(jaw_deg)
-    body.set_joints(q, jaw)
-    link = body.link_pose({"jaw_a": JAW_A_INDEX, "wrist_pitch": 4}[MARKER.link])
-    np.testing.assert_allclose(marker_frame(q, jaw_angle_rad=jaw), link, atol=1e-6)
-    centre = link[:3, :3].T @ (marker_position(q, jaw_angle_rad=jaw) - link[:3, 3])
-    np.testing.assert_allclose(centre, np.add(MARKER.offset_m, np.multiply(MARKER.normal, MARKER.half_extents_m)), atol=1e-6)
-    np.testing.assert_allclose(np.linalg.norm(marker_normal(q, jaw_angle_rad=jaw)), 1.0)
-    corners = marker_corners(q, jaw_angle_rad=jaw)
-    assert corners.shape == (8, 3)
-    np.testing.assert_allclose(corners.mean(axis=0), link[:3, :3] @ MARKER.offset_m + link[:3, 3], atol=1e-6)
+    body.set_joints(q, 0.0)
+    link = body.link_pose({"wrist_yaw": WRIST_YAW_INDEX, "wrist_pitch": 4}[MARKER.link])
+    np.testing.assert_allclose(marker_frame(q), link, atol=1e-6)
+    corners = marker_corners(q)
+    np.testing.assert_allclose(corners.mean(axis=0), marker_position(q), atol=1e-12)
+    # It marks a point near where the jaws touch, as the paper's tape did.
+    assert np.linalg.norm(marker_position(q) - kin.touch_point(q)) < 0.0035
+
+
+def test_marker_face_samples_only_on_faces_towards_the_viewpoint():
+    q = np.array([0.0, 0.0, 0.16, 0.0, 0.0, 0.0])
+    centre = marker_position(q)
+    viewpoint = centre + np.array([0.0, 0.0, 0.2])  # straight above
+    points, normals = marker_face_samples(q, viewpoint)
+    assert len(points) in (25, 50, 75)  # one to three faces, a 5 x 5 grid each
+    assert np.all(np.einsum("ij,ij->i", normals, viewpoint - points) > 0)
 
 
 def test_body_holds_its_joints_when_physics_steps(physics):

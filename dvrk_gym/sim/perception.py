@@ -55,7 +55,7 @@ def detect_marker(rgb: np.ndarray, min_area_px: float = MIN_MARKER_AREA_PX) -> B
         min_area_px: the smallest region accepted as the marker, in pixels.
     """
     mask = red_mask(rgb)
-    count, labels, stats, centroids = cv2.connectedComponentsWithStats(mask, connectivity=8)
+    count, _, stats, centroids = cv2.connectedComponentsWithStats(mask, connectivity=8)
     if count <= 1:
         return None
     largest = 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))

@@ -24,7 +24,7 @@ from dvrk_gym.sim.camera import PAPER_INTRINSICS, PixelWindow, StereoCamera, def
 from dvrk_gym.sim.motion import CartesianMove, MotionLimits, SimClock
 from dvrk_gym.sim.perception import Blob, detect_circles, detect_marker, match_to_expected
 from dvrk_gym.sim.physics import Physics
-from dvrk_gym.sim.robot import PSMBody, marker_corners, marker_face_points, marker_normal, marker_position
+from dvrk_gym.sim.robot import PSMBody, marker_corners, marker_face_samples, marker_position
 from dvrk_gym.sim.scene import CIRCLE_RADIUS_M, SceneBodies, build_scene, grid_circle_centers
 
 HOME_JOINTS = np.array([0.0, 0.0, 0.05, 0.0, 0.0, 0.0])
@@ -35,7 +35,7 @@ JAW_SPEED_RAD_S = math.radians(150.0)
 
 MARKER_WINDOW_MARGIN_PX = 2
 """Pixels added around the marker's projected bounding box when rendering its window."""
-MARKER_RAY_STANDOFF_M = 0.0003
+MARKER_RAY_STANDOFF_M = 0.00005
 """Visibility rays stop this far in front of the marker's face, metres."""
 
 
@@ -175,7 +175,7 @@ class DvrkWorld:
 
     def true_marker_position(self) -> np.ndarray:
         """Where the red marker's centre really is, base frame, m. Evaluation only."""
-        return marker_position(self.q_true, self.cable.true_dh, self.jaw_angle)
+        return marker_position(self.q_true, self.cable.true_dh)
 
     def move_to(
         self,
@@ -251,7 +251,7 @@ class DvrkWorld:
         the full frame's. The marker is the only red thing in the scene, so the result is
         that of a full-frame search, at a fraction of the cost.
         """
-        left_uv, right_uv = self.camera.project(marker_corners(self.q_true, self.cable.true_dh, self.jaw_angle))
+        left_uv, right_uv = self.camera.project(marker_corners(self.q_true, self.cable.true_dh))
         left = self._detect_in_window("left", left_uv)
         right = self._detect_in_window("right", right_uv)
         return self._stereo(self._with_noise(left, noise_rng), self._with_noise(right, noise_rng))
@@ -262,22 +262,22 @@ class DvrkWorld:
             return blob
         return Blob(blob.centroid + noise_rng.normal(0.0, sigma, size=2), blob.area_px, blob.touches_border)
 
-    def marker_fully_visible(self, side: str) -> bool:
-        """Geometric visibility of the marker from one camera (no rendering).
+    def marker_visible_fraction(self, side: str) -> float:
+        """Geometric visibility of the marker from one camera, without rendering.
 
-        True when the marker faces the camera and a ray from the camera's optical centre
-        to every corner and the centre of its face meets nothing on the way. This is the
-        fast geometric check; :meth:`observe_marker` is the pixel path (tests compare them).
+        Rays from the camera's optical centre to a grid of points on the marker faces
+        that face it; the fraction that meet nothing on the way (0: hidden, 1: seen whole).
+        This is the fast geometric check; :meth:`observe_marker` is the pixel path, and
+        the tests measure how the two agree.
         """
-        points = marker_face_points(self.q_true, self.cable.true_dh, self.jaw_angle)
-        normal = marker_normal(self.q_true, self.cable.true_dh, self.jaw_angle)
         origin = self.camera.pose[:3, 3] + (self.camera.baseline_m * self.camera.pose[:3, 0] if side == "right" else 0.0)
-        if normal @ (origin - points[0]) <= 0.0:
-            return False
-        # Stop each ray just short of the face, so it cannot hit the wrist the marker is on.
-        ends = points + MARKER_RAY_STANDOFF_M * normal
+        points, normals = marker_face_samples(self.q_true, origin, self.cable.true_dh)
+        if len(points) == 0:
+            return 0.0
+        # Stop each ray just in front of the face, so it cannot hit the jaws under the tape.
+        ends = points + MARKER_RAY_STANDOFF_M * normals
         hits = self.physics.client.rayTestBatch([list(origin)] * len(ends), ends.tolist())
-        return all(hit[0] == -1 for hit in hits)
+        return float(np.mean([hit[0] == -1 for hit in hits]))
 
     def _detect_in_window(self, side: str, corners_uv: np.ndarray) -> Blob | None:
         k = self.camera.intrinsics
