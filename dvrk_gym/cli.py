@@ -8,6 +8,8 @@ import sys
 from pathlib import Path
 from typing import Callable, Sequence
 
+from dvrk_gym.cli_calibration import add_commands as add_calibration_commands
+
 Command = Callable[[argparse.Namespace], int]
 
 
@@ -45,6 +47,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("-v", "--verbose", action="store_true", help="log progress details")
     subparsers = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     _add_demo(subparsers)
+    add_calibration_commands(subparsers)
     return parser
 
 

@@ -1,0 +1,159 @@
+"""The paper's calibration benchmark: RBT, DNN and DNN+RF touching the 35 circles.
+
+Table "Calibration Error Results" of the paper: for each method and six yaw settings (the
+five yaws, and a random yaw per circle), the error between where the closed jaws touched
+and the circle's centre, over the 35 circles, in pixels (left image) and millimetres.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from dvrk_gym.calibration.policy import CalibratedPolicy, Calibrator
+from dvrk_gym.envs.grid_touch import N_CIRCLES
+from dvrk_gym.evaluation import run_episodes, summarize
+from dvrk_gym.sim.scene import GRID_COLUMNS, GRID_ROWS
+
+logger = logging.getLogger(__name__)
+
+YAW_SETTINGS: tuple[tuple[str, float | str], ...] = (
+    ("yaw -90", -np.pi / 2),
+    ("yaw -45", -np.pi / 4),
+    ("yaw 0", 0.0),
+    ("yaw 45", np.pi / 4),
+    ("yaw 90", np.pi / 2),
+    ("random", "random"),
+)
+"""The paper's six settings: (label, GridTouch ``yaw`` option)."""
+
+PAPER_PIXELS = {
+    "RBT": (39.9, 53.6, 52.0, 72.0, 44.1, 47.1),
+    "DNN": (26.7, 28.3, 22.7, 21.5, 22.5, 23.1),
+    "DNN+RF": (10.5, 14.2, 12.8, 12.1, 8.9, 14.7),
+}
+"""The paper's per-setting mean errors in pixels (1920 x 1080; 1 mm is about 11.3 px)."""
+PAPER_MEAN_MM = {"RBT": 4.55, "DNN": 2.14, "DNN+RF": 1.08}
+PAPER_PX_PER_MM = 11.3
+
+
+@dataclass(frozen=True)
+class CircleErrors:
+    """Errors of one method in one setting, per circle (row-major grid order).
+
+    Attributes:
+        pixel: (35,) distance in the left image, pixels.
+        mm: (35,) distance in the workspace plane, millimetres.
+        yaw: (35,) the yaw asked for at each circle, radians.
+    """
+
+    pixel: np.ndarray
+    mm: np.ndarray
+    yaw: np.ndarray
+
+
+def touch_grid(env: gym.Env, policy: Any, yaw: float | str, seed: int = 0, progress: bool = False) -> CircleErrors:
+    """Touch all 35 circles once with ``policy`` at one yaw setting."""
+    results = run_episodes(
+        env, policy, N_CIRCLES, seed=seed, options=lambda i: {"yaw": yaw, "circle": i}, progress=progress, description=f"touch grid ({yaw})"
+    )
+    pick = lambda key: np.array([r.metrics.get(key, np.nan) for r in results])  # noqa: E731
+    return CircleErrors(pixel=pick("pixel_error"), mm=pick("mm_error"), yaw=pick("target_yaw"))
+
+
+def calibration_table(env: gym.Env, calibrators: dict[str, Calibrator], seed: int = 0, progress: bool = True) -> dict[str, dict[str, CircleErrors]]:
+    """Every method in every setting: ``table[method][setting]``."""
+    table: dict[str, dict[str, CircleErrors]] = {}
+    for method, calibrator in calibrators.items():
+        policy = CalibratedPolicy(calibrator)
+        table[method] = {label: touch_grid(env, policy, yaw, seed=seed + k) for k, (label, yaw) in enumerate(YAW_SETTINGS)}
+        mean_mm = np.nanmean([e.mm.mean() for e in table[method].values()])
+        logger.info("%s: mean touch error %.2f mm", method, mean_mm)
+    return table
+
+
+def table_summary(table: dict[str, dict[str, CircleErrors]]) -> dict[str, Any]:
+    """Statistics per method and setting (and over all settings), as plain numbers."""
+    summary: dict[str, Any] = {}
+    for method, settings in table.items():
+        rows = {label: {"pixel": summarize(e.pixel), "mm": summarize(e.mm)} for label, e in settings.items()}
+        every = [e for e in settings.values()]
+        rows["all settings"] = {
+            "pixel": summarize(np.concatenate([e.pixel for e in every])),
+            "mm": summarize(np.concatenate([e.mm for e in every])),
+        }
+        summary[method] = rows
+    return summary
+
+
+def format_table(table: dict[str, dict[str, CircleErrors]]) -> str:
+    """The paper's table in text: mean +- s.e., median, min, max per setting; paper beside."""
+    summary = table_summary(table)
+    lines = []
+    for unit, key in (("pixels", "pixel"), ("mm", "mm")):
+        lines.append(f"Calibration error ({unit}), over the 35 circles: mean +- s.e. / median / min / max")
+        header = f"{'method':<8}" + "".join(f"{label:>26}" for label, _ in YAW_SETTINGS)
+        lines.append(header)
+        for method, rows in summary.items():
+            cells = "".join(
+                f"{rows[label][key]['mean']:>9.2f} +- {rows[label][key]['sem']:<4.2f} {rows[label][key]['median']:>4.1f}/{rows[label][key]['min']:.1f}/{rows[label][key]['max']:.1f}".rjust(26)
+                for label, _ in YAW_SETTINGS
+            )
+            lines.append(f"{method:<8}{cells}")
+            if key == "pixel" and method in PAPER_PIXELS:
+                lines.append(f"{'  paper':<8}" + "".join(f"{v:>26.1f}" for v in PAPER_PIXELS[method]))
+        lines.append("")
+    lines.append(f"{'method':<8}{'sim mean mm':>14}{'paper mm':>10}{'difference':>12}")
+    for method, rows in summary.items():
+        sim = rows["all settings"]["mm"]["mean"]
+        paper = PAPER_MEAN_MM.get(method)
+        diff = f"{100 * (sim - paper) / paper:+.0f}%" if paper else "-"
+        lines.append(f"{method:<8}{sim:>14.2f}{(paper if paper else float('nan')):>10.2f}{diff:>12}")
+    return "\n".join(lines)
+
+
+def plot_error_maps(table: dict[str, dict[str, CircleErrors]], path: Path) -> Path:
+    """Per-circle error maps: one row per method, one column per setting (mm, shared scale)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    methods = list(table)
+    vmax = max(float(np.nanmax(e.mm)) for settings in table.values() for e in settings.values())
+    fig, axes = plt.subplots(len(methods), len(YAW_SETTINGS), figsize=(2.6 * len(YAW_SETTINGS), 2.3 * len(methods)), squeeze=False)
+    for row, method in enumerate(methods):
+        for col, (label, _) in enumerate(YAW_SETTINGS):
+            errors = table[method][label].mm.reshape(GRID_ROWS, GRID_COLUMNS)
+            ax = axes[row, col]
+            image = ax.imshow(errors, origin="lower", cmap="magma", vmin=0.0, vmax=vmax)
+            ax.set_xticks([])
+            ax.set_yticks([])
+            ax.set_title(f"{method}, {label}\nmean {np.nanmean(errors):.2f} mm", fontsize=8)
+    fig.colorbar(image, ax=axes, shrink=0.8, label="touch error (mm)")
+    fig.suptitle("Per-circle calibration error (grid as printed: x right, y up)")
+    path = Path(path)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def save_table(table: dict[str, dict[str, CircleErrors]], path: Path) -> Path:
+    """Write the summary and the per-circle errors as JSON."""
+    data = {
+        "summary": table_summary(table),
+        "per_circle": {
+            method: {label: {"pixel": e.pixel.tolist(), "mm": e.mm.tolist(), "yaw": e.yaw.tolist()} for label, e in settings.items()}
+            for method, settings in table.items()
+        },
+        "paper": {"mean_mm": PAPER_MEAN_MM, "pixels": PAPER_PIXELS},
+    }
+    path = Path(path)
+    path.write_text(json.dumps(data, indent=1))
+    return path

@@ -1,0 +1,84 @@
+"""Phase II: touch every circle for each of the five yaws and record a person's corrections.
+
+For each yaw the robot goes to each of the 35 circle centres where the Phase I calibrator
+sends it; a (simulated) person pushes the jaws onto the centre, and the change in the
+robot's reported position is stored. The forests of the two-phase calibrator learn these
+residuals.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+
+import gymnasium as gym
+import numpy as np
+from tqdm.auto import tqdm
+
+from dvrk_gym.calibration.policy import CalibratedPolicy, Calibrator, calibrator_input
+from dvrk_gym.envs.grid_touch import N_CIRCLES
+from dvrk_gym.sim.kinematics import PAPER_YAWS_RAD
+
+
+@dataclass(frozen=True)
+class Phase2Data:
+    """Phase II corrections, one row per touch (SI units).
+
+    Attributes:
+        camera_position: (N, 3) the circle centre as the endoscope saw it, m.
+        orientation: (N, 3) the (yaw, pitch, roll) used, rad.
+        commanded: (N, 3) where the calibrator sent the robot (base frame), m.
+        corrected: (N, 3) the reported position after the person's correction, m.
+        circle: (N,) which circle.
+    """
+
+    camera_position: np.ndarray
+    orientation: np.ndarray
+    commanded: np.ndarray
+    corrected: np.ndarray
+    circle: np.ndarray
+
+    @property
+    def X(self) -> np.ndarray:
+        """Calibrator inputs (N, 6): camera position (m), yaw, pitch, roll (rad)."""
+        return np.hstack([self.camera_position, self.orientation])
+
+    def save(self, path) -> None:
+        """Write the rows to an ``.npz`` file (plain arrays, no pickles)."""
+        np.savez(path, **{f.name: getattr(self, f.name) for f in fields(self)})
+
+    @classmethod
+    def load(cls, path) -> "Phase2Data":
+        """Read rows written by :meth:`save`."""
+        with np.load(path, allow_pickle=False) as data:
+            names = {f.name for f in fields(cls)}
+            if set(data.files) != names:
+                raise ValueError(f"{path} is not Phase II data: arrays {sorted(data.files)}, expected {sorted(names)}")
+            return cls(**{name: data[name] for name in names})
+
+
+def collect_phase2(env: gym.Env, calibrator: Calibrator, yaws: np.ndarray = PAPER_YAWS_RAD, seed: int = 0, progress: bool = True) -> Phase2Data:
+    """Run the paper's Phase II on GridTouch-v0: every yaw, every circle, one correction each.
+
+    Args:
+        env: a GridTouch-v0 environment (wrapped or not).
+        calibrator: the Phase I calibrator that chooses where to send the robot.
+        yaws: the yaws to use, rad (the paper's five by default).
+        seed: seeds the first reset; the rest of the pass follows deterministically.
+        progress: show a progress bar.
+    """
+    policy = CalibratedPolicy(calibrator)
+    rows: dict[str, list] = {f.name: [] for f in fields(Phase2Data)}
+    env.reset(seed=seed)
+    with tqdm(total=len(yaws) * N_CIRCLES, desc="Phase II touches", disable=not progress) as bar:
+        for yaw in yaws:
+            for circle in range(N_CIRCLES):
+                observation, _ = env.reset(options={"yaw": float(yaw), "circle": circle})
+                action = policy(observation)
+                _, _, _, _, info = env.step(action)
+                rows["camera_position"].append(np.asarray(observation["desired_goal"], dtype=float))
+                rows["orientation"].append(calibrator_input(observation["desired_goal"], float(yaw))[0, 3:])
+                rows["commanded"].append(action[:3].astype(float))
+                rows["corrected"].append(info["reported_position"] + info["human_correction"])
+                rows["circle"].append(circle)
+                bar.update()
+    return Phase2Data(**{name: np.array(values) for name, values in rows.items()})

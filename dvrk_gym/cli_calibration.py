@@ -1,0 +1,164 @@
+"""The calibration commands of ``dvrk-gym``: collect, calibrate, evaluate, search."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+
+def _add_world_options(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--bias", default="paper", help="cable bias preset: none, paper or severe (default: %(default)s)")
+    parser.add_argument("--bias-seed", type=int, default=0, help="which instrument to draw (default: %(default)s)")
+    parser.add_argument("--resolution", type=int, nargs=2, default=(1920, 1080), metavar=("W", "H"), help="endoscope image size (default: 1920 1080)")
+    parser.add_argument("--seed", type=int, default=0, help="seeds collection, training and evaluation (default: %(default)s)")
+
+
+def _add_budget_options(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--trajectories", type=int, default=57, help="Phase I trajectories (the paper: %(default)s)")
+    parser.add_argument("--epochs", type=int, default=1000, help="DNN training epochs (the paper: %(default)s)")
+
+
+def _config(args: argparse.Namespace):
+    from dvrk_gym.calibration.pipeline import PipelineConfig
+
+    return PipelineConfig(
+        n_trajectories=getattr(args, "trajectories", 57),
+        dnn_epochs=getattr(args, "epochs", 1000),
+        bias=args.bias,
+        bias_seed=args.bias_seed,
+        camera_resolution=tuple(args.resolution),
+        seed=args.seed,
+    )
+
+
+def _run_collect(args: argparse.Namespace) -> int:
+    import gymnasium as gym
+
+    import dvrk_gym  # noqa: F401
+    from dvrk_gym.calibration.phase1 import PaperExplorationPolicy, collect_phase1
+
+    args.out.mkdir(parents=True, exist_ok=True)
+    env = gym.make("dvrk_gym/CalibrationExploration-v0", bias=args.bias, bias_seed=args.bias_seed, camera_resolution=tuple(args.resolution))
+    try:
+        data = collect_phase1(env, PaperExplorationPolicy(seed=args.seed), args.trajectories, seed=args.seed)
+    finally:
+        env.close()
+    path = args.out / "phase1.npz"
+    data.save(path)
+    print(f"Phase I: {args.trajectories} trajectories, {data.n_raw} raw samples, {data.n_kept} kept ({data.n_kept / data.n_raw:.0%}; the paper: 5256 and 1939, 37%)")
+    print(f"wrote {path}")
+    return 0
+
+
+def _run_calibrate(args: argparse.Namespace) -> int:
+    from dvrk_gym.calibration.pipeline import run_calibration
+
+    result = run_calibration(args.out, _config(args), benchmark=False)
+    phase1 = result["phase1"]
+    print(f"Phase I: {phase1.n_raw} raw, {phase1.n_kept} kept; Phase II: {len(result['phase2'].circle)} corrections")
+    print(f"models in {args.out}: rbt.npz, dnn.npz, two_phase.npz (safe to load: no pickles)")
+    return 0
+
+
+def _run_evaluate(args: argparse.Namespace) -> int:
+    if args.policy:
+        return _evaluate_policy(args)
+    from dvrk_gym.calibration.benchmark import format_table
+    from dvrk_gym.calibration.pipeline import run_calibration
+
+    result = run_calibration(args.out, _config(args), benchmark=True)
+    print(format_table(result["table"]))
+    print(f"wrote {args.out / 'calibration_table.json'}, {args.out / 'calibration_table.txt'}, {args.out / 'calibration_error_maps.png'}")
+    return 0
+
+
+def _evaluate_policy(args: argparse.Namespace) -> int:
+    import gymnasium as gym
+
+    import dvrk_gym  # noqa: F401
+    from dvrk_gym.evaluation import load_policy_factory, run_episodes, summarize
+
+    factory = load_policy_factory(args.policy)
+    env = gym.make(args.env, bias=args.bias, bias_seed=args.bias_seed, camera_resolution=tuple(args.resolution))
+    try:
+        policy = factory(env)
+        options = json.loads(args.options) if args.options else None
+        results = run_episodes(env, policy, args.episodes, seed=args.seed, options=options)
+    finally:
+        env.close()
+    names = sorted({name for r in results for name in r.metrics})
+    print(f"{args.policy} on {args.env}, {args.episodes} episodes (seed {args.seed})")
+    print(f"{'metric':<22}{'mean':>10}{'s.e.':>9}{'median':>10}{'min':>10}{'max':>10}")
+    for name in names:
+        stats = summarize(r.metrics[name] for r in results if name in r.metrics)
+        print(f"{name:<22}{stats['mean']:>10.3f}{stats['sem']:>9.3f}{stats['median']:>10.3f}{stats['min']:>10.3f}{stats['max']:>10.3f}")
+    args.out.mkdir(parents=True, exist_ok=True)
+    path = args.out / "evaluation.json"
+    path.write_text(json.dumps([{"options": r.options, "metrics": r.metrics} for r in results], indent=1, default=str))
+    print(f"wrote {path}")
+    return 0
+
+
+def _run_search(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from dvrk_gym.calibration.datasets import load_paper_phase1
+    from dvrk_gym.calibration.phase1 import Phase1Data
+    from dvrk_gym.calibration.search import format_table, plot_search, run_search, search_caption
+
+    if args.data == "paper":
+        X, y = load_paper_phase1()
+        source = "the authors' real Phase I data"
+    else:
+        clean = Phase1Data.load(args.data).cleaned()
+        X, y = clean.X, clean.y
+        source = str(args.data)
+    results = run_search(X, y, folds=args.folds, seed=args.seed, quick=args.quick)
+    caption = f"{search_caption(results)} Data: {source}, {len(X)} rows."
+    print(format_table(results, caption))
+    args.out.mkdir(parents=True, exist_ok=True)
+    plot_search(results, str(args.out / "model_search.png"), caption)
+    rows = [{"name": r.name, "family": r.family, "mean_mm2": r.mean_mm2, "std_mm2": r.std_mm2, "folds_mm2": list(r.fold_mm2), "epochs": r.epochs} for r in results]
+    (args.out / "model_search.json").write_text(json.dumps(rows, indent=1))
+    print(f"wrote {args.out / 'model_search.png'}, {args.out / 'model_search.json'} ({np.size(results)} models)")
+    return 0
+
+
+def add_commands(subparsers: argparse._SubParsersAction) -> None:
+    """Register collect, calibrate, evaluate and search."""
+    collect = subparsers.add_parser("collect", help="Phase I: run the paper's random exploration and save the data")
+    collect.add_argument("--out", type=Path, default=Path("dvrk_gym_out/calibration"), help="output folder (default: %(default)s)")
+    collect.add_argument("--trajectories", type=int, default=57, help="trajectories (the paper: %(default)s)")
+    _add_world_options(collect)
+    collect.set_defaults(func=_run_collect)
+
+    calibrate = subparsers.add_parser("calibrate", help="Phase I and II: fit the rigid body, DNN and DNN+RF calibrators (cached stages)")
+    calibrate.add_argument("--out", type=Path, default=Path("dvrk_gym_out/calibration"), help="output folder (default: %(default)s)")
+    _add_budget_options(calibrate)
+    _add_world_options(calibrate)
+    calibrate.set_defaults(func=_run_calibrate)
+
+    evaluate = subparsers.add_parser(
+        "evaluate",
+        help="the paper's calibration table (RBT, DNN, DNN+RF x six yaw settings), or any policy with --policy",
+        description="Without --policy: calibrate (resuming cached stages in --out) and produce the paper's table "
+        "'Calibration Error Results' with per-circle error maps. With --policy module:factory: run that policy "
+        "(factory(env) -> policy) on --env and summarise every metric.",
+    )
+    evaluate.add_argument("--out", type=Path, default=Path("dvrk_gym_out/calibration"), help="output folder (default: %(default)s)")
+    evaluate.add_argument("--policy", help="evaluate another policy: 'package.module:factory', factory(env) returns the policy")
+    evaluate.add_argument("--env", default="dvrk_gym/GridTouch-v0", help="environment for --policy (default: %(default)s)")
+    evaluate.add_argument("--episodes", type=int, default=35, help="episodes for --policy (default: %(default)s)")
+    evaluate.add_argument("--options", help="reset options for --policy as JSON, e.g. '{\"yaw\": \"random\"}'")
+    _add_budget_options(evaluate)
+    _add_world_options(evaluate)
+    evaluate.set_defaults(func=_run_evaluate)
+
+    search = subparsers.add_parser("search", help="the paper's model search: 10-fold CV of 24 nets, linear and forests, with its bar chart")
+    search.add_argument("--data", default="paper", help="'paper' (the authors' real data) or a phase1.npz from collect (default: %(default)s)")
+    search.add_argument("--out", type=Path, default=Path("dvrk_gym_out/search"), help="output folder (default: %(default)s)")
+    search.add_argument("--folds", type=int, default=10, help="cross-validation folds (default: %(default)s)")
+    search.add_argument("--seed", type=int, default=0, help="seeds the folds and the models (default: %(default)s)")
+    search.add_argument("--quick", action="store_true", help="a few models, few epochs, 3 folds")
+    search.set_defaults(func=_run_search)

@@ -1,0 +1,138 @@
+"""Evaluate any policy on any dvrk_gym environment, with fixed seeds and the paper's metrics.
+
+A policy is a callable from observation to action, a stable-baselines3 model (anything
+with ``predict(observation, deterministic=True)``), or a
+:class:`~dvrk_gym.calibration.policy.CalibratedPolicy`. Each episode's metrics are the
+numeric scalars of its final ``info`` (for GridTouch: ``pixel_error``, ``mm_error``,
+``is_success``...) plus its return and length; :func:`summarize` gives mean, standard
+error, median, minimum and maximum.
+"""
+
+from __future__ import annotations
+
+import importlib
+from dataclasses import dataclass, field
+from typing import Any, Callable, Iterable
+
+import gymnasium as gym
+import numpy as np
+from tqdm.auto import tqdm
+
+Policy = Callable[[Any], np.ndarray]
+Options = dict[str, Any] | Callable[[int], dict[str, Any]] | None
+
+
+@dataclass(frozen=True)
+class EpisodeResult:
+    """One evaluated episode.
+
+    Attributes:
+        index: the episode's position in the run.
+        options: the reset options used.
+        length: steps taken.
+        total_reward: sum of rewards.
+        metrics: numeric scalars of the final info (and ``return``, ``length``).
+        final_info: the final info dict itself (may hold arrays and strings).
+    """
+
+    index: int
+    options: dict[str, Any]
+    length: int
+    total_reward: float
+    metrics: dict[str, float]
+    final_info: dict[str, Any] = field(repr=False)
+
+
+def as_policy(policy: Any) -> Policy:
+    """Wrap a callable, a stable-baselines3 model or a CalibratedPolicy as obs -> action."""
+    if hasattr(policy, "predict") and hasattr(policy, "observation_space"):  # SB3 model or policy
+        return lambda observation: policy.predict(observation, deterministic=True)[0]
+    if callable(policy):
+        return policy
+    raise TypeError(f"a policy must be callable or have predict(); got {type(policy).__name__}")
+
+
+def load_policy_factory(spec: str) -> Callable[[gym.Env], Any]:
+    """Import ``"package.module:factory"``: a function taking the env, returning a policy."""
+    module_name, _, attribute = spec.partition(":")
+    if not module_name or not attribute:
+        raise ValueError(f"--policy must look like 'package.module:factory', got {spec!r}")
+    try:
+        module = importlib.import_module(module_name)
+    except ImportError as error:
+        raise ValueError(f"cannot import {module_name!r} for --policy: {error}") from None
+    try:
+        factory = getattr(module, attribute)
+    except AttributeError:
+        raise ValueError(f"module {module_name!r} has no attribute {attribute!r}") from None
+    if not callable(factory):
+        raise ValueError(f"{spec!r} is not callable")
+    return factory
+
+
+def run_episodes(
+    env: gym.Env,
+    policy: Any,
+    n_episodes: int,
+    seed: int = 0,
+    options: Options = None,
+    progress: bool = True,
+    description: str = "episodes",
+) -> list[EpisodeResult]:
+    """Run ``n_episodes`` of ``policy`` on ``env``.
+
+    Args:
+        env: the environment.
+        policy: see :func:`as_policy`.
+        n_episodes: how many episodes.
+        seed: the first episode is reset with this seed, the rest continue its stream, so
+            the whole run is reproducible.
+        options: reset options, fixed or a function of the episode index.
+        progress: show a progress bar.
+        description: the progress bar's label.
+    """
+    if n_episodes < 1:
+        raise ValueError(f"n_episodes must be >= 1, got {n_episodes}")
+    act = as_policy(policy)
+    results = []
+    for index in tqdm(range(n_episodes), desc=description, disable=not progress):
+        episode_options = options(index) if callable(options) else dict(options or {})
+        observation, info = env.reset(seed=seed if index == 0 else None, options=episode_options)
+        total, length, done = 0.0, 0, False
+        while not done:
+            observation, reward, terminated, truncated, info = env.step(act(observation))
+            total += float(reward)
+            length += 1
+            done = terminated or truncated
+        metrics = {key: float(value) for key, value in info.items() if _is_scalar(value)}
+        metrics.update({"return": total, "length": float(length)})
+        results.append(EpisodeResult(index, episode_options, length, total, metrics, info))
+    return results
+
+
+def _is_scalar(value: Any) -> bool:
+    return isinstance(value, (bool, int, float, np.bool_, np.integer, np.floating)) and np.isfinite(float(value))
+
+
+def summarize(values: Iterable[float]) -> dict[str, float]:
+    """Mean, standard error of the mean, median, minimum, maximum and count."""
+    array = np.asarray(list(values), dtype=float)
+    if array.size == 0:
+        raise ValueError("nothing to summarize")
+    sem = float(array.std(ddof=1) / np.sqrt(array.size)) if array.size > 1 else 0.0
+    return {
+        "mean": float(array.mean()),
+        "sem": sem,
+        "median": float(np.median(array)),
+        "min": float(array.min()),
+        "max": float(array.max()),
+        "n": float(array.size),
+    }
+
+
+def summarize_metric(results: list[EpisodeResult], name: str) -> dict[str, float]:
+    """:func:`summarize` one metric over the episodes that report it."""
+    values = [r.metrics[name] for r in results if name in r.metrics]
+    if not values:
+        raise ValueError(f"no episode reported {name!r}; metrics are {sorted(results[0].metrics) if results else []}")
+    return summarize(values)
