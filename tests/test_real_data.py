@@ -72,6 +72,7 @@ def test_chosen_net_cv_error_is_within_the_paper_figure(paper_data) -> None:
     assert np.mean(errors) <= CHOSEN_NET_MAX_MM2
 
 
+@pytest.mark.slow
 def test_quick_search_cross_validates_each_model_and_plots(paper_data, tmp_path) -> None:
     X, y = paper_data
     results = run_search(X, y, quick=True, progress=False)

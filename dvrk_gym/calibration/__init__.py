@@ -1,21 +1,45 @@
 """Calibration: the paper's models (rigid body, DNN, per-yaw residual forests, two-phase),
-baselines for the model search, the authors' data, and model files without pickle."""
+baselines for the model search, the authors' data, and model files without pickle.
 
-from dvrk_gym.calibration.datasets import load_paper_phase1
-from dvrk_gym.calibration.dnn import DNNCalibrator
-from dvrk_gym.calibration.features import encode_euler, encode_quaternion, nearest_yaw_index
-from dvrk_gym.calibration.forests import ForestCalibrator, ResidualForests
-from dvrk_gym.calibration.linear import LinearCalibrator
-from dvrk_gym.calibration.rigid import RigidBodyCalibrator
-from dvrk_gym.calibration.search import (
-    SearchResult, cross_validate, format_table, paper_models, plot_search, run_search,
-)
-from dvrk_gym.calibration.serialization import ModelFileError
-from dvrk_gym.calibration.two_phase import TwoPhaseCalibrator
+The names below are imported lazily (PEP 562), so importing a light submodule such as
+``dvrk_gym.calibration.features`` does not pull in torch, scikit-learn and matplotlib.
+"""
 
-__all__ = [
-    "DNNCalibrator", "ForestCalibrator", "LinearCalibrator", "ModelFileError",
-    "ResidualForests", "RigidBodyCalibrator", "SearchResult", "TwoPhaseCalibrator",
-    "cross_validate", "encode_euler", "encode_quaternion", "format_table", "load_paper_phase1",
-    "nearest_yaw_index", "paper_models", "plot_search", "run_search",
-]
+from __future__ import annotations
+
+import importlib
+from typing import Any
+
+_EXPORTS = {
+    "load_paper_phase1": "datasets",
+    "DNNCalibrator": "dnn",
+    "encode_euler": "features",
+    "encode_quaternion": "features",
+    "nearest_yaw_index": "features",
+    "ForestCalibrator": "forests",
+    "ResidualForests": "forests",
+    "LinearCalibrator": "linear",
+    "RigidBodyCalibrator": "rigid",
+    "SearchResult": "search",
+    "cross_validate": "search",
+    "format_table": "search",
+    "paper_models": "search",
+    "plot_search": "search",
+    "run_search": "search",
+    "ModelFileError": "serialization",
+    "TwoPhaseCalibrator": "two_phase",
+}
+
+__all__ = sorted(_EXPORTS)
+
+
+def __getattr__(name: str) -> Any:
+    if name not in _EXPORTS:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(f"{__name__}.{_EXPORTS[name]}"), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_EXPORTS))

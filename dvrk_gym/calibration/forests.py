@@ -172,4 +172,7 @@ class ResidualForests(SavableModel):
             TreeEnsemble.from_arrays(arrays, f"yaw{g}_", _POSITION_FEATURES, 3) if g in groups
             else None for g in range(len(PAPER_YAWS_RAD))
         ]
+        for g, forest in enumerate(model.forests_):
+            if forest is not None and forest.n_trees != model.trees:
+                raise ValueError(f"yaw group {g} holds {forest.n_trees} trees; params say {model.trees}")
         return model

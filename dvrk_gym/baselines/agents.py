@@ -1,0 +1,102 @@
+"""The reinforcement-learning agents, one table row each: env id, algorithm, wrappers, settings.
+
+An agent is named by an :class:`AgentSpec`: which environment it learns, with which
+stable-baselines3 algorithm and replay buffer, through which wrapper, with which env
+keywords and hyperparameters. Adding an agent is adding a row to :data:`AGENTS`. The
+Debridement agent (PPO or SAC on the pick target in primitive mode) waits for
+``dvrk_gym/Debridement-v0``, which does not exist yet: when it does, its row names that env
+id, its algorithm and a wrapper for its action space, and its budget goes in
+:data:`dvrk_gym.baselines.budgets.BUDGETS`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+import gymnasium as gym
+from stable_baselines3 import PPO, SAC, TD3
+from stable_baselines3.common.base_class import BaseAlgorithm
+from stable_baselines3.common.vec_env import VecEnv
+from stable_baselines3.her import HerReplayBuffer
+
+from dvrk_gym.baselines.wrappers import wrap_grid_touch
+
+ALGORITHMS: dict[str, type[BaseAlgorithm]] = {"SAC": SAC, "TD3": TD3, "PPO": PPO}
+
+
+@dataclass(frozen=True)
+class AgentSpec:
+    """One agent.
+
+    Attributes:
+        name: the agent's name on the command line.
+        env_id: the Gymnasium id it learns.
+        algorithm: a key of :data:`ALGORITHMS`.
+        her: relabel goals with HER (goal selection "future").
+        wrap: ``wrap(env, training_yaws)`` gives the env as the agent sees it
+            (``training_yaws`` is None for evaluation).
+        description: one line for help texts and tables.
+        env_kwargs: keywords for ``gym.make`` (the reward's form, say).
+        hyperparameters: keywords for the algorithm's constructor.
+    """
+
+    name: str
+    env_id: str
+    algorithm: str
+    her: bool
+    wrap: Callable[[gym.Env, str | None], gym.Env]
+    description: str
+    env_kwargs: dict[str, Any] = field(default_factory=dict)
+    hyperparameters: dict[str, Any] = field(default_factory=dict)
+
+
+_GRID_TOUCH_SAC = {
+    "learning_rate": 1e-3,
+    "buffer_size": 100_000,
+    "batch_size": 256,
+    "learning_starts": 200,
+    "train_freq": 1,
+    "gradient_steps": 2,
+    "policy_kwargs": {"net_arch": [256, 256]},
+}
+
+AGENTS: dict[str, AgentSpec] = {
+    "sac_her": AgentSpec(
+        name="sac_her",
+        env_id="dvrk_gym/GridTouch-v0",
+        algorithm="SAC",
+        her=True,
+        wrap=wrap_grid_touch,
+        description="SAC + HER (future goals) on GridTouch-v0",
+        env_kwargs={"reward_type": "dense"},
+        hyperparameters=_GRID_TOUCH_SAC,
+    ),
+    "sac": AgentSpec(
+        name="sac",
+        env_id="dvrk_gym/GridTouch-v0",
+        algorithm="SAC",
+        her=False,
+        wrap=wrap_grid_touch,
+        description="SAC on GridTouch-v0 (no relabelling)",
+        env_kwargs={"reward_type": "dense"},
+        hyperparameters=_GRID_TOUCH_SAC,
+    ),
+}
+
+
+def get_agent(name: str) -> AgentSpec:
+    """The agent called ``name``; a clear error listing the agents otherwise."""
+    if name not in AGENTS:
+        raise ValueError(f"unknown agent {name!r}; valid: {sorted(AGENTS)}")
+    return AGENTS[name]
+
+
+def build_model(spec: AgentSpec, env: VecEnv, seed: int, overrides: dict[str, Any] | None = None, device: str = "cpu") -> BaseAlgorithm:
+    """A fresh, seeded model of ``spec`` on ``env`` (``overrides`` replace hyperparameters)."""
+    kwargs = {**spec.hyperparameters, **(overrides or {})}
+    if spec.her:
+        kwargs.setdefault("replay_buffer_class", HerReplayBuffer)
+        kwargs.setdefault("replay_buffer_kwargs", {"n_sampled_goal": 4, "goal_selection_strategy": "future"})
+    algorithm = ALGORITHMS[spec.algorithm]
+    return algorithm("MultiInputPolicy", env, seed=seed, device=device, verbose=0, **kwargs)

@@ -1,0 +1,227 @@
+"""Train an agent for a budget of env steps, measuring its touch error as it learns.
+
+Every training env step is one commanded touch, i.e. one robot move of the budget. The
+learning curve evaluates the deterministic policy on a separate env (same instrument) at
+evenly spaced points: the 35 circles once, the yaw cycling through the benchmark's six
+settings; these evaluation touches are measurements and are not counted in the budget.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from stable_baselines3.common.base_class import BaseAlgorithm
+from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecEnv
+from tqdm.auto import tqdm
+
+import dvrk_gym  # noqa: F401  (registers the environments)
+from dvrk_gym.baselines.agents import AgentSpec, build_model, get_agent
+from dvrk_gym.baselines.wrappers import TRAINING_YAWS
+from dvrk_gym.calibration.benchmark import YAW_SETTINGS
+from dvrk_gym.envs.grid_touch import N_CIRCLES
+from dvrk_gym.evaluation import run_episodes
+
+logger = logging.getLogger(__name__)
+
+VEC_ENVS = ("dummy", "subproc")
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """Settings of a training run.
+
+    Attributes:
+        agent: a name in :data:`dvrk_gym.baselines.agents.AGENTS`.
+        steps: env steps (robot moves) to train for; see
+            :func:`dvrk_gym.baselines.budgets.resolve_budget`.
+        seed: seeds the model (stable-baselines3 seeds torch and numpy with it) and the envs.
+        bias: the cable bias preset.
+        bias_seed: which instrument.
+        camera_resolution: endoscope image size (width, height), pixels; evaluate at the same.
+        training_yaws: "paper" (a tour of the circles per paper yaw) or "random".
+        n_envs: parallel training envs (each step of the vector env is ``n_envs`` moves).
+        vec_env: "dummy" (one process) or "subproc" (a process per env).
+        eval_points: evaluations along the learning curve (plus one before training).
+        env_overrides: ``gym.make`` keywords replacing the agent's (``reward_type``...).
+        overrides: hyperparameters replacing the agent's (``learning_starts``...).
+    """
+
+    agent: str = "sac_her"
+    steps: int = 5476
+    seed: int = 0
+    bias: str = "paper"
+    bias_seed: int = 0
+    camera_resolution: tuple[int, int] = (1920, 1080)
+    training_yaws: str = "paper"
+    n_envs: int = 1
+    vec_env: str = "dummy"
+    eval_points: int = 20
+    env_overrides: dict[str, Any] = field(default_factory=dict)
+    overrides: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "camera_resolution", tuple(self.camera_resolution))
+        get_agent(self.agent)
+        if self.training_yaws not in TRAINING_YAWS:
+            raise ValueError(f"training_yaws must be one of {TRAINING_YAWS}, got {self.training_yaws!r}")
+        if self.vec_env not in VEC_ENVS:
+            raise ValueError(f"vec_env must be one of {VEC_ENVS}, got {self.vec_env!r}")
+        for name in ("steps", "n_envs", "eval_points"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
+
+    @property
+    def spec(self) -> AgentSpec:
+        return get_agent(self.agent)
+
+    def env_kwargs(self) -> dict[str, Any]:
+        """``gym.make`` keywords of the training and evaluation envs."""
+        return {
+            "bias": self.bias,
+            "bias_seed": self.bias_seed,
+            "camera_resolution": self.camera_resolution,
+            **self.spec.env_kwargs,
+            **self.env_overrides,
+        }
+
+    def to_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+
+@dataclass(frozen=True)
+class CurvePoint:
+    """The policy's touch error after ``env_steps`` training moves (means over the circles).
+
+    Attributes:
+        env_steps: training env steps so far.
+        mm_error: mean touch error in the workspace plane, millimetres.
+        pixel_error: mean touch error in the left image, pixels.
+        success_rate: fraction of touches within the env's success radius.
+    """
+
+    env_steps: int
+    mm_error: float
+    pixel_error: float
+    success_rate: float
+
+
+@dataclass
+class TrainResult:
+    """A trained model and how its training went.
+
+    Attributes:
+        model: the stable-baselines3 model.
+        config: the run's settings.
+        curve: the learning curve.
+        env_steps: env steps trained (``steps`` rounded up to a multiple of ``n_envs``).
+        train_seconds: wall time of training without the curve's evaluations, s.
+        eval_seconds: wall time of the curve's evaluations, s.
+    """
+
+    model: BaseAlgorithm
+    config: TrainConfig
+    curve: list[CurvePoint]
+    env_steps: int
+    train_seconds: float
+    eval_seconds: float
+
+    @property
+    def steps_per_second(self) -> float:
+        """Training env steps per second of wall time (gradient updates included)."""
+        return self.env_steps / max(self.train_seconds, 1e-9)
+
+
+def make_agent_env(config: TrainConfig, training: bool) -> gym.Env:
+    """One env as the agent sees it (training: the yaw schedule; evaluation: options choose)."""
+    env = gym.make(config.spec.env_id, **config.env_kwargs())
+    return config.spec.wrap(env, config.training_yaws if training else None)
+
+
+def make_training_vec_env(config: TrainConfig) -> VecEnv:
+    """The training vector env: ``n_envs`` copies, one process each with "subproc"."""
+    factories = [lambda: make_agent_env(config, training=True) for _ in range(config.n_envs)]
+    if config.vec_env == "subproc":
+        return SubprocVecEnv(factories, start_method="forkserver")
+    return DummyVecEnv(factories)
+
+
+def curve_options(index: int) -> dict[str, Any]:
+    """Reset options of the learning curve's ``index``-th touch: circle ``index``, a cycling yaw setting."""
+    return {"circle": index % N_CIRCLES, "yaw": YAW_SETTINGS[index % len(YAW_SETTINGS)][1]}
+
+
+def evaluate_curve_point(model: BaseAlgorithm, env: gym.Env, env_steps: int, seed: int) -> CurvePoint:
+    """Touch the 35 circles with the deterministic policy; mean errors."""
+    results = run_episodes(env, model, N_CIRCLES, seed=seed, options=curve_options, progress=False)
+    mean = lambda key: float(np.mean([r.metrics[key] for r in results]))  # noqa: E731
+    return CurvePoint(env_steps, mean("mm_error"), mean("pixel_error"), mean("is_success"))
+
+
+class LearningCurve(BaseCallback):
+    """Evaluate at evenly spaced env steps and show a progress bar.
+
+    Args:
+        env: the evaluation env (wrapped as the agent sees it).
+        total_steps: the run's env steps.
+        n_points: evaluations during training (after one at step 0).
+        seed: seed of every evaluation (the same touches each time).
+        progress: show a progress bar.
+    """
+
+    def __init__(self, env: gym.Env, total_steps: int, n_points: int, seed: int, progress: bool) -> None:
+        super().__init__()
+        self.eval_env = env
+        self.marks = list(np.unique(np.linspace(0, total_steps, n_points + 1).round().astype(int)))
+        self.seed = seed
+        self.points: list[CurvePoint] = []
+        self.eval_seconds = 0.0
+        self._bar = tqdm(total=total_steps, desc="training", unit="step", disable=not progress)
+
+    def evaluate(self) -> None:
+        start = time.perf_counter()
+        point = evaluate_curve_point(self.model, self.eval_env, self.num_timesteps, self.seed)
+        self.eval_seconds += time.perf_counter() - start
+        self.points.append(point)
+        self.marks = [m for m in self.marks if m > self.num_timesteps]
+        self._bar.set_postfix(mm=f"{point.mm_error:.2f}")
+        logger.info("%d env steps: %.2f mm, %.1f px", point.env_steps, point.mm_error, point.pixel_error)
+
+    def _on_training_start(self) -> None:
+        self.evaluate()
+
+    def _on_step(self) -> bool:
+        self._bar.update(self.training_env.num_envs)
+        if self.marks and self.num_timesteps >= self.marks[0]:
+            self.evaluate()
+        return True
+
+    def _on_training_end(self) -> None:
+        if not self.points or self.points[-1].env_steps != self.num_timesteps:
+            self.evaluate()
+        self._bar.close()
+
+
+def train(config: TrainConfig, progress: bool = True) -> TrainResult:
+    """Train ``config.agent`` for ``config.steps`` env steps, with its learning curve."""
+    train_env = make_training_vec_env(config)
+    train_env.seed(config.seed)
+    eval_env = make_agent_env(config, training=False)
+    try:
+        model = build_model(config.spec, train_env, config.seed, config.overrides)
+        curve = LearningCurve(eval_env, config.steps, config.eval_points, seed=config.seed + 10_000, progress=progress)
+        start = time.perf_counter()
+        model.learn(total_timesteps=config.steps, callback=curve)
+        wall = time.perf_counter() - start
+    finally:
+        train_env.close()
+        eval_env.close()
+    result = TrainResult(model, config, curve.points, int(model.num_timesteps), wall - curve.eval_seconds, curve.eval_seconds)
+    logger.info("%s: %d env steps in %.0f s (%.1f steps/s)", config.agent, result.env_steps, result.train_seconds, result.steps_per_second)
+    return result

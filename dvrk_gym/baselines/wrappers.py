@@ -1,0 +1,137 @@
+"""Wrappers that put GridTouch-v0 in the form the stable-baselines3 agents learn best from.
+
+The agent's action is the base-frame position command ``(bx, by, bz)`` scaled to [-1, 1]
+(:class:`TargetYawAction`, then gymnasium's ``RescaleAction``): the yaw is the one the
+episode asks for, as with the calibrators, since the reward does not depend on it and an
+agent free to pick its yaw would make the benchmark's yaw settings meaningless. The goals
+are scaled from metres to about [-1, 1] over the workspace (:class:`GoalScaling`), so that
+a millimetre is a visible change to the networks; the wrapper's ``compute_reward`` undoes
+the scaling, so HER's relabelled rewards stay the env's own. :class:`TrainingYaws` chooses
+the yaw of each training episode.
+"""
+
+from __future__ import annotations
+
+from typing import Any, SupportsFloat
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+from gymnasium.wrappers import RescaleAction
+
+from dvrk_gym.envs.grid_touch import N_CIRCLES
+from dvrk_gym.sim.kinematics import PAPER_YAWS_RAD
+
+GOAL_CENTER_M = (0.0, 0.0, 0.19)
+"""Camera-frame point mapped to 0 by :class:`GoalScaling`: about the phantom's centre, metres."""
+GOAL_HALF_RANGE_M = 0.05
+"""Camera-frame distance mapped to 1 by :class:`GoalScaling`, metres (the phantom is 75 mm wide)."""
+TRAINING_YAWS = ("paper", "random")
+"""How training episodes choose their yaw: a tour of the 35 circles per paper yaw, or a random yaw each."""
+
+
+class TargetYawAction(gym.ActionWrapper):
+    """Action ``(bx, by, bz)`` in metres; the yaw (rad) is the one the episode asks for.
+
+    The yaw is read from the last observation (``observation[-1]`` of GridTouch-v0).
+    """
+
+    def __init__(self, env: gym.Env) -> None:
+        super().__init__(env)
+        box = env.action_space
+        self.action_space = spaces.Box(box.low[:3], box.high[:3], dtype=box.dtype)
+        self._yaw = 0.0
+
+    def reset(self, **kwargs: Any) -> tuple[Any, dict[str, Any]]:
+        observation, info = self.env.reset(**kwargs)
+        self._yaw = float(observation["observation"][-1])
+        return observation, info
+
+    def action(self, action: np.ndarray) -> np.ndarray:
+        return np.append(np.asarray(action, dtype=np.float32), np.float32(self._yaw))
+
+
+class GoalScaling(gym.ObservationWrapper):
+    """Goals mapped from camera-frame metres to ``(goal - center) / half_range``.
+
+    Args:
+        env: a goal-conditioned env (Dict observation with ``achieved_goal`` and
+            ``desired_goal``, and ``compute_reward``).
+        center_m: the camera-frame point mapped to 0, (x, y, z) metres.
+        half_range_m: the distance mapped to 1, metres.
+    """
+
+    def __init__(self, env: gym.Env, center_m: tuple[float, float, float] = GOAL_CENTER_M, half_range_m: float = GOAL_HALF_RANGE_M) -> None:
+        super().__init__(env)
+        if not (np.isfinite(half_range_m) and half_range_m > 0):
+            raise ValueError(f"half_range_m must be finite and > 0, got {half_range_m}")
+        self.center_m = np.asarray(center_m, dtype=np.float64)
+        self.half_range_m = float(half_range_m)
+        scaled = {}
+        for key, box in env.observation_space.spaces.items():
+            if key in ("achieved_goal", "desired_goal"):
+                box = spaces.Box(self._scale(box.low), self._scale(box.high), dtype=np.float32)
+            scaled[key] = box
+        self.observation_space = spaces.Dict(scaled)
+
+    def _scale(self, goal_m: np.ndarray) -> np.ndarray:
+        return ((np.asarray(goal_m, dtype=np.float64) - self.center_m) / self.half_range_m).astype(np.float32)
+
+    def unscale(self, goal: np.ndarray) -> np.ndarray:
+        """Scaled goals (..., 3) back to camera-frame metres."""
+        return np.asarray(goal, dtype=np.float64) * self.half_range_m + self.center_m
+
+    def observation(self, observation: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        return {**observation, "achieved_goal": self._scale(observation["achieved_goal"]), "desired_goal": self._scale(observation["desired_goal"])}
+
+    def compute_reward(self, achieved_goal: np.ndarray, desired_goal: np.ndarray, info: Any) -> np.ndarray:
+        """The env's reward for scaled goals (..., 3), vectorised (HER calls this)."""
+        return self.env.unwrapped.compute_reward(self.unscale(achieved_goal), self.unscale(desired_goal), info)
+
+
+class TrainingYaws(gym.Wrapper):
+    """Choose the yaw of each training episode (reset options given by the caller win).
+
+    Args:
+        env: GridTouch-v0 (possibly wrapped).
+        mode: "paper": a whole tour of the 35 circles at each of the paper's five yaws in
+            turn (as in Phase II); "random": a uniform random yaw per circle from the env's
+            seeded generator (the benchmark's sixth setting).
+    """
+
+    def __init__(self, env: gym.Env, mode: str = "paper") -> None:
+        if mode not in TRAINING_YAWS:
+            raise ValueError(f"training yaw mode must be one of {TRAINING_YAWS}, got {mode!r}")
+        super().__init__(env)
+        self.mode = mode
+        self._episodes = 0
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
+        if seed is not None:
+            self._episodes = 0
+        options = dict(options or {})
+        if self.mode == "random":
+            options.setdefault("yaw", "random")
+        else:
+            tour = self._episodes // N_CIRCLES
+            options.setdefault("yaw", float(PAPER_YAWS_RAD[tour % len(PAPER_YAWS_RAD)]))
+        self._episodes += 1
+        return self.env.reset(seed=seed, options=options)
+
+    def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
+        return self.env.step(action)
+
+
+def wrap_grid_touch(env: gym.Env, training_yaws: str | None = None) -> gym.Env:
+    """GridTouch-v0 as the agents see it: scaled goals, ``(bx, by, bz)`` actions in [-1, 1].
+
+    Args:
+        env: a GridTouch-v0 env.
+        training_yaws: None for evaluation (the caller's reset options choose the yaw), or
+            a :data:`TRAINING_YAWS` mode.
+    """
+    if training_yaws is not None:
+        env = TrainingYaws(env, training_yaws)
+    env = GoalScaling(env)
+    env = TargetYawAction(env)
+    return RescaleAction(env, min_action=-1.0, max_action=1.0)

@@ -1,0 +1,458 @@
+"""The debridement fragments: pumpkin seeds and raisins on the paper.
+
+A fragment is one rigid ellipsoid (a convex hull) whose surface is compliant: PyBullet's
+soft contact (``contactStiffness``, ``contactDamping``) lets the jaws sink into it by
+force / stiffness, which is the fragment's compression, and the solver handles that
+spring implicitly, so it is stable at any time step. Its compression is tracked as a
+state (:meth:`Fragment.compression`) that follows the jaws in and relaxes with the
+fragment's recovery time when they let go.
+
+Why not a deformable body: measured here, PyBullet's soft bodies at this scale either
+fall through the paper (classic mass-spring world at 1x and 5x world scale), explode
+(deformable-world mass-spring), or run at about 11 steps/s for eight fragments
+(deformable-world FEM at 10x scale, which also wobbles at rest); see the note in
+``tests/test_fragments.py``.
+
+Two details matter at millimetre scale:
+
+* Bullet pads a convex hull by its collision margin, 1 mm by default, which would make a
+  2.4 mm seed float 1 mm above the paper. The margin is set to
+  :data:`COLLISION_MARGIN_M` and the hull is shrunk by it, so the padded hull is the
+  ellipsoid.
+* A fragment weighs about 0.1 g, too light for the contact solver to pass a grip of a
+  newton through it, so holding is not left to friction; see :mod:`dvrk_gym.sim.grasp`.
+
+Sizes follow the paper's table (mm, mean +- sd, length x width x thickness): pumpkin
+seed 12.4+-0.8 x 6.8+-0.3 x 2.4+-0.3; raisin 12.3+-1.5 x 5.9+-1.1 x 4.2+-0.5.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from dvrk_gym.sim import meshes
+from dvrk_gym.sim.physics import Physics
+from dvrk_gym.sim.scene import PHANTOM_SIZE_M, WORKSPACE_CENTER_M
+
+COLLISION_MARGIN_M = 1.0e-4
+"""Collision margin of a fragment's hull (Bullet's default, 1 mm, is half a seed)."""
+
+
+TRUNCATE_SD = 3.0
+"""Sizes are drawn from normals truncated at this many standard deviations."""
+
+FRAGMENTS_PER_TRIAL = 8
+MIN_GAP_M = 0.003
+"""Least edge-to-edge distance between two fragments on the paper, metres."""
+EDGE_MARGIN_M = 0.005
+"""Fragments keep at least this far inside the phantom's edges, metres."""
+
+_HULL_RINGS = 8
+_HULL_SEGMENTS = 16
+_VISUAL_RINGS = 12
+_VISUAL_SEGMENTS = 24
+_SPAWN_CLEARANCE_M = 1.0e-5
+"""Fragments are created this far above the paper, so they start just out of contact."""
+_LAYOUT_SAMPLES = 128
+"""Boundary points per ellipse when testing the gap between two fragments."""
+
+
+@dataclass(frozen=True)
+class FragmentType:
+    """A kind of fragment.
+
+    Attributes:
+        name: its key in :data:`FRAGMENT_TYPES`.
+        size_mean_m: mean (length, width, thickness), metres.
+        size_sd_m: standard deviations of (length, width, thickness), metres.
+        stiffness_n_m: contact stiffness of its surface: N per metre of indentation.
+        friction: Coulomb friction coefficient against the jaws and the paper.
+        spinning_friction: torsional friction (PyBullet ``spinningFriction``), metres.
+        rolling_friction: rolling friction (PyBullet ``rollingFriction``), metres.
+        color_rgba: its colour (r, g, b, a) in [0, 1].
+        density_kg_m3: its density, kg/m^3.
+        recovery_time_s: time constant with which it springs back after a squeeze, s.
+        pierce_force_n: the force a jaw tip pressing end-on needs to pierce it, N;
+            None if it cannot be pierced.
+        pierce_hold_n: the most a pierced fragment can bear before it tears off the tip, N.
+    """
+
+    name: str
+    size_mean_m: tuple[float, float, float]
+    size_sd_m: tuple[float, float, float]
+    stiffness_n_m: float
+    friction: float
+    spinning_friction: float
+    rolling_friction: float
+    color_rgba: tuple[float, float, float, float]
+    density_kg_m3: float
+    recovery_time_s: float
+    pierce_force_n: float | None = None
+    pierce_hold_n: float = 0.0
+
+    @property
+    def pierceable(self) -> bool:
+        """Whether a jaw tip can pierce it."""
+        return self.pierce_force_n is not None
+
+
+FRAGMENT_TYPES: dict[str, FragmentType] = {
+    # Smooth and slippery, stiff: a pumpkin seed hardly gives under the jaws.
+    "pumpkin_seed": FragmentType(
+        name="pumpkin_seed",
+        size_mean_m=(0.0124, 0.0068, 0.0024),
+        size_sd_m=(0.0008, 0.0003, 0.0003),
+        stiffness_n_m=1.0e4,
+        friction=0.45,
+        spinning_friction=1.0e-5,
+        rolling_friction=1.0e-5,
+        color_rgba=(0.87, 0.80, 0.62, 1.0),  # off-white beige: saturated enough to tell from paper
+        density_kg_m3=1000.0,
+        recovery_time_s=0.02,
+    ),
+    # Sticky and elastic, soft: a raisin squashes, grips, and a tip can go into it.
+    "raisin": FragmentType(
+        name="raisin",
+        size_mean_m=(0.0123, 0.0059, 0.0042),
+        size_sd_m=(0.0015, 0.0011, 0.0005),
+        stiffness_n_m=1.5e3,
+        friction=1.2,
+        spinning_friction=2.0e-4,
+        rolling_friction=2.0e-4,
+        color_rgba=(0.36, 0.22, 0.12, 1.0),  # dark brown: hue about 25 deg, never the marker's red
+        density_kg_m3=1300.0,
+        recovery_time_s=0.25,
+        pierce_force_n=0.6,
+        pierce_hold_n=0.05,
+    ),
+}
+
+
+def fragment_type(kind: str | FragmentType) -> FragmentType:
+    """The FragmentType for a name or a FragmentType (returned as is)."""
+    if isinstance(kind, FragmentType):
+        return kind
+    try:
+        return FRAGMENT_TYPES[kind]
+    except KeyError:
+        raise ValueError(f"unknown fragment kind {kind!r}; expected one of {sorted(FRAGMENT_TYPES)}") from None
+
+
+# ---------------------------------------------------------------------------- sampling
+def sample_fragment_sizes(kind: str | FragmentType, rng: np.random.Generator, n: int = FRAGMENTS_PER_TRIAL) -> np.ndarray:
+    """Draw fragment sizes from the paper's table.
+
+    Each dimension is normal with the table's mean and sd, truncated at
+    :data:`TRUNCATE_SD` sd (redrawn until inside, so always positive). A fragment lies on
+    its flattest side, so each row is then ordered length >= width >= thickness (this
+    touches well under 1 in 1000 draws).
+
+    Args:
+        kind: "pumpkin_seed", "raisin" or a FragmentType.
+        rng: the generator to draw from.
+        n: how many fragments.
+
+    Returns:
+        (n, 3) sizes (length, width, thickness), metres.
+    """
+    spec = fragment_type(kind)
+    if n < 0:
+        raise ValueError(f"n must be >= 0, got {n}")
+    mean, sd = np.array(spec.size_mean_m), np.array(spec.size_sd_m)
+    z = rng.standard_normal((n, 3))
+    while True:
+        bad = np.abs(z) > TRUNCATE_SD
+        if not bad.any():
+            break
+        z[bad] = rng.standard_normal(int(bad.sum()))
+    sizes = mean + z * sd
+    return -np.sort(-sizes, axis=1)
+
+
+def phantom_region(edge_margin_m: float = EDGE_MARGIN_M) -> tuple[np.ndarray, np.ndarray]:
+    """The part of the paper fragments may cover: ((x_min, y_min), (x_max, y_max)), metres."""
+    half = PHANTOM_SIZE_M[:2] / 2 - edge_margin_m
+    return WORKSPACE_CENTER_M[:2] - half, WORKSPACE_CENTER_M[:2] + half
+
+
+def footprint_half_extents(size: np.ndarray, yaw: float) -> np.ndarray:
+    """Half extents (x, y) of the axis-aligned box around a fragment's outline, metres."""
+    a, b = size[0] / 2, size[1] / 2
+    c, s = math.cos(yaw), math.sin(yaw)
+    return np.array([math.hypot(a * c, b * s), math.hypot(a * s, b * c)])
+
+
+def ellipse_outline(size: np.ndarray, position: np.ndarray, yaw: float, samples: int = _LAYOUT_SAMPLES) -> np.ndarray:
+    """Points on a fragment's outline (its ellipse on the paper), (samples, 2), metres."""
+    t = 2.0 * np.pi * np.arange(samples) / samples
+    local = np.stack([size[0] / 2 * np.cos(t), size[1] / 2 * np.sin(t)], axis=1)
+    c, s = math.cos(yaw), math.sin(yaw)
+    return local @ np.array([[c, s], [-s, c]]) + position
+
+
+def outline_gap(size_i, position_i, yaw_i, size_j, position_j, yaw_j) -> float:
+    """A lower bound on the edge-to-edge distance between two fragment outlines, metres.
+
+    The distance between the two sampled outlines exceeds the true one by at most half
+    the spacing of the samples on each, which is subtracted; overlapping outlines give a
+    negative value.
+    """
+    pi, pj = np.asarray(position_i, float), np.asarray(position_j, float)
+    ri, rj = max(size_i[:2]) / 2, max(size_j[:2]) / 2
+    centre_distance = float(np.linalg.norm(pi - pj))
+    if centre_distance >= ri + rj:  # bounding circles apart: the circles' gap is a lower bound
+        return centre_distance - ri - rj
+    a = ellipse_outline(size_i, pi, yaw_i)
+    b = ellipse_outline(size_j, pj, yaw_j)
+    if _inside_ellipse(pi, size_j, pj, yaw_j) or _inside_ellipse(pj, size_i, pi, yaw_i):
+        return -1.0
+    if _inside_ellipse(a, size_j, pj, yaw_j).any():
+        return -1.0
+    spacing = 2.0 * np.pi * max(ri, rj) / _LAYOUT_SAMPLES
+    sampled = float(np.sqrt(((a[:, None, :] - b[None, :, :]) ** 2).sum(-1)).min())
+    return sampled - spacing
+
+
+def _inside_ellipse(points, size, position, yaw) -> np.ndarray:
+    d = np.atleast_2d(np.asarray(points, float) - position)
+    c, s = math.cos(yaw), math.sin(yaw)
+    u, v = d[:, 0] * c + d[:, 1] * s, -d[:, 0] * s + d[:, 1] * c
+    return (u / (size[0] / 2)) ** 2 + (v / (size[1] / 2)) ** 2 <= 1.0
+
+
+def sample_layout(
+    rng: np.random.Generator,
+    sizes: np.ndarray,
+    n: int | None = None,
+    min_gap_m: float = MIN_GAP_M,
+    region: tuple[Sequence[float], Sequence[float]] | None = None,
+    max_tries: int = 2000,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Random positions and orientations for fragments on the paper, by rejection sampling.
+
+    Each fragment's outline (the ellipse of its length and width) lies entirely inside
+    ``region`` and at least ``min_gap_m`` from every other outline. Yaws are uniform.
+
+    Args:
+        rng: the generator to draw from.
+        sizes: (n, 3) sizes from :func:`sample_fragment_sizes`, metres.
+        n: how many to place (default: all rows of ``sizes``).
+        min_gap_m: least edge-to-edge distance, metres.
+        region: ((x_min, y_min), (x_max, y_max)) the outlines must stay in, metres,
+            base frame; default: the phantom inset by :data:`EDGE_MARGIN_M`.
+        max_tries: draws allowed per fragment before starting the layout over; the
+            whole layout is attempted at most 20 times.
+
+    Returns:
+        positions (n, 2) in metres (base frame x, y) and yaws (n,) in radians, in
+        [-pi/2, pi/2): the angle of each fragment's length axis from base x.
+
+    Raises:
+        ValueError: if no layout was found (the region is too small for the fragments).
+    """
+    sizes = np.asarray(sizes, dtype=float)
+    n = len(sizes) if n is None else int(n)
+    if n > len(sizes):
+        raise ValueError(f"n = {n} fragments asked for but only {len(sizes)} sizes given")
+    low, high = (np.asarray(v, dtype=float) for v in (region or phantom_region()))
+    for _ in range(20):
+        positions, yaws = [], []
+        for i in range(n):
+            placed = _place_one(rng, sizes[i], sizes[:i], positions, yaws, low, high, min_gap_m, max_tries)
+            if placed is None:
+                break
+            positions.append(placed[0])
+            yaws.append(placed[1])
+        else:
+            return np.array(positions).reshape(n, 2), np.array(yaws, dtype=float)
+    raise ValueError(
+        f"could not place {n} fragments at least {min_gap_m * 1e3:.1f} mm apart inside the region "
+        f"{np.round(low * 1e3, 1).tolist()} - {np.round(high * 1e3, 1).tolist()} mm after 20 attempts; "
+        "use fewer fragments, a smaller gap or a larger region"
+    )
+
+
+def _place_one(rng, size, placed_sizes, positions, yaws, low, high, min_gap_m, max_tries):
+    for _ in range(max_tries):
+        yaw = float(rng.uniform(-np.pi / 2, np.pi / 2))
+        half = footprint_half_extents(size, yaw)
+        if np.any(high - low < 2 * half):
+            continue
+        position = rng.uniform(low + half, high - half)
+        if all(
+            outline_gap(size, position, yaw, s, p, y) >= min_gap_m
+            for s, p, y in zip(placed_sizes, positions, yaws)
+        ):
+            return position, yaw
+    return None
+
+
+# ---------------------------------------------------------------------------- bodies
+def _unit_sphere(rings: int, segments: int) -> tuple[np.ndarray, np.ndarray]:
+    """Vertices (poles first) and outward-facing triangles of a UV sphere of radius 1."""
+    theta = np.pi * np.arange(1, rings) / rings
+    phi = 2.0 * np.pi * np.arange(segments) / segments
+    tt, pp = np.meshgrid(theta, phi, indexing="ij")
+    ring_points = np.stack([np.sin(tt) * np.cos(pp), np.sin(tt) * np.sin(pp), np.cos(tt)], axis=-1).reshape(-1, 3)
+    vertices = np.vstack([[0.0, 0.0, 1.0], [0.0, 0.0, -1.0], ring_points])
+    k = np.arange(segments)
+    nxt = (k + 1) % segments
+    faces = [np.stack([np.zeros(segments, int), 2 + k, 2 + nxt], axis=1)]
+    for r in range(rings - 2):
+        a, b = 2 + r * segments, 2 + (r + 1) * segments
+        faces.append(np.stack([a + k, b + k, b + nxt], axis=1))
+        faces.append(np.stack([a + k, b + nxt, a + nxt], axis=1))
+    last = 2 + (rings - 2) * segments
+    faces.append(np.stack([np.ones(segments, int), last + nxt, last + k], axis=1))
+    return vertices, np.vstack(faces)
+
+
+def ellipsoid_mesh(semi_axes_m: np.ndarray, rings: int = _VISUAL_RINGS, segments: int = _VISUAL_SEGMENTS) -> meshes.Mesh:
+    """A triangle mesh of an ellipsoid with semi-axes (a, b, c) along x, y, z, metres."""
+    semi = np.asarray(semi_axes_m, dtype=float)
+    unit, faces = _unit_sphere(rings, segments)
+    normals = unit / semi**2
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    return meshes.Mesh(unit * semi, faces, normals)
+
+
+class Fragment:
+    """One fragment in the world.
+
+    Args:
+        physics: the world it lives in.
+        name: its body name in ``physics``.
+        kind: what it is.
+        size_m: (length, width, thickness), metres.
+        position: (x, y) of its centre on the paper, metres, base frame.
+        yaw: angle of its length axis from base x, radians.
+    """
+
+    def __init__(self, physics: Physics, name: str, kind: FragmentType, size_m: np.ndarray, position: np.ndarray, yaw: float) -> None:
+        self.physics = physics
+        self.name = name
+        self.kind = kind
+        self.size_m = np.array(size_m, dtype=float)
+        if self.size_m.shape != (3,) or not np.all(self.size_m > 2 * COLLISION_MARGIN_M):
+            raise ValueError(f"size_m must be 3 lengths > {2 * COLLISION_MARGIN_M} m, got {size_m!r}")
+        self.semi_axes_m = self.size_m / 2
+        self.mass_kg = float(kind.density_kg_m3 * 4.0 / 3.0 * np.pi * np.prod(self.semi_axes_m))
+        """Its mass, kg."""
+        self._compression_m = 0.0
+        self.body_id = physics.add(name, self._build(np.asarray(position, dtype=float), float(yaw)))
+
+    def _build(self, position: np.ndarray, yaw: float) -> int:
+        c = self.physics.client
+        unit, _ = _unit_sphere(_HULL_RINGS, _HULL_SEGMENTS)
+        hull = unit * (self.semi_axes_m - COLLISION_MARGIN_M)  # the margin pads it back out
+        collision = c.createCollisionShape(c.GEOM_MESH, vertices=hull.tolist())
+        visual = ellipsoid_mesh(self.semi_axes_m).visual_shape(c, self.kind.color_rgba)
+        z = WORKSPACE_CENTER_M[2] + self.semi_axes_m[2] + _SPAWN_CLEARANCE_M
+        orientation = Rotation.from_euler("z", yaw).as_quat()
+        body = c.createMultiBody(
+            self.mass_kg,
+            collision,
+            visual,
+            basePosition=[float(position[0]), float(position[1]), float(z)],
+            baseOrientation=[float(v) for v in orientation],
+        )
+        c.changeDynamics(
+            body,
+            -1,
+            collisionMargin=COLLISION_MARGIN_M,
+            lateralFriction=self.kind.friction,
+            spinningFriction=self.kind.spinning_friction,
+            rollingFriction=self.kind.rolling_friction,
+        )
+        return body
+
+    # ------------------------------------------------------------------ state
+    def position(self) -> np.ndarray:
+        """Its centre (x, y, z), metres, base frame."""
+        return np.array(self.physics.client.getBasePositionAndOrientation(self.body_id)[0])
+
+    def orientation(self) -> np.ndarray:
+        """Its orientation as a quaternion (x, y, z, w)."""
+        return np.array(self.physics.client.getBasePositionAndOrientation(self.body_id)[1])
+
+    def pose(self) -> np.ndarray:
+        """Its pose (4x4, metres, base frame); the body axes are (length, width, thickness)."""
+        position, quaternion = self.physics.client.getBasePositionAndOrientation(self.body_id)
+        pose = np.eye(4)
+        pose[:3, :3] = Rotation.from_quat(quaternion).as_matrix()
+        pose[:3, 3] = position
+        return pose
+
+    def yaw(self) -> float:
+        """Angle of its length axis in the paper's plane from base x, radians in [-pi/2, pi/2)."""
+        axis = self.pose()[:3, 0]
+        angle = math.atan2(axis[1], axis[0])
+        return (angle + np.pi / 2) % np.pi - np.pi / 2
+
+    def compression(self) -> float:
+        """How far it is squeezed, metres: the jaws' summed indentation, relaxing after release."""
+        return self._compression_m
+
+    def update_compression(self, indentation_m: float, dt_s: float) -> None:
+        """Advance the compression state by one step given the jaws' indentation now.
+
+        It follows a deeper squeeze at once and springs back towards a shallower one
+        with the kind's recovery time (a raisin slowly, a seed at once).
+        """
+        if indentation_m >= self._compression_m:
+            self._compression_m = float(indentation_m)
+        else:
+            decay = math.exp(-dt_s / self.kind.recovery_time_s)
+            self._compression_m = float(indentation_m + (self._compression_m - indentation_m) * decay)
+
+    def outward_normal(self, point: np.ndarray) -> np.ndarray:
+        """The ellipsoid's outward unit normal nearest ``point`` (base frame, metres)."""
+        pose = self.pose()
+        local = pose[:3, :3].T @ (np.asarray(point, dtype=float) - pose[:3, 3])
+        normal = local / self.semi_axes_m**2
+        norm = np.linalg.norm(normal)
+        if norm == 0.0:
+            return pose[:3, 2].copy()
+        return pose[:3, :3] @ (normal / norm)
+
+    def on_paper(self, tolerance_m: float = 0.001) -> bool:
+        """Whether it lies on the paper (its centre over the phantom, at resting height)."""
+        p = self.position()
+        low, high = phantom_region(0.0)
+        over = bool(np.all(p[:2] >= low) and np.all(p[:2] <= high))
+        return over and abs(p[2] - WORKSPACE_CENTER_M[2] - self.semi_axes_m[2]) < tolerance_m
+
+
+def spawn_fragments(
+    physics: Physics,
+    kind: str | FragmentType,
+    sizes: np.ndarray,
+    positions: np.ndarray,
+    yaws: np.ndarray,
+    name_prefix: str = "fragment",
+) -> list[Fragment]:
+    """Create fragments lying flat on the paper, named "fragment_0", "fragment_1", ...
+
+    Args:
+        physics: the world to create them in.
+        kind: "pumpkin_seed", "raisin" or a FragmentType.
+        sizes: (n, 3) (length, width, thickness), metres.
+        positions: (n, 2) centres (x, y) on the paper, metres, base frame.
+        yaws: (n,) angles of their length axes from base x, radians.
+        name_prefix: body names are ``f"{name_prefix}_{i}"``.
+    """
+    spec = fragment_type(kind)
+    sizes = np.asarray(sizes, dtype=float).reshape(-1, 3)
+    positions = np.asarray(positions, dtype=float).reshape(-1, 2)
+    yaws = np.asarray(yaws, dtype=float).reshape(-1)
+    if not (len(sizes) == len(positions) == len(yaws)):
+        raise ValueError(f"sizes, positions and yaws must have one row per fragment; got {len(sizes)}, {len(positions)}, {len(yaws)}")
+    return [
+        Fragment(physics, f"{name_prefix}_{i}", spec, size, position, yaw)
+        for i, (size, position, yaw) in enumerate(zip(sizes, positions, yaws))
+    ]

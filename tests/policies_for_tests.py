@@ -1,0 +1,11 @@
+"""Policy factories for the `dvrk-gym evaluate --policy module:factory` tests."""
+
+import numpy as np
+
+
+def middle_of_the_grid(env):
+    """A fixed command over the middle of the grid (an uncalibrated, open-loop policy)."""
+    return lambda observation: np.array([0.040, 0.042, -0.154, 0.0], dtype=np.float32)
+
+
+NOT_CALLABLE = 42
