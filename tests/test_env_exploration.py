@@ -71,10 +71,10 @@ def test_cleaning_rule_keeps_only_agreeing_stereo_pairs():
 @pytest.mark.slow
 def test_collect_phase1_loses_samples_to_the_wrist_like_the_paper(make_env, tmp_path):
     env = make_env("dvrk_gym/CalibrationExploration-v0", bias="paper", max_steps=30)
-    data = collect_phase1(env, PaperExplorationPolicy(seed=0), n_trajectories=4, progress=False)
-    assert data.n_raw == 120
+    data = collect_phase1(env, PaperExplorationPolicy(seed=0), n_trajectories=12, progress=False)
+    assert data.n_raw == 360
     kept = data.n_kept / data.n_raw
-    assert 0.15 < kept < 0.70  # the paper kept 37%; the wrist hides the marker otherwise
+    assert 0.20 < kept < 0.60  # the paper kept 37% (57 trajectories here: 36%); the wrist hides it otherwise
     clean = data.cleaned()
     assert np.isfinite(clean.X).all() and clean.X.shape == (data.n_kept, 6)
     assert clean.y.shape == (data.n_kept, 3)

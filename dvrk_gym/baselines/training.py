@@ -8,14 +8,16 @@ settings; these evaluation touches are measurements and are not counted in the b
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import logging
 import time
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Iterator
 
 import gymnasium as gym
 import numpy as np
+import torch
 from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecEnv
@@ -49,6 +51,8 @@ class TrainConfig:
         n_envs: parallel training envs (each step of the vector env is ``n_envs`` moves).
         vec_env: "dummy" (one process) or "subproc" (a process per env).
         eval_points: evaluations along the learning curve (plus one before training).
+        torch_threads: torch's intra-op threads while training (restored after). One is
+            fastest here: small networks on 2 shared cores ran 12x slower with two threads.
         env_overrides: ``gym.make`` keywords replacing the agent's (``reward_type``...).
         overrides: hyperparameters replacing the agent's (``learning_starts``...).
     """
@@ -63,6 +67,7 @@ class TrainConfig:
     n_envs: int = 1
     vec_env: str = "dummy"
     eval_points: int = 20
+    torch_threads: int = 1
     env_overrides: dict[str, Any] = field(default_factory=dict)
     overrides: dict[str, Any] = field(default_factory=dict)
 
@@ -73,7 +78,7 @@ class TrainConfig:
             raise ValueError(f"training_yaws must be one of {TRAINING_YAWS}, got {self.training_yaws!r}")
         if self.vec_env not in VEC_ENVS:
             raise ValueError(f"vec_env must be one of {VEC_ENVS}, got {self.vec_env!r}")
-        for name in ("steps", "n_envs", "eval_points"):
+        for name in ("steps", "n_envs", "eval_points", "torch_threads"):
             if getattr(self, name) < 1:
                 raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
 
@@ -208,8 +213,24 @@ class LearningCurve(BaseCallback):
         self._bar.close()
 
 
+@contextlib.contextmanager
+def torch_threads(n: int) -> Iterator[None]:
+    """Run the block with ``n`` torch intra-op threads, then restore the previous number."""
+    previous = torch.get_num_threads()
+    torch.set_num_threads(n)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(previous)
+
+
 def train(config: TrainConfig, progress: bool = True) -> TrainResult:
     """Train ``config.agent`` for ``config.steps`` env steps, with its learning curve."""
+    with torch_threads(config.torch_threads):
+        return _train(config, progress)
+
+
+def _train(config: TrainConfig, progress: bool) -> TrainResult:
     train_env = make_training_vec_env(config)
     train_env.seed(config.seed)
     eval_env = make_agent_env(config, training=False)

@@ -134,4 +134,5 @@ def wrap_grid_touch(env: gym.Env, training_yaws: str | None = None) -> gym.Env:
         env = TrainingYaws(env, training_yaws)
     env = GoalScaling(env)
     env = TargetYawAction(env)
-    return RescaleAction(env, min_action=-1.0, max_action=1.0)
+    unit = np.ones(env.action_space.shape, dtype=np.float32)
+    return RescaleAction(env, min_action=-unit, max_action=unit)

@@ -14,6 +14,7 @@ import gymnasium as gym
 import numpy as np
 from tqdm.auto import tqdm
 
+from dvrk_gym.calibration.records import ArrayRecord
 from dvrk_gym.envs.exploration import PITCH_RANGE_RAD, ROLL_RANGE_RAD, SAFE_X_M, SAFE_Y_M, SAFE_Z_M, YAW_RANGE_RAD
 
 ROW_TOLERANCE_PX = 2.0
@@ -84,7 +85,7 @@ class PaperExplorationPolicy:
 
 
 @dataclass(frozen=True)
-class Phase1Data:
+class Phase1Data(ArrayRecord):
     """Phase I samples, one row per commanded pose (SI units).
 
     Attributes:
@@ -129,19 +130,6 @@ class Phase1Data:
     def y(self) -> np.ndarray:
         """Calibration targets (N, 3): reported base position, m."""
         return self.reported_position
-
-    def save(self, path) -> None:
-        """Write the rows to an ``.npz`` file (plain arrays, no pickles)."""
-        np.savez(path, **{f.name: getattr(self, f.name) for f in fields(self)})
-
-    @classmethod
-    def load(cls, path) -> "Phase1Data":
-        """Read rows written by :meth:`save`."""
-        with np.load(path, allow_pickle=False) as data:
-            names = {f.name for f in fields(cls)}
-            if set(data.files) != names:
-                raise ValueError(f"{path} is not Phase I data: arrays {sorted(data.files)}, expected {sorted(names)}")
-            return cls(**{name: data[name] for name in names})
 
 
 def clean_mask(left_px: np.ndarray, right_px: np.ndarray, camera_position: np.ndarray, areas_px: np.ndarray, image_width: int) -> np.ndarray:

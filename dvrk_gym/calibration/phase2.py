@@ -14,13 +14,14 @@ import gymnasium as gym
 import numpy as np
 from tqdm.auto import tqdm
 
+from dvrk_gym.calibration.records import ArrayRecord
 from dvrk_gym.calibration.policy import CalibratedPolicy, Calibrator, calibrator_input
 from dvrk_gym.envs.grid_touch import N_CIRCLES
 from dvrk_gym.sim.kinematics import PAPER_YAWS_RAD
 
 
 @dataclass(frozen=True)
-class Phase2Data:
+class Phase2Data(ArrayRecord):
     """Phase II corrections, one row per touch (SI units).
 
     Attributes:
@@ -41,19 +42,6 @@ class Phase2Data:
     def X(self) -> np.ndarray:
         """Calibrator inputs (N, 6): camera position (m), yaw, pitch, roll (rad)."""
         return np.hstack([self.camera_position, self.orientation])
-
-    def save(self, path) -> None:
-        """Write the rows to an ``.npz`` file (plain arrays, no pickles)."""
-        np.savez(path, **{f.name: getattr(self, f.name) for f in fields(self)})
-
-    @classmethod
-    def load(cls, path) -> "Phase2Data":
-        """Read rows written by :meth:`save`."""
-        with np.load(path, allow_pickle=False) as data:
-            names = {f.name for f in fields(cls)}
-            if set(data.files) != names:
-                raise ValueError(f"{path} is not Phase II data: arrays {sorted(data.files)}, expected {sorted(names)}")
-            return cls(**{name: data[name] for name in names})
 
 
 def collect_phase2(env: gym.Env, calibrator: Calibrator, yaws: np.ndarray = PAPER_YAWS_RAD, seed: int = 0, progress: bool = True) -> Phase2Data:

@@ -18,15 +18,14 @@ from dvrk_gym.envs.base import DvrkEnv, EnvConfig
 from dvrk_gym.sim import kinematics as kin
 from dvrk_gym.sim.world import StereoDetection
 
-DEG = np.pi / 180.0
 SAFE_X_M = (0.005, 0.070)
 SAFE_Y_M = (0.011, 0.074)
 """The paper's safe exploration ranges in the base frame, metres (its data span these)."""
 SAFE_Z_M = (-0.153, -0.147)
 """Heights of the reported point that keep the 10 mm jaws 1-8 mm above the paper, metres."""
-YAW_RANGE_RAD = (-90.0 * DEG, 90.0 * DEG)
-PITCH_RANGE_RAD = (-15.0 * DEG, 25.0 * DEG)
-ROLL_RANGE_RAD = (-180.0 * DEG, -150.0 * DEG)
+YAW_RANGE_RAD = kin.PAPER_YAW_RANGE_RAD
+PITCH_RANGE_RAD = kin.PAPER_PITCH_RANGE_RAD
+ROLL_RANGE_RAD = kin.PAPER_ROLL_RANGE_RAD
 
 ACTION_NAMES = ("bx", "by", "bz", "yaw", "pitch", "roll")
 ACTION_LOW = np.array([0.0, 0.0, -0.170, YAW_RANGE_RAD[0], PITCH_RANGE_RAD[0], ROLL_RANGE_RAD[0]])

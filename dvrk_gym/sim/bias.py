@@ -422,13 +422,10 @@ class CableModel:
 
 # --- statistics over the paper's workspace -------------------------------------------
 
-# The paper's Phase I workspace (base frame, m) and rotation ranges (rad).
+# The paper's Phase I workspace (base frame, m); its rotation ranges are in kinematics.
 WORKSPACE_X_M = (0.005, 0.075)
 WORKSPACE_Y_M = (0.005, 0.075)
 WORKSPACE_Z_M = (-0.164, -0.154)
-PAPER_YAW_RANGE_RAD = (-90.0 * _DEG, 90.0 * _DEG)
-PAPER_PITCH_RANGE_RAD = (-15.0 * _DEG, 25.0 * _DEG)
-PAPER_ROLL_RANGE_RAD = (-180.0 * _DEG, -150.0 * _DEG)
 # Approach distance for the hysteresis gap: beyond the widest play of the presets, so
 # each approach ends on its branch of the loop.
 APPROACH_DELTA = np.array([2.0 * _DEG, 2.0 * _DEG, 2.0e-3, 5.0 * _DEG, 5.0 * _DEG, 5.0 * _DEG])
@@ -465,7 +462,7 @@ def sample_paper_commands(rng: np.random.Generator, n_samples: int) -> tuple[np.
     low = [WORKSPACE_X_M[0], WORKSPACE_Y_M[0], WORKSPACE_Z_M[0]]
     high = [WORKSPACE_X_M[1], WORKSPACE_Y_M[1], WORKSPACE_Z_M[1]]
     positions = rng.uniform(low, high, (n_samples, 3))
-    ranges = np.array([PAPER_YAW_RANGE_RAD, PAPER_PITCH_RANGE_RAD, PAPER_ROLL_RANGE_RAD])
+    ranges = np.array([kin.PAPER_YAW_RANGE_RAD, kin.PAPER_PITCH_RANGE_RAD, kin.PAPER_ROLL_RANGE_RAD])
     eulers = rng.uniform(ranges[:, 0], ranges[:, 1], (n_samples, 3))
     commands, kept = [], []
     for position, euler in zip(positions, eulers):

@@ -1,17 +1,19 @@
 """The debridement fragments: pumpkin seeds and raisins on the paper.
 
-A fragment is one rigid ellipsoid (a convex hull) whose surface is compliant: PyBullet's
-soft contact (``contactStiffness``, ``contactDamping``) lets the jaws sink into it by
-force / stiffness, which is the fragment's compression, and the solver handles that
-spring implicitly, so it is stable at any time step. Its compression is tracked as a
-state (:meth:`Fragment.compression`) that follows the jaws in and relaxes with the
-fragment's recovery time when they let go.
+A fragment is one rigid ellipsoid (a convex hull) with a compliance of its own: a
+Kelvin-Voigt element across the jaws (``stiffness_n_m``, ``damping_n_s_m``). While the
+jaws hold it they close past where they first touched it by grip force / stiffness, so
+they really reach into its hull by its compression (see :mod:`dvrk_gym.sim.grasp`);
+:meth:`Fragment.compression` tracks that squeeze, and after release it springs back
+with the time constant damping / stiffness (a raisin slowly, a seed at once).
 
 Why not a deformable body: measured here, PyBullet's soft bodies at this scale either
-fall through the paper (classic mass-spring world at 1x and 5x world scale), explode
-(deformable-world mass-spring), or run at about 11 steps/s for eight fragments
-(deformable-world FEM at 10x scale, which also wobbles at rest); see the note in
-``tests/test_fragments.py``.
+fall through the paper (classic mass-spring world at 1x and 5x world scale; at 10x it
+sinks 3 mm into the phantom and the jaws pass through it), explode (deformable-world
+mass-spring, any scale), or run at about 11 steps/s for eight fragments
+(deformable-world FEM at 10x, which also wobbles at rest). Why not PyBullet's soft
+contact (``contactStiffness``): squeezed between a jaw and the paper a 0.1 g body
+cannot push back with more than about 0.1 N, so it sank 1 mm into the paper.
 
 Two details matter at millimetre scale:
 
@@ -20,7 +22,8 @@ Two details matter at millimetre scale:
   :data:`COLLISION_MARGIN_M` and the hull is shrunk by it, so the padded hull is the
   ellipsoid.
 * A fragment weighs about 0.1 g, too light for the contact solver to pass a grip of a
-  newton through it, so holding is not left to friction; see :mod:`dvrk_gym.sim.grasp`.
+  newton through it, so holding is not left to friction alone; see
+  :mod:`dvrk_gym.sim.grasp`.
 
 Sizes follow the paper's table (mm, mean +- sd, length x width x thickness): pumpkin
 seed 12.4+-0.8 x 6.8+-0.3 x 2.4+-0.3; raisin 12.3+-1.5 x 5.9+-1.1 x 4.2+-0.5.
@@ -70,15 +73,16 @@ class FragmentType:
         name: its key in :data:`FRAGMENT_TYPES`.
         size_mean_m: mean (length, width, thickness), metres.
         size_sd_m: standard deviations of (length, width, thickness), metres.
-        stiffness_n_m: contact stiffness of its surface: N per metre of indentation.
+        stiffness_n_m: its stiffness across the jaws: N per metre of squeeze.
+        damping_n_s_m: its damping across the jaws, N s/m (recovery time = damping /
+            stiffness).
         friction: Coulomb friction coefficient against the jaws and the paper.
         spinning_friction: torsional friction (PyBullet ``spinningFriction``), metres.
         rolling_friction: rolling friction (PyBullet ``rollingFriction``), metres.
         color_rgba: its colour (r, g, b, a) in [0, 1].
         density_kg_m3: its density, kg/m^3.
-        recovery_time_s: time constant with which it springs back after a squeeze, s.
-        pierce_force_n: the force a jaw tip pressing end-on needs to pierce it, N;
-            None if it cannot be pierced.
+        pierce_force_n: the force (stiffness x how far in) a jaw tip pressing end-on needs
+            to pierce it, N; None if it cannot be pierced.
         pierce_hold_n: the most a pierced fragment can bear before it tears off the tip, N.
     """
 
@@ -86,14 +90,19 @@ class FragmentType:
     size_mean_m: tuple[float, float, float]
     size_sd_m: tuple[float, float, float]
     stiffness_n_m: float
+    damping_n_s_m: float
     friction: float
     spinning_friction: float
     rolling_friction: float
     color_rgba: tuple[float, float, float, float]
     density_kg_m3: float
-    recovery_time_s: float
     pierce_force_n: float | None = None
     pierce_hold_n: float = 0.0
+
+    @property
+    def recovery_time_s(self) -> float:
+        """Time constant with which it springs back after a squeeze, s."""
+        return self.damping_n_s_m / self.stiffness_n_m
 
     @property
     def pierceable(self) -> bool:
@@ -108,12 +117,12 @@ FRAGMENT_TYPES: dict[str, FragmentType] = {
         size_mean_m=(0.0124, 0.0068, 0.0024),
         size_sd_m=(0.0008, 0.0003, 0.0003),
         stiffness_n_m=1.0e4,
+        damping_n_s_m=200.0,  # springs back in 0.02 s
         friction=0.45,
         spinning_friction=1.0e-5,
         rolling_friction=1.0e-5,
         color_rgba=(0.87, 0.80, 0.62, 1.0),  # off-white beige: saturated enough to tell from paper
         density_kg_m3=1000.0,
-        recovery_time_s=0.02,
     ),
     # Sticky and elastic, soft: a raisin squashes, grips, and a tip can go into it.
     "raisin": FragmentType(
@@ -121,13 +130,13 @@ FRAGMENT_TYPES: dict[str, FragmentType] = {
         size_mean_m=(0.0123, 0.0059, 0.0042),
         size_sd_m=(0.0015, 0.0011, 0.0005),
         stiffness_n_m=1.5e3,
+        damping_n_s_m=375.0,  # springs back in 0.25 s
         friction=1.2,
         spinning_friction=2.0e-4,
         rolling_friction=2.0e-4,
-        color_rgba=(0.36, 0.22, 0.12, 1.0),  # dark brown: hue about 25 deg, never the marker's red
+        color_rgba=(0.45, 0.28, 0.16, 1.0),  # dark brown: hue 25 deg (not the marker's red), brighter than the circles even in shade
         density_kg_m3=1300.0,
-        recovery_time_s=0.25,
-        pierce_force_n=0.6,
+        pierce_force_n=0.15,
         pierce_hold_n=0.05,
     ),
 }
@@ -148,9 +157,9 @@ def sample_fragment_sizes(kind: str | FragmentType, rng: np.random.Generator, n:
     """Draw fragment sizes from the paper's table.
 
     Each dimension is normal with the table's mean and sd, truncated at
-    :data:`TRUNCATE_SD` sd (redrawn until inside, so always positive). A fragment lies on
-    its flattest side, so each row is then ordered length >= width >= thickness (this
-    touches well under 1 in 1000 draws).
+    :data:`TRUNCATE_SD` sd (redrawn until inside, so always positive), independently, so
+    each follows the table. About 8 % of raisins come out thicker than wide (4.2+-0.5
+    against 5.9+-1.1 mm); they lie as drawn, as a lumpy raisin does.
 
     Args:
         kind: "pumpkin_seed", "raisin" or a FragmentType.
@@ -170,8 +179,7 @@ def sample_fragment_sizes(kind: str | FragmentType, rng: np.random.Generator, n:
         if not bad.any():
             break
         z[bad] = rng.standard_normal(int(bad.sum()))
-    sizes = mean + z * sd
-    return -np.sort(-sizes, axis=1)
+    return mean + z * sd
 
 
 def phantom_region(edge_margin_m: float = EDGE_MARGIN_M) -> tuple[np.ndarray, np.ndarray]:
@@ -389,8 +397,8 @@ class Fragment:
         return pose
 
     def yaw(self) -> float:
-        """Angle of its length axis in the paper's plane from base x, radians in [-pi/2, pi/2)."""
-        axis = self.pose()[:3, 0]
+        """Angle of its longer axis in the paper's plane from base x, radians in [-pi/2, pi/2)."""
+        axis = self.pose()[:3, 0 if self.size_m[0] >= self.size_m[1] else 1]
         angle = math.atan2(axis[1], axis[0])
         return (angle + np.pi / 2) % np.pi - np.pi / 2
 

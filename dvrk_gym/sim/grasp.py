@@ -23,7 +23,8 @@ A fragment moves only through contact with the jaws:
   constraint goes and the fragment falls. A squeeze that is not antipodal never holds:
   the seed slides out or is left behind (failure mode B).
 * **Piercing** (raisins): a jaw tip that presses end-on into a pierceable fragment that
-  cannot give way goes in and holds it by a point constraint at the tip, which bears at
+  cannot give way, with the fragment's pierce force (its stiffness times how far the
+  tip is in), goes in and holds it by a point constraint at the tip, which bears at
   most ``pierce_hold_n`` and does not let go when the jaws open (failure mode C). It
   tears off when something holds the fragment back harder than that.
 
@@ -52,6 +53,8 @@ JAW_LINKS = (JAW_A_INDEX, JAW_B_INDEX)
 _DRIVE_FORCE = 50.0
 """Force (N, or N m) of the velocity motors that carry each joint through a step."""
 _STILL_RAD = 1e-7
+_INTO_COS = 0.3
+"""A contact blocks a closing jaw only if the jaw moves into it within about 73 degrees of its normal."""
 
 
 @dataclass(frozen=True)
@@ -70,7 +73,6 @@ class GripperConfig:
         pierce_tip_zone_m: contacts this close to a jaw's end count as its tip, m.
         pierce_max_angle_rad: largest angle between the jaw and the inward surface normal
             for the tip to press end-on.
-        pierce_depth_m: how far into a fragment that cannot give way the tip must press, m.
         pierce_tear_m: a pierce tears when the tip and its hole are this far apart, m.
         max_free_speed_m_s: a fragment not held is slowed to this speed (a guard: the
             solver can shoot a squeezed 0.1 g body out at metres per second).
@@ -83,12 +85,11 @@ class GripperConfig:
     grasp_steps: int = 3
     pierce_tip_zone_m: float = 1.0e-3
     pierce_max_angle_rad: float = math.radians(35.0)
-    pierce_depth_m: float = 1.0e-4
     pierce_tear_m: float = 1.0e-3
     max_free_speed_m_s: float = 0.2
 
     def __post_init__(self) -> None:
-        for name in ("grip_force_n", "jaw_speed_rad_s", "stop_depth_m", "pierce_depth_m", "pierce_tear_m", "max_free_speed_m_s"):
+        for name in ("grip_force_n", "jaw_speed_rad_s", "stop_depth_m", "pierce_tear_m", "max_free_speed_m_s"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
                 raise ValueError(f"GripperConfig.{name} must be finite and > 0, got {value}")
@@ -103,6 +104,7 @@ class _Touch:
     depth_m: float  # > 0 when pressing in
     point: np.ndarray  # on the other body
     jaw_point: np.ndarray  # on the jaw
+    normal: np.ndarray  # from the other body towards the jaw
 
 
 @dataclass
@@ -147,6 +149,7 @@ class Gripper:
         self._by_name = {f.name: f for f in fragments}
         self.holds: dict[str, Hold] = {}
         self._streak: dict[str, int] = {}
+        self._first_touch: dict[str, np.ndarray] = {}
         self.q = np.array(robot.joints, dtype=float)
         self.half_angles = np.full(2, max(robot.jaw_angle, 0.0) / 2)
         self.jaw_target = float(robot.jaw_angle)
@@ -279,8 +282,32 @@ class Gripper:
                 return hold.contact_half_angles - compression / 2 / hold.levers_m
         return None
 
+    def _give(self, body: int) -> float:
+        """How far a closing jaw may press into a body before it stalls, m: a fragment
+        yields as far as the grip force squeezes it, anything else hardly at all."""
+        fragment = self.fragments.get(body)
+        if fragment is None:
+            return self.config.stop_depth_m
+        return max(self.config.stop_depth_m, self.config.grip_force_n / fragment.kind.stiffness_n_m)
+
     def _blocked(self, i: int) -> bool:
-        return any(t.depth_m >= self.config.stop_depth_m for t in self._touches[i].values())
+        """Whether closing jaw i would press further into something that does not give.
+
+        Only contacts the closing motion pushes into count (a jaw that came down on top
+        of a fragment slides over it as it closes), and only once the jaw is in further
+        than the body gives (:meth:`_give`).
+        """
+        pressed = [t for body, t in self._touches[i].items() if t.depth_m >= self._give(body)]
+        if not pressed:
+            return False
+        pose = self.robot.link_pose(JAW_LINKS[i])
+        closing_spin = pose[:3, 2] * (-1.0 if i == 0 else 1.0)  # jaw A closes by turning back about its axis
+        for touch in pressed:
+            velocity = np.cross(closing_spin, touch.jaw_point - pose[:3, 3])
+            speed = np.linalg.norm(velocity)
+            if speed > 0.0 and velocity @ -touch.normal > _INTO_COS * speed:
+                return True
+        return False
 
     def _drive(self, arm_velocity: np.ndarray, jaw_rates: np.ndarray) -> None:
         """Set every joint where it is now, with its velocity for the coming step."""
@@ -306,7 +333,7 @@ class Gripper:
             for cp in c.getContactPoints(bodyA=robot, linkIndexA=link):
                 body, depth = cp[2], -cp[8]
                 if body != robot and (body not in touches or depth > touches[body].depth_m):
-                    touches[body] = _Touch(depth, np.array(cp[6]), np.array(cp[5]))
+                    touches[body] = _Touch(depth, np.array(cp[6]), np.array(cp[5]), np.array(cp[7]))
             self._touches[i] = touches
 
     def _limit_free_speeds(self) -> None:
@@ -362,6 +389,8 @@ class Gripper:
         touching = all(fragment.body_id in self._touches[i] and self._touches[i][fragment.body_id].depth_m >= 0.0 for i in range(2))
         ok = touching and self.jaw_target < self.jaw_angle and self._antipodal(fragment)
         self._streak[name] = self._streak.get(name, 0) + 1 if ok else 0
+        if self._streak[name] == 1:  # the squeeze is measured from where both jaws first touched
+            self._first_touch[name] = self.half_angles.copy()
         if self._streak[name] < self.config.grasp_steps:
             return
         self._streak[name] = 0
@@ -374,13 +403,15 @@ class Gripper:
         constraint = self._fix_to_link(fragment, WRIST_YAW_INDEX)
         capacity = fragment.kind.friction * self.config.jaw_friction * 2.0 * self.config.grip_force_n
         c.changeConstraint(constraint, maxForce=capacity)
-        self.holds[name] = Hold("grasp", constraint, WRIST_YAW_INDEX, self.half_angles.copy(), np.array(levers), np.zeros(3), np.zeros(3))
+        first_touch = np.maximum(self._first_touch.pop(name), self.half_angles)
+        self.holds[name] = Hold("grasp", constraint, WRIST_YAW_INDEX, first_touch, np.array(levers), np.zeros(3), np.zeros(3))
 
     def _try_pierce(self, fragment: Fragment) -> bool:
         cos_limit = math.cos(self.config.pierce_max_angle_rad)
+        depth = fragment.kind.pierce_force_n / fragment.kind.stiffness_n_m
         for i, link in enumerate(JAW_LINKS):
             touch = self._touches[i].get(fragment.body_id)
-            if touch is None or touch.depth_m < self.config.pierce_depth_m:
+            if touch is None or touch.depth_m < depth:
                 continue
             jaw_pose = self.robot.link_pose(link)
             along = jaw_pose[:3, :3].T @ (touch.jaw_point - jaw_pose[:3, 3])

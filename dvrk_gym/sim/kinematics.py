@@ -73,6 +73,10 @@ JAW_UPPER_RAD: float = float(np.deg2rad(80.0))
 JAW_FULLY_OPEN_RAD: float = float(np.deg2rad(75.0))
 JAW_LENGTH_M: float = 0.0100
 PAPER_YAWS_RAD: np.ndarray = _frozen(np.deg2rad([-90.0, -45.0, 0.0, 45.0, 90.0]))
+PAPER_YAW_RANGE_RAD: tuple[float, float] = (float(np.deg2rad(-90.0)), float(np.deg2rad(90.0)))
+PAPER_PITCH_RANGE_RAD: tuple[float, float] = (float(np.deg2rad(-15.0)), float(np.deg2rad(25.0)))
+PAPER_ROLL_RANGE_RAD: tuple[float, float] = (float(np.deg2rad(-180.0)), float(np.deg2rad(-150.0)))
+"""The paper's Phase I rotation ranges: yaw U[-90, 90], pitch U[-15, 25], roll U[-180, -150] deg."""
 
 # The wrist-pitch point lies (insertion - 15.6 mm) past the RCM along the shaft; this
 # is that +15.6 mm (sum of the insertion and roll d offsets, negated).

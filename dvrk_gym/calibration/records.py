@@ -1,0 +1,31 @@
+"""Data sets as frozen dataclasses of arrays, saved as plain ``.npz`` (never pickles)."""
+
+from __future__ import annotations
+
+from dataclasses import fields
+from os import PathLike
+from typing import TypeVar
+
+import numpy as np
+
+_Record = TypeVar("_Record", bound="ArrayRecord")
+
+
+class ArrayRecord:
+    """Mixin for a frozen dataclass whose fields are all numpy arrays of equal length."""
+
+    def save(self, path: str | PathLike) -> None:
+        """Write every field to an ``.npz`` file."""
+        np.savez(path, **{f.name: getattr(self, f.name) for f in fields(self)})
+
+    @classmethod
+    def load(cls: type[_Record], path: str | PathLike) -> _Record:
+        """Read a file written by :meth:`save`; refuse files of another kind or with pickles."""
+        names = {f.name for f in fields(cls)}
+        try:
+            with np.load(path, allow_pickle=False) as data:
+                if set(data.files) != names:
+                    raise ValueError(f"{path} is not {cls.__name__} data: arrays {sorted(data.files)}, expected {sorted(names)}")
+                return cls(**{name: data[name] for name in names})
+        except (OSError, EOFError) as error:  # not a zip / npz, or truncated
+            raise ValueError(f"{path} is not a readable {cls.__name__} file: {error}") from None
