@@ -17,7 +17,7 @@ from dvrk_gym.sim.fragments import (
     sample_layout,
     spawn_fragments,
 )
-from dvrk_gym.sim.grasp import JAW_LINKS, Gripper
+from dvrk_gym.sim.grasp import GRASP_TIP_CLEARANCE_M, JAW_LINKS, Gripper
 from dvrk_gym.sim.physics import Physics
 from dvrk_gym.sim.robot import PSMBody
 from dvrk_gym.sim.scene import WORKSPACE_CENTER_M, build_scene
@@ -26,9 +26,6 @@ PAPER_TABLE_MM = {  # (length, width, thickness): mean, sd
     "pumpkin_seed": ((12.4, 6.8, 2.4), (0.8, 0.3, 0.3)),
     "raisin": ((12.3, 5.9, 4.2), (1.5, 1.1, 0.5)),
 }
-GRASP_TIP_HEIGHT_M = 0.0007
-"""The closed jaw tip stops this far above the paper: low enough to pinch a 2.4 mm seed,
-high enough that the lower jaw (the paper's 10 degree roll tilts the jaws) clears the paper."""
 
 
 @pytest.fixture
@@ -73,14 +70,14 @@ def _lower_and_close(gripper, fragment, tip_xy, tool_yaw=0.0):
     top = WORKSPACE_CENTER_M[2]
     above = _tool_pose(tip_xy, top + fragment.size_m[2] + 0.004, tool_yaw)
     gripper.place(kin.inverse_kinematics(above), kin.JAW_FULLY_OPEN_RAD)
-    gripper.move_tool(_tool_pose(tip_xy, top + GRASP_TIP_HEIGHT_M, tool_yaw), 0.02)
+    gripper.move_tool(_tool_pose(tip_xy, top + GRASP_TIP_CLEARANCE_M, tool_yaw), 0.02)
     gripper.command_jaw(-0.2)
     gripper.settle_jaws(240)
 
 
 def _raise(gripper, tip_xy, height_m, tool_yaw=0.0):
     top = WORKSPACE_CENTER_M[2]
-    gripper.move_tool(_tool_pose(tip_xy, top + GRASP_TIP_HEIGHT_M + height_m, tool_yaw), 0.03)
+    gripper.move_tool(_tool_pose(tip_xy, top + GRASP_TIP_CLEARANCE_M + height_m, tool_yaw), 0.03)
 
 
 # ---------------------------------------------------------------------------- sizes
