@@ -4,7 +4,7 @@ The paper compares 24 networks (1-4 hidden layers x 30 or 300 units x ReLU, sigm
 linear regression on Euler angles and on quaternions, and random forests, by 10-fold
 cross-validation of the mean squared L2 error of the predicted base position (mm^2).
 
-Cost: the 24 nets x 10 folds x 1000 epochs take about 80 minutes on one CPU core. By
+Cost: the 24 nets x 10 folds x 1000 epochs take about 90 minutes on one CPU core. By
 default every net still trains the paper's 1000 epochs, and the chosen net (3 x 300 ReLU),
 the linear models and the forests run all 10 folds, but the other 23 nets are scored on the
 first ``SWEEP_FOLDS`` folds of the same shuffled 10-fold split (an unbiased, noisier
@@ -134,7 +134,7 @@ def paper_models(epochs: int = PAPER_EPOCHS, sweep_folds: int | None = SWEEP_FOL
     Args:
         epochs: Training epochs of every net (paper: 1000).
         sweep_folds: Folds scored for the nets other than the chosen 3 x 300 ReLU; None
-            scores all folds (the paper's protocol, about 80 min on one core).
+            scores all folds (the paper's protocol, about 90 min on one core).
         batch_size: Mini-batch rows of every net.
         quick: A handful of models (two linear, one forest, the chosen net and the paper's
             best net) with at most 30 epochs, for smoke runs.
