@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import Callable, Sequence
 
 from dvrk_gym.cli_calibration import add_commands as add_calibration_commands
+from dvrk_gym.cli_debridement import add_commands as add_debridement_commands
 
 Command = Callable[[argparse.Namespace], int]
 
@@ -48,6 +49,7 @@ def build_parser() -> argparse.ArgumentParser:
     subparsers = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     _add_demo(subparsers)
     add_calibration_commands(subparsers)
+    add_debridement_commands(subparsers)
     return parser
 
 

@@ -7,6 +7,7 @@ import gymnasium as gym
 ENV_ENTRY_POINTS = {
     "dvrk_gym/CalibrationExploration-v0": "dvrk_gym.envs.exploration:CalibrationExplorationEnv",
     "dvrk_gym/GridTouch-v0": "dvrk_gym.envs.grid_touch:GridTouchEnv",
+    "dvrk_gym/Debridement-v0": "dvrk_gym.envs.debridement:DebridementEnv",
 }
 
 

@@ -112,7 +112,7 @@ class DvrkEnv(gym.Env):
         unknown = sorted(set(options) - set(self.option_names))
         if unknown:
             raise ValueError(f"unknown reset option(s) {unknown}; valid options: {list(self.option_names)}")
-        self.world.physics.client.restoreState(self._initial_physics_state)
+        self._restore_initial_state()
         observation, info = self._reset_episode(options)
         self._needs_reset = False
         return observation, info
@@ -137,6 +137,11 @@ class DvrkEnv(gym.Env):
         super().close()
 
     # ------------------------------------------------------------------ helpers for subclasses
+    def _restore_initial_state(self) -> None:
+        """Put the physics back as it was when the env was made (an env that rebuilds its
+        world on reset overrides this)."""
+        self.world.physics.client.restoreState(self._initial_physics_state)
+
     def _reset_episode(self, options: dict[str, Any]) -> tuple[Any, dict[str, Any]]:
         raise NotImplementedError
 

@@ -56,8 +56,6 @@ pinches a 2.4 mm seed below its middle."""
 
 ARM_JOINTS = 6
 JAW_LINKS = (JAW_A_INDEX, JAW_B_INDEX)
-_DRIVE_FORCE = 50.0
-"""Force (N, or N m) of the velocity motors that carry each joint through a step."""
 _STILL_RAD = 1e-7
 _INTO_COS = 0.3
 """A contact blocks a closing jaw only if the jaw moves into it within about 73 degrees of its normal."""
@@ -259,6 +257,11 @@ class Gripper:
                 return count
         return max_steps
 
+    def release(self, name: str) -> None:
+        """Let go of one fragment (grasped or pierced); nothing happens if it is not held."""
+        if name in self.holds:
+            self._release(name)
+
     def release_all(self) -> None:
         """Let go of everything (grasps and pierces), e.g. before rebuilding the world."""
         for name in list(self.holds):
@@ -317,18 +320,7 @@ class Gripper:
 
     def _drive(self, arm_velocity: np.ndarray, jaw_rates: np.ndarray) -> None:
         """Set every joint where it is now, with its velocity for the coming step."""
-        c = self.physics.client
-        body = self.robot.body_id
-        positions = list(self.q) + [self.q[5] + self.half_angles[0], self.q[5] - self.half_angles[1]]
-        velocities = list(arm_velocity) + [arm_velocity[5] + jaw_rates[0], arm_velocity[5] - jaw_rates[1]]
-        for j, (p, v) in enumerate(zip(positions, velocities)):
-            c.resetJointState(body, j, float(p), float(v))
-        c.setJointMotorControlArray(
-            body, list(range(len(positions))), c.VELOCITY_CONTROL,
-            targetVelocities=[float(v) for v in velocities], forces=[_DRIVE_FORCE] * len(positions),
-        )
-        self.robot.joints = self.q.copy()
-        self.robot.jaw_angle = float(self.half_angles.sum())
+        self.robot.drive(self.q, self.half_angles, arm_velocity, jaw_rates)
 
     # ------------------------------------------------------------------ sensing
     def _sense(self) -> None:

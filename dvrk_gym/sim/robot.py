@@ -70,6 +70,10 @@ JAW_STEEL = (0.72, 0.72, 0.74, 1.0)
 
 LINK_MASS_KG = 0.01
 MOTOR_FORCE_N = 50.0
+"""Force (N, or N m) of the motors that hold each joint, or carry it through a step."""
+JAW_FRICTION = 1.0
+"""Friction coefficient of the jaws (PyBullet multiplies it with the other body's, so 1
+leaves a fragment's own friction in force)."""
 
 JAW_A_INDEX = 6
 JAW_B_INDEX = 7
@@ -189,6 +193,8 @@ class PSMBody:
         self.dh = tuple(dh)
         self.name = name
         self.body_id = physics.add(name, self._build())
+        for link in (JAW_A_INDEX, JAW_B_INDEX):
+            physics.client.changeDynamics(self.body_id, link, lateralFriction=JAW_FRICTION)
         self.joints = np.array([0.0, 0.0, 0.12, 0.0, 0.0, 0.0])
         self.jaw_angle = 0.0
         self.set_joints(self.joints, 0.0)
@@ -287,6 +293,41 @@ class PSMBody:
             forces=[MOTOR_FORCE_N] * len(targets),
         )
         self.joints = q.copy()
+
+    def drive(
+        self,
+        q: np.ndarray,
+        jaw_half_angles: np.ndarray,
+        arm_velocity: np.ndarray,
+        jaw_rates: np.ndarray,
+    ) -> None:
+        """Set every joint where it is now, with the velocity it keeps over the next step.
+
+        For stepping physics with a moving tool (contacts see a moving jaw): each joint is
+        reset to its position and velocity, and a velocity motor of MOTOR_FORCE_N carries
+        that velocity through the step. Unlike :meth:`set_joints`, the jaws open
+        independently.
+
+        Args:
+            q: (6,) arm joints now, rad / m.
+            jaw_half_angles: (2,) how far jaw A and jaw B are open from the closed
+                position, rad (>= 0).
+            arm_velocity: (6,) arm joint velocities for the step, rad/s / m/s.
+            jaw_rates: (2,) opening rates of jaw A and jaw B, rad/s (+ opens).
+        """
+        q = np.asarray(q, dtype=float)
+        arm_velocity = np.asarray(arm_velocity, dtype=float)
+        positions = list(q) + [q[5] + jaw_half_angles[0], q[5] - jaw_half_angles[1]]
+        velocities = list(arm_velocity) + [arm_velocity[5] + jaw_rates[0], arm_velocity[5] - jaw_rates[1]]
+        c = self.physics.client
+        for j, (p, v) in enumerate(zip(positions, velocities)):
+            c.resetJointState(self.body_id, j, float(p), float(v))
+        c.setJointMotorControlArray(
+            self.body_id, list(range(len(positions))), c.VELOCITY_CONTROL,
+            targetVelocities=[float(v) for v in velocities], forces=[MOTOR_FORCE_N] * len(positions),
+        )
+        self.joints = q.copy()
+        self.jaw_angle = float(jaw_half_angles[0] + jaw_half_angles[1])
 
     def link_pose(self, link_index: int) -> np.ndarray:
         """The world pose (4x4, metres) of a link's frame as PyBullet has it now."""

@@ -17,15 +17,18 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.spatial.transform import Rotation, Slerp
 
 from dvrk_gym.sim import kinematics as kin
 from dvrk_gym.sim.bias import BiasConfig, CableModel, resolve_bias
 from dvrk_gym.sim.camera import PAPER_INTRINSICS, PixelWindow, StereoCamera, default_camera_pose
-from dvrk_gym.sim.motion import CartesianMove, MotionLimits, SimClock
+from dvrk_gym.sim.fragments import FRAGMENTS_PER_TRIAL, Fragment, FragmentType, sample_fragment_sizes, sample_layout, spawn_fragments
+from dvrk_gym.sim.grasp import Gripper, GripperConfig
+from dvrk_gym.sim.motion import CartesianMove, MotionLimits, SimClock, trapezoid_progress
 from dvrk_gym.sim.perception import Blob, detect_circles, detect_marker, match_to_expected
 from dvrk_gym.sim.physics import Physics
 from dvrk_gym.sim.robot import PSMBody, marker_corners, marker_face_samples, marker_position
-from dvrk_gym.sim.scene import CIRCLE_RADIUS_M, SceneBodies, build_scene, grid_circle_centers
+from dvrk_gym.sim.scene import CIRCLE_RADIUS_M, WORKSPACE_CENTER_M, SceneBodies, build_scene, grid_circle_centers
 
 HOME_JOINTS = np.array([0.0, 0.0, 0.05, 0.0, 0.0, 0.0])
 """A retracted configuration: the tool is 34 mm below the RCM, far outside the camera's view."""
@@ -37,6 +40,11 @@ MARKER_WINDOW_MARGIN_PX = 2
 """Pixels added around the marker's projected bounding box when rendering its window."""
 MARKER_RAY_STANDOFF_M = 0.00005
 """Visibility rays stop this far in front of the marker's face, metres."""
+PARKING_ORIGIN_M = np.array([0.14, -0.03, -0.175])
+PARKING_PITCH_M = 0.015
+"""Where fragments taken out of play are parked (on the tray, out of the paper's view), metres."""
+FRAGMENT_SETTLE_STEPS = 24
+"""Physics steps (0.1 s) that let new fragments settle onto the paper before a trial."""
 
 
 @dataclass(frozen=True)
@@ -147,6 +155,8 @@ class DvrkWorld:
         self.q_cmd = HOME_JOINTS.copy()
         self.q_true = HOME_JOINTS.copy()
         self.jaw_angle = 0.0
+        self.fragments: list[Fragment] = []
+        self.gripper: Gripper | None = None
         self._grid_cache: tuple[StereoDetection, ...] | None = None
         self.reset_robot(HOME_JOINTS)
 
@@ -158,7 +168,11 @@ class DvrkWorld:
         self.q_cmd = q.copy()
         self.q_true = self.cable.true_joints(q)
         self.jaw_angle = float(jaw_angle_rad)
-        self.robot.set_joints(self.q_true, self.jaw_angle)
+        if self.gripper is None:
+            self.robot.set_joints(self.q_true, self.jaw_angle)
+        else:  # nothing stays held through a reset, and the gripper drives the jaws from here
+            self.gripper.release_all()
+            self.gripper.place(self.q_true, self.jaw_angle)
         self.clock.reset()
 
     def reported_pose(self) -> np.ndarray:
@@ -183,6 +197,7 @@ class DvrkWorld:
         jaw_angle_rad: float | None = None,
         noise_rng: np.random.Generator | None = None,
         clamp_to_limits: bool = False,
+        limits: MotionLimits | None = None,
     ) -> MoveResult:
         """Move the tool frame in a straight line to ``pose`` and let it settle.
 
@@ -195,6 +210,7 @@ class DvrkWorld:
             noise_rng: the generator for this move's repeatability noise (None: no noise).
             clamp_to_limits: clamp joints that would leave their limits (and report them
                 in the result) instead of raising.
+            limits: speed limits of this move (default: the world's).
 
         Raises:
             kinematics.UnreachablePoseError: if ``pose`` needs joints outside their limits
@@ -204,7 +220,7 @@ class DvrkWorld:
             q_target, clamped = kin.inverse_kinematics_clamped(pose, q_ref=self.q_cmd)
         else:
             q_target, clamped = kin.inverse_kinematics(pose, q_ref=self.q_cmd), np.zeros(6, dtype=bool)
-        move = CartesianMove.plan(self.reported_pose(), kin.forward_kinematics(q_target), self.config.motion)
+        move = CartesianMove.plan(self.reported_pose(), kin.forward_kinematics(q_target), limits or self.config.motion)
         return self._finish_move(q_target, move.duration_s, jaw_angle_rad, noise_rng, clamped)
 
     def move_joints(self, q: np.ndarray, jaw_angle_rad: float | None = None, noise_rng: np.random.Generator | None = None) -> MoveResult:
@@ -229,10 +245,178 @@ class DvrkWorld:
             self.jaw_angle = float(jaw_angle_rad)
         self.q_cmd = np.array(q_target, dtype=float)
         self.q_true = self.cable.true_joints(self.q_cmd, noise_rng)
-        self.robot.set_joints(self.q_true, self.jaw_angle)
+        if self.gripper is None:
+            self.robot.set_joints(self.q_true, self.jaw_angle)
+        else:  # a free-space move: held fragments go along, nothing else is touched
+            self.gripper.place(self.q_true, jaw_angle_rad)
+            self.jaw_angle = self.gripper.jaw_angle
         elapsed = max(duration_s, jaw_time) + self.config.motion.settle_time_s
         self.clock.advance(elapsed)
         return MoveResult(elapsed, self.q_cmd.copy(), self.q_true.copy(), clamped)
+
+    # ----------------------------------------------------------------- fragments
+    def rebuild(self) -> None:
+        """Empty the physics server and build the workspace and the robot again, in order.
+
+        A reset that rebuilds gives the same physics bit for bit whatever happened before;
+        removing and re-adding bodies would not (body ids, collision shapes and contact
+        caches carry history). The robot ends at HOME_JOINTS with relaxed cables.
+        """
+        if self.gripper is not None:
+            self.gripper.release_all()
+        self.physics.reset()
+        self.scene = build_scene(self.physics)
+        self.robot = PSMBody(self.physics, dh=self.cable.true_dh)
+        self.fragments, self.gripper = [], None
+        self.reset_robot(HOME_JOINTS)
+
+    def add_fragments(
+        self,
+        kind: str | FragmentType,
+        rng: np.random.Generator,
+        n: int = FRAGMENTS_PER_TRIAL,
+        gripper_config: GripperConfig | None = None,
+    ) -> list[Fragment]:
+        """Lay ``n`` fragments of ``kind`` at random on the paper and make the jaws able to hold them.
+
+        Sizes, positions and orientations are drawn from ``rng`` (the paper's sizes, at
+        least 3 mm apart, any orientation); the fragments settle for
+        FRAGMENT_SETTLE_STEPS physics steps (not counted on the clock). From now on the
+        robot moves through a :class:`~dvrk_gym.sim.grasp.Gripper`.
+
+        Raises:
+            RuntimeError: if fragments were added since the last :meth:`rebuild`.
+        """
+        if self.gripper is not None:
+            raise RuntimeError("this world already has fragments; call rebuild() first")
+        sizes = sample_fragment_sizes(kind, rng, n)
+        positions, yaws = sample_layout(rng, sizes)
+        self.fragments = spawn_fragments(self.physics, kind, sizes, positions, yaws)
+        self.gripper = Gripper(self.physics, self.robot, self.fragments, gripper_config)
+        for _ in range(FRAGMENT_SETTLE_STEPS):
+            self.gripper.step()
+        return self.fragments
+
+    def _require_gripper(self) -> Gripper:
+        if self.gripper is None:
+            raise RuntimeError("this world has no fragments; call add_fragments() first")
+        return self.gripper
+
+    def move_stepped(
+        self,
+        pose: np.ndarray,
+        noise_rng: np.random.Generator | None = None,
+        min_tip_clearance_m: float | None = None,
+        limits: MotionLimits | None = None,
+        duration_s: float | None = None,
+    ) -> MoveResult:
+        """Move the tool frame in a straight line to ``pose``, stepping physics all the way.
+
+        The move is the same trapezoidal profile as :meth:`move_to`, sampled at the physics
+        time step; every sample goes through the nominal inverse kinematics (the joint
+        command) and the cable model (the true joints the jaws follow), so the jaws push,
+        squeeze and lift what they meet. This move's repeatability noise is blended in
+        along the way from the last move's.
+
+        Args:
+            pose: the commanded tool pose (4x4, base frame, metres); clamped to the
+                joint limits (reported in the result).
+            noise_rng: the generator for this move's repeatability noise (None: none).
+            min_tip_clearance_m: keep the closed jaw tip at least this high above the
+                paper: the part of the path below is raised onto that floor, where the
+                tool stalls (the silicone under the paper gives; the jaws do not dig in),
+                metres; None: no floor.
+            limits: speed limits of this move (default: the world's).
+            duration_s: make the move last exactly this long at constant speed, with
+                no settling (a control period), seconds; None: the trapezoidal profile.
+        """
+        gripper = self._require_gripper()
+        q_target, clamped = kin.inverse_kinematics_clamped(pose, q_ref=self.q_cmd)
+        end = kin.forward_kinematics(q_target)
+        if duration_s is None:
+            move = CartesianMove.plan(self.reported_pose(), end, limits or self.config.motion)
+        else:
+            move = CartesianMove(self.reported_pose(), end, float(duration_s), 0.0)
+        dt = self.physics.time_step_s
+        offset_start = self.q_true - self.cable.true_joints(self.q_cmd)
+        floor = None if min_tip_clearance_m is None else float(WORKSPACE_CENTER_M[2]) + min_tip_clearance_m
+        commands, trues = [], []
+        q_ref = self.q_cmd
+        for waypoint in _waypoints(move, dt):
+            state = self.cable.get_state()
+            q_ref, _ = kin.inverse_kinematics_clamped(waypoint, q_ref=q_ref)
+            q_true = self.cable.true_joints(q_ref)
+            if floor is not None:
+                gap = kin.touch_point(q_true + offset_start, self.cable.true_dh)[2] - floor
+                if gap < 0.0:  # the tip stays on the floor: lift this waypoint by the gap (the
+                    # true tip follows the command one for one in height)
+                    self.cable.set_state(state)
+                    waypoint = waypoint.copy()
+                    waypoint[2, 3] -= gap
+                    q_ref, _ = kin.inverse_kinematics_clamped(waypoint, q_ref=commands[-1] if commands else self.q_cmd)
+                    q_true = self.cable.true_joints(q_ref)
+            commands.append(q_ref)
+            trues.append(q_true)
+        noise_end = self.cable.true_joints(commands[-1], noise_rng) - trues[-1]
+        fractions = np.arange(1, len(commands) + 1)[:, None] / len(commands)
+        path = np.array(trues) + (1.0 - fractions) * offset_start + fractions * noise_end
+        steps = gripper.follow(path)
+        self.q_cmd, self.q_true = np.array(commands[-1]), path[-1].copy()
+        self.jaw_angle = gripper.jaw_angle
+        settle = 0.0 if duration_s is not None else self.dwell((limits or self.config.motion).settle_time_s)
+        elapsed = steps * dt + settle
+        self.clock.advance(steps * dt)
+        return MoveResult(elapsed, self.q_cmd.copy(), self.q_true.copy(), clamped)
+
+    def actuate_jaws(self, jaw_angle_rad: float, duration_s: float | None = None) -> float:
+        """Command the jaws to an opening (rad; <= 0 closes as far as what they hold allows).
+
+        Physics steps with the arm still, for ``duration_s`` seconds or, when None, until
+        the jaws stop moving (at most 2 s). Returns the simulated seconds taken (also
+        added to the clock).
+        """
+        gripper = self._require_gripper()
+        gripper.command_jaw(jaw_angle_rad)
+        dt = self.physics.time_step_s
+        if duration_s is None:
+            steps = gripper.settle_jaws(max_steps=int(round(2.0 / dt)))
+        else:
+            steps = max(0, int(round(duration_s / dt)))
+            for _ in range(steps):
+                gripper.step()
+        self.jaw_angle = gripper.jaw_angle
+        self.clock.advance(steps * dt)
+        return steps * dt
+
+    def dwell(self, seconds: float, step_physics: bool = True) -> float:
+        """Wait ``seconds`` with the arm still (physics stepped, if asked); returns the time taken."""
+        dt = self.physics.time_step_s
+        steps = max(0, int(round(seconds / dt)))
+        if step_physics and self.gripper is not None:
+            for _ in range(steps):
+                self.gripper.step()
+        self.clock.advance(steps * dt)
+        return steps * dt
+
+    def set_aside_fragment(self, index: int) -> None:
+        """Take fragment ``index`` out of play, as the operator does with a failed one.
+
+        It is let go of (even if pierced), and parked on the tray far outside the camera's
+        view of the paper, where it stays still and touches nothing.
+        """
+        gripper = self._require_gripper()
+        fragment = self.fragments[index]
+        gripper.release(fragment.name)
+        c = self.physics.client
+        parking = [PARKING_ORIGIN_M[0], PARKING_ORIGIN_M[1] + PARKING_PITCH_M * index, PARKING_ORIGIN_M[2]]
+        c.changeDynamics(fragment.body_id, -1, mass=0.0)
+        c.setCollisionFilterGroupMask(fragment.body_id, -1, 0, 0)
+        c.resetBasePositionAndOrientation(fragment.body_id, parking, [0.0, 0.0, 0.0, 1.0])
+        c.resetBaseVelocity(fragment.body_id, [0.0, 0.0, 0.0], [0.0, 0.0, 0.0])
+
+    def true_fragment_positions(self) -> np.ndarray:
+        """Centres of the fragments, (n, 3) base frame, metres. Evaluation only."""
+        return np.array([f.position() for f in self.fragments]).reshape(-1, 3)
 
     # ----------------------------------------------------------------- cameras
     def render(self, side: str = "left") -> np.ndarray:
@@ -336,6 +520,20 @@ class DvrkWorld:
     def close(self) -> None:
         """Free the physics server; safe to call more than once."""
         self.physics.close()
+
+
+def _waypoints(move: CartesianMove, dt_s: float) -> np.ndarray:
+    """Poses every ``dt_s`` seconds along a move, ending at its end: (n, 4, 4).
+
+    The same poses as ``move.waypoints(dt_s)``, with one slerp for the whole move.
+    """
+    n = max(1, math.ceil(move.duration_s / dt_s))
+    progress = np.array([trapezoid_progress(move.duration_s * (i + 1) / n, move.duration_s, move.ramp_s) for i in range(n)])
+    poses = np.tile(np.eye(4), (n, 1, 1))
+    poses[:, :3, 3] = (1.0 - progress)[:, None] * move.start[:3, 3] + progress[:, None] * move.end[:3, 3]
+    rotations = Rotation.from_matrix(np.stack([move.start[:3, :3], move.end[:3, :3]]))
+    poses[:, :3, :3] = Slerp([0.0, 1.0], rotations)(progress).as_matrix()
+    return poses
 
 
 def _blob_or_none(uv: np.ndarray) -> Blob | None:
