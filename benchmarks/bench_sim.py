@@ -14,6 +14,7 @@ import numpy as np
 
 from dvrk_gym.sim import kinematics as kin
 from dvrk_gym.sim.camera import PAPER_INTRINSICS
+from dvrk_gym.envs.exploration import sample_paper_poses
 from dvrk_gym.sim.world import DvrkWorld, WorldConfig
 
 
@@ -24,26 +25,12 @@ def _rate(fn, n: int) -> float:
     return n / (time.perf_counter() - start)
 
 
-def _paper_poses(rng: np.random.Generator, n: int) -> list[np.ndarray]:
-    poses = []
-    while len(poses) < n:
-        position = [rng.uniform(0.005, 0.075), rng.uniform(0.01, 0.075), -0.161]
-        yaw, pitch, roll = np.radians([rng.uniform(-90, 90), rng.uniform(-15, 25), rng.uniform(-180, -150)])
-        pose = kin.pose_from_euler(position, yaw, pitch, roll)
-        try:
-            kin.inverse_kinematics(pose)
-        except kin.UnreachablePoseError:
-            continue
-        poses.append(pose)
-    return poses
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--n", type=int, default=400, help="marker detections to time (default: %(default)s)")
     args = parser.parse_args()
     rng = np.random.default_rng(0)
-    poses = _paper_poses(rng, args.n)
+    poses = sample_paper_poses(rng, args.n)
     joints = [kin.inverse_kinematics(p) for p in poses]
 
     fk = _rate(lambda i: kin.forward_kinematics(joints[i % len(joints)]), 20000)

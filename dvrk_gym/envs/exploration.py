@@ -42,6 +42,25 @@ def workspace_corners() -> np.ndarray:
     return np.array([[x, y, z] for y in SAFE_Y_M for x in SAFE_X_M])
 
 
+def sample_paper_poses(rng: np.random.Generator, n: int) -> list[np.ndarray]:
+    """``n`` reachable tool poses from the paper's exploration distribution (4x4, metres).
+
+    Positions uniform in the safe ranges, orientations uniform in the paper's rotation
+    ranges; draws the nominal robot cannot reach are skipped.
+    """
+    poses: list[np.ndarray] = []
+    while len(poses) < n:
+        position = [rng.uniform(*SAFE_X_M), rng.uniform(*SAFE_Y_M), rng.uniform(*SAFE_Z_M)]
+        angles = [rng.uniform(*YAW_RANGE_RAD), rng.uniform(*PITCH_RANGE_RAD), rng.uniform(*ROLL_RANGE_RAD)]
+        pose = kin.pose_from_euler(position, *angles)
+        try:
+            kin.inverse_kinematics(pose)
+        except kin.UnreachablePoseError:
+            continue
+        poses.append(pose)
+    return poses
+
+
 def home_orientation() -> tuple[float, float, float]:
     """(yaw, pitch, roll) in radians of the paper's rest orientation: yaw 0, the paper's rule."""
     pitch, roll = kin.paper_pitch_roll(0.0)
