@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 from typing import Callable, Sequence
 
+from dvrk_gym.cli_baselines import add_commands as add_baseline_commands
 from dvrk_gym.cli_calibration import add_commands as add_calibration_commands
 from dvrk_gym.cli_debridement import add_commands as add_debridement_commands
 
@@ -50,6 +51,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_demo(subparsers)
     add_calibration_commands(subparsers)
     add_debridement_commands(subparsers)
+    add_baseline_commands(subparsers)
     return parser
 
 

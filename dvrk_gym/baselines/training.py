@@ -43,7 +43,10 @@ class TrainConfig:
         agent: a name in :data:`dvrk_gym.baselines.agents.AGENTS`.
         steps: env steps (robot moves) to train for; see
             :func:`dvrk_gym.baselines.budgets.resolve_budget`.
-        seed: seeds the model (stable-baselines3 seeds torch and numpy with it) and the envs.
+        seed: seeds the model and the training envs (``reset(seed=...)`` via the vector
+            env). Note stable-baselines3 also seeds Python's, numpy's and torch's global
+            generators with it, and its HER buffer draws from numpy's; this package draws
+            nothing from global generators.
         bias: the cable bias preset.
         bias_seed: which instrument.
         camera_resolution: endoscope image size (width, height), pixels; evaluate at the same.

@@ -1,7 +1,8 @@
 """Wrappers that put GridTouch-v0 in the form the stable-baselines3 agents learn best from.
 
 The agent's action is the base-frame position command ``(bx, by, bz)`` scaled to [-1, 1]
-(:class:`TargetYawAction`, then gymnasium's ``RescaleAction``): the yaw is the one the
+(:class:`TargetYawAction`, then gymnasium's ``RescaleAction``, which maps -1 and +1 to
+the bounds of GridTouch's box, metres): the yaw is the one the
 episode asks for, as with the calibrators, since the reward does not depend on it and an
 agent free to pick its yaw would make the benchmark's yaw settings meaningless. The goals
 are scaled from metres to about [-1, 1] over the workspace (:class:`GoalScaling`), so that
@@ -84,6 +85,17 @@ class GoalScaling(gym.ObservationWrapper):
     def observation(self, observation: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
         return {**observation, "achieved_goal": self._scale(observation["achieved_goal"]), "desired_goal": self._scale(observation["desired_goal"])}
 
+    def step(self, action: Any) -> tuple[dict[str, np.ndarray], float, bool, bool, dict[str, Any]]:
+        """Step; the reward is :meth:`compute_reward` of the scaled goals returned.
+
+        It equals the env's reward up to float32 rounding of the goals (about 1e-6 mm),
+        and exactly what HER recomputes for the same goals, as stable-baselines3 checks.
+        """
+        observation, _, terminated, truncated, info = self.env.step(action)
+        observation = self.observation(observation)
+        reward = float(self.compute_reward(observation["achieved_goal"], observation["desired_goal"], info))
+        return observation, reward, terminated, truncated, info
+
     def compute_reward(self, achieved_goal: np.ndarray, desired_goal: np.ndarray, info: Any) -> np.ndarray:
         """The env's reward for scaled goals (..., 3), vectorised (HER calls this)."""
         return self.env.unwrapped.compute_reward(self.unscale(achieved_goal), self.unscale(desired_goal), info)
@@ -132,7 +144,7 @@ def wrap_grid_touch(env: gym.Env, training_yaws: str | None = None) -> gym.Env:
     """
     if training_yaws is not None:
         env = TrainingYaws(env, training_yaws)
-    env = GoalScaling(env)
     env = TargetYawAction(env)
     unit = np.ones(env.action_space.shape, dtype=np.float32)
-    return RescaleAction(env, min_action=-unit, max_action=unit)
+    env = RescaleAction(env, min_action=-unit, max_action=unit)
+    return GoalScaling(env)  # outermost, so that ``env.compute_reward`` is found (SB3's check_env)

@@ -1,0 +1,175 @@
+"""The reinforcement-learning baselines: budgets, wrappers, training, saving, benchmark, CLI."""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.wrappers import RescaleAction
+
+import dvrk_gym  # noqa: F401
+from stable_baselines3.common.env_checker import check_env
+
+from dvrk_gym.baselines import AGENTS, BUDGETS, TrainConfig, load_agent, resolve_budget, save_agent, train, wrap_grid_touch
+from dvrk_gym.baselines.comparison import agent_row, benchmark_agent, calibration_rows, format_comparison
+from dvrk_gym.baselines.training import make_agent_env
+from dvrk_gym.baselines.wrappers import GoalScaling, TargetYawAction, TrainingYaws
+from dvrk_gym.calibration.benchmark import YAW_SETTINGS, CircleErrors, save_table
+from dvrk_gym.cli_baselines import add_commands
+from dvrk_gym.envs.grid_touch import ACTION_HIGH, ACTION_LOW, N_CIRCLES
+from dvrk_gym.sim.kinematics import PAPER_YAWS_RAD
+
+TINY = (320, 180)
+FAST_NETWORK = {"learning_starts": 40, "batch_size": 64, "gradient_steps": 1, "policy_kwargs": {"net_arch": [32, 32]}}
+
+
+@pytest.fixture
+def grid_env():
+    env = gym.make("dvrk_gym/GridTouch-v0", camera_resolution=TINY)
+    yield env
+    env.close()
+
+
+def test_budgets_are_the_calibrators_moves_and_ten_times():
+    assert BUDGETS == {"calibrator": 57 * 93 + 175, "10x": 10 * (57 * 93 + 175)}
+    assert resolve_budget("calibrator") == 5476
+    assert resolve_budget("10x") == 54760
+    assert resolve_budget("10x", steps=300) == 300
+
+
+@pytest.mark.parametrize("budget, steps", [("100x", None), (None, None), ("calibrator", 0), ("calibrator", 2.5)])
+def test_bad_budgets_are_refused_with_the_valid_ones(budget, steps):
+    with pytest.raises(ValueError, match="budget|steps"):
+        resolve_budget(budget, steps)
+
+
+def test_action_rescaling_maps_unit_bounds_to_the_box_and_adds_the_asked_yaw(grid_env):
+    env = wrap_grid_touch(grid_env)
+    assert env.action_space.low.tolist() == [-1.0] * 3 and env.action_space.high.tolist() == [1.0] * 3
+    env.reset(seed=0, options={"yaw": 0.5, "circle": 3})
+    rescale = env.env  # GoalScaling(RescaleAction(TargetYawAction(GridTouch)))
+    inner = rescale.env
+    assert isinstance(rescale, RescaleAction) and isinstance(inner, TargetYawAction)
+    low = inner.action(rescale.action(-np.ones(3, dtype=np.float32)))
+    high = inner.action(rescale.action(np.ones(3, dtype=np.float32)))
+    np.testing.assert_allclose(low, [*ACTION_LOW[:3], 0.5], atol=1e-6)
+    np.testing.assert_allclose(high, [*ACTION_HIGH[:3], 0.5], atol=1e-6)
+    _, _, _, _, info = env.step(np.zeros(3, dtype=np.float32))
+    assert info["commanded_yaw"] == pytest.approx(0.5, abs=1e-6)
+    assert info["clamped"] == []
+
+
+def test_goal_scaling_keeps_the_envs_reward(grid_env):
+    env = GoalScaling(grid_env)
+    observation, _ = env.reset(seed=0)
+    metres = grid_env.unwrapped._observation()
+    np.testing.assert_allclose(env.unscale(observation["desired_goal"]), metres["desired_goal"], atol=1e-6)
+    rng = np.random.default_rng(0)
+    achieved, desired = rng.uniform(-1, 1, (5, 3)), rng.uniform(-1, 1, (5, 3))
+    expected = grid_env.unwrapped.compute_reward(env.unscale(achieved), env.unscale(desired), {})
+    np.testing.assert_allclose(env.compute_reward(achieved, desired, {}), expected)
+    assert np.all(expected < -1.0)  # random points 5 cm apart: many millimetres of error
+
+
+def test_paper_training_yaws_tour_the_circles_once_per_paper_yaw(grid_env):
+    env = TrainingYaws(grid_env, "paper")
+    yaws = [env.reset(seed=0 if k == 0 else None)[1]["target_yaw"] for k in range(N_CIRCLES + 1)]
+    assert yaws[:N_CIRCLES] == [pytest.approx(PAPER_YAWS_RAD[0])] * N_CIRCLES
+    assert yaws[N_CIRCLES] == pytest.approx(PAPER_YAWS_RAD[1])
+    assert env.reset(options={"yaw": 0.25})[1]["target_yaw"] == pytest.approx(0.25)  # the caller wins
+
+
+def test_wrapped_env_passes_stable_baselines3_check_env(grid_env):
+    env = wrap_grid_touch(grid_env, "paper")
+    check_env(env, warn=False)
+
+
+def test_unknown_agent_and_training_yaws_are_refused():
+    with pytest.raises(ValueError, match="sac_her"):
+        TrainConfig(agent="dqn")
+    with pytest.raises(ValueError, match="paper"):
+        TrainConfig(training_yaws="sometimes")
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("agent", sorted(AGENTS))
+def test_each_agent_trains_saves_loads_and_runs_the_benchmark(agent, tmp_path):
+    config = TrainConfig(agent=agent, steps=120, camera_resolution=TINY, eval_points=2, overrides=FAST_NETWORK)
+    result = train(config, progress=False)
+    assert result.env_steps == 120
+    assert [p.env_steps for p in result.curve] == [0, 60, 120]
+    assert all(np.isfinite([p.mm_error, p.pixel_error]).all() for p in result.curve)
+    assert result.steps_per_second > 0
+
+    loaded = load_agent(save_agent(result, tmp_path / "model.zip"))
+    env = make_agent_env(config, training=False)
+    observation, _ = env.reset(seed=3, options={"yaw": "random"})
+    env.close()
+    np.testing.assert_array_equal(loaded.model.predict(observation, deterministic=True)[0], result.model.predict(observation, deterministic=True)[0])
+
+    table = benchmark_agent(loaded)
+    assert list(table) == [label for label, _ in YAW_SETTINGS]
+    for errors in table.values():
+        assert errors.mm.shape == (N_CIRCLES,) and np.isfinite(errors.mm).all() and np.isfinite(errors.pixel).all()
+    row = agent_row(loaded, table)
+    assert row.robot_moves == 120 and np.isfinite(row.mm_error)
+
+
+def test_loading_needs_the_settings_written_beside_the_zip(tmp_path):
+    (tmp_path / "model.zip").write_bytes(b"not a model")
+    with pytest.raises(FileNotFoundError, match="model.json"):
+        load_agent(tmp_path / "model.zip")
+    (tmp_path / "model.json").write_text(json.dumps({"format": "something else"}))
+    with pytest.raises(ValueError, match="not a dvrk_gym baseline"):
+        load_agent(tmp_path / "model.zip")
+
+
+def _fake_calibration_run(folder, mm_by_method):
+    folder.mkdir()
+    table = {
+        method: {label: CircleErrors(pixel=np.full(N_CIRCLES, 11.3 * mm), mm=np.full(N_CIRCLES, mm), yaw=np.zeros(N_CIRCLES)) for label, _ in YAW_SETTINGS}
+        for method, mm in mm_by_method.items()
+    }
+    save_table(table, folder / "calibration_table.json")
+    config = {"bias": "paper", "bias_seed": 0, "camera_resolution": list(TINY), "dnn_epochs": 10, "n_trajectories": 57, "seed": 0, "steps_per_trajectory": 93}
+    (folder / "pipeline_config.json").write_text(json.dumps(config))
+
+
+def test_calibration_rows_count_phase1_poses_and_phase2_touches(tmp_path):
+    _fake_calibration_run(tmp_path / "cal", {"RBT": 6.0, "DNN": 2.0, "DNN+RF": 1.0})
+    rows, config = calibration_rows(tmp_path / "cal")
+    assert [(r.method, r.robot_moves, r.mm_error) for r in rows] == [("RBT", 5301, 6.0), ("DNN", 5301, 2.0), ("DNN+RF", 5476, 1.0)]
+    assert config.camera_resolution == TINY
+    assert "5,476" in format_comparison(rows)
+
+
+@pytest.mark.slow
+def test_cli_train_then_evaluate_round_trip(tmp_path, capsys):
+    parser = argparse.ArgumentParser(prog="dvrk-gym")
+    add_commands(parser.add_subparsers(dest="command", required=True))
+    out = tmp_path / "run"
+    args = parser.parse_args(
+        ["baseline", "train", "--algo", "sac", "--steps", "30", "--learning-starts", "20", "--resolution", *map(str, TINY),
+         "--eval-points", "1", "--out", str(out), "--no-progress"]
+    )
+    assert args.func(args) == 0
+    for name in ("model.zip", "model.json", "learning_curve.json", "learning_curve.png"):
+        assert (out / name).stat().st_size > 0
+    curve = json.loads((out / "learning_curve.json").read_text())["points"]
+    assert [p["env_steps"] for p in curve] == [0, 30]
+
+    _fake_calibration_run(tmp_path / "cal", {"RBT": 6.0, "DNN": 2.0, "DNN+RF": 1.0})
+    args = parser.parse_args(
+        ["baseline", "evaluate", "--model", str(out / "model.zip"), "--calibration", str(tmp_path / "cal"), "--out", str(tmp_path / "eval"), "--no-progress"]
+    )
+    assert args.func(args) == 0
+    printed = capsys.readouterr().out
+    assert "yaw -90" in printed and "random" in printed and "robot moves" in printed
+    rows = json.loads((tmp_path / "eval" / "comparison.json").read_text())["rows"]
+    assert [r["method"] for r in rows] == ["RBT", "DNN", "DNN+RF", "sac (30 steps, seed 0)"]
+    assert rows[-1]["robot_moves"] == 30 and np.isfinite(rows[-1]["mm_error"])
+    summary = json.loads((tmp_path / "eval" / "baseline_table.json").read_text())["summary"]
+    assert summary["sac (30 steps, seed 0)"]["all settings"]["mm"]["n"] == 6 * N_CIRCLES
