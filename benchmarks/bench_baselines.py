@@ -64,8 +64,8 @@ def comparison(args: argparse.Namespace, steps: int) -> None:
         path = save_agent(result, args.out / f"{agent_name}_{steps}_seed{args.seed}" / "model.zip")
         save_curve(result.curve, path.parent / "learning_curve.json", {"agent": agent_name, "steps_per_second": result.steps_per_second})
         agent = load_agent(path)
-        table[agent.label] = benchmark_agent(agent, seed=BENCHMARK_SEED + calibration.seed)  # the calibrators' touches
-        rows.append(agent_row(agent, table[agent.label]))
+        table[agent_name] = benchmark_agent(agent, seed=BENCHMARK_SEED + calibration.seed)  # the calibrators' touches
+        rows.append(agent_row(agent, table[agent_name]))
         curves[agent.label] = result.curve
         notes += setting_mismatches(agent, calibration)
         print(f"{agent_name}: trained {result.env_steps} steps at {result.steps_per_second:.1f} steps/s; with evaluation {time.perf_counter() - start:.0f} s", flush=True)

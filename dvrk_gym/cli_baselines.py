@@ -55,15 +55,17 @@ def _run_evaluate(args: argparse.Namespace) -> int:
         raise ValueError(f"two models have the same agent, steps and seed ({labels}); give each once")
     rows, calibration = calibration_rows(args.calibration) if args.calibration is not None else ([], None)
     seed = args.seed if args.seed is not None else (calibration.seed if calibration is not None else 0)
-    table = {agent.label: benchmark_agent(agent, seed=BENCHMARK_SEED + seed, progress=not args.no_progress) for agent in agents}
-    text = format_table(table)
+    names = [agent.config.agent for agent in agents]
+    keys = names if len(set(names)) == len(names) else [f"{name}#{i + 1}" for i, name in enumerate(names)]  # short, for the paper's table
+    table = {key: benchmark_agent(agent, seed=BENCHMARK_SEED + seed, progress=not args.no_progress) for key, agent in zip(keys, agents)}
+    text = format_table(table) + "\n" + "\n".join(f"{key}: {agent.label}, {agent.path}" for key, agent in zip(keys, agents))
     print(text)
     args.out.mkdir(parents=True, exist_ok=True)
     save_table(table, args.out / "baseline_table.json")
     (args.out / "baseline_table.txt").write_text(text + "\n")
     written = [args.out / "baseline_table.json", args.out / "baseline_table.txt"]
     if calibration is not None:
-        rows += [agent_row(agent, table[agent.label]) for agent in agents]
+        rows += [agent_row(agent, table[key]) for key, agent in zip(keys, agents)]
         notes = [note for agent in agents for note in setting_mismatches(agent, calibration)]
         comparison = format_comparison(rows, notes)
         print()

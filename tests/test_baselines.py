@@ -172,4 +172,4 @@ def test_cli_train_then_evaluate_round_trip(tmp_path, capsys):
     assert [r["method"] for r in rows] == ["RBT", "DNN", "DNN+RF", "sac (30 steps, seed 0)"]
     assert rows[-1]["robot_moves"] == 30 and np.isfinite(rows[-1]["mm_error"])
     summary = json.loads((tmp_path / "eval" / "baseline_table.json").read_text())["summary"]
-    assert summary["sac (30 steps, seed 0)"]["all settings"]["mm"]["n"] == 6 * N_CIRCLES
+    assert summary["sac"]["all settings"]["mm"]["n"] == 6 * N_CIRCLES
