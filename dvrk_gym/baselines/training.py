@@ -234,8 +234,7 @@ def train(config: TrainConfig, progress: bool = True) -> TrainResult:
 
 
 def _train(config: TrainConfig, progress: bool) -> TrainResult:
-    train_env = make_training_vec_env(config)
-    train_env.seed(config.seed)
+    train_env = make_training_vec_env(config)  # seeded by the model (env i: seed + i)
     eval_env = make_agent_env(config, training=False)
     try:
         model = build_model(config.spec, train_env, config.seed, config.overrides)
