@@ -1,4 +1,8 @@
-"""The reinforcement-learning baseline commands of ``dvrk-gym``: baseline train, baseline evaluate."""
+"""The reinforcement-learning baseline commands of ``dvrk-gym``: baseline train, baseline evaluate.
+
+Everything heavy (torch, stable-baselines3, pybullet) is imported inside the commands, so
+that ``dvrk-gym baseline --help`` stays fast.
+"""
 
 from __future__ import annotations
 
@@ -19,9 +23,18 @@ def _run_train(args: argparse.Namespace) -> int:
     from dvrk_gym.baselines.curves import plot_curves, save_curve
     from dvrk_gym.baselines.training import TrainConfig, train
 
+    from dvrk_gym.baselines.names import AGENT_ENVS, DEBRIDEMENT_ID
+
     steps = resolve_budget(args.budget, args.steps)
+    picks = AGENT_ENVS[args.algo] == DEBRIDEMENT_ID
+    if picks and args.reward is not None:
+        raise ValueError(f"--reward chooses GridTouch's reward; {args.algo} learns Debridement-v0 with its shaped pick reward")
+    if not picks and args.fragment is not None:
+        raise ValueError(f"--fragment is for the pick agents; {args.algo} learns GridTouch-v0")
     overrides = {} if args.learning_starts is None else {"learning_starts": args.learning_starts}
     env_overrides = {} if args.reward is None else {"reward_type": args.reward}
+    if args.fragment is not None:
+        env_overrides["fragment"] = args.fragment
     config = TrainConfig(
         agent=args.algo, steps=steps, seed=args.seed, bias=args.bias, bias_seed=args.bias_seed,
         camera_resolution=tuple(args.resolution), training_yaws=args.training_yaws, n_envs=args.n_envs,
@@ -34,25 +47,48 @@ def _run_train(args: argparse.Namespace) -> int:
     label = f"{args.algo}, seed {args.seed}"
     meta = {"agent": args.algo, "seed": args.seed, "env_steps": result.env_steps, "steps_per_second": result.steps_per_second}
     save_curve(result.curve, out / "learning_curve.json", meta)
-    plot_curves({label: result.curve}, out / "learning_curve.png", title=f"{args.algo} on GridTouch-v0 (bias {args.bias}, seed {args.seed})")
-    final = result.curve[-1]
-    print(f"{args.algo}: {result.env_steps} env steps in {result.train_seconds:.0f} s ({result.steps_per_second:.1f} steps/s; evaluations {result.eval_seconds:.0f} s more)")
-    print(f"learning curve: {result.curve[0].mm_error:.2f} mm at 0 steps -> {final.mm_error:.2f} mm ({final.pixel_error:.1f} px) at {final.env_steps}")
+    env_name = AGENT_ENVS[args.algo].split("/")[-1]
+    plot_curves({label: result.curve}, out / "learning_curve.png", title=f"{args.algo} on {env_name} (bias {args.bias}, seed {args.seed})", metric="success_rate" if picks else "mm_error")
+    first, final = result.curve[0], result.curve[-1]
+    print(f"{args.algo}: {result.env_steps} env steps in {result.train_seconds:.0f} s ({result.steps_per_second:.2f} steps/s; evaluations {result.eval_seconds:.0f} s more)")
+    if picks:
+        print(f"learning curve: success {first.success_rate:.0%}, grip offset {first.mm_error:.2f} mm at 0 steps -> "
+              f"success {final.success_rate:.0%}, {final.mm_error:.2f} mm, {final.time_per_fragment_s:.2f} s per fragment at {final.env_steps}")
+    else:
+        print(f"learning curve: {first.mm_error:.2f} mm at 0 steps -> {final.mm_error:.2f} mm ({final.pixel_error:.1f} px) at {final.env_steps}")
     print(f"wrote {model_path}, {model_path.with_suffix('.json')}, {out / 'learning_curve.json'}, {out / 'learning_curve.png'}")
     return 0
 
 
 def _run_evaluate(args: argparse.Namespace) -> int:
     from dvrk_gym.baselines.checkpoints import load_agent
+    from dvrk_gym.baselines.names import GRID_TOUCH_ID
+
+    if args.trials < 1:
+        raise ValueError(f"--trials must be >= 1, got {args.trials}")
+    agents = [load_agent(path) for path in args.model]
+    labels = [agent.label for agent in agents]
+    if len(set(labels)) < len(labels):
+        raise ValueError(f"two models have the same agent, steps and seed ({labels}); give each once")
+    args.out.mkdir(parents=True, exist_ok=True)
+    written: list[Path] = []
+    grid_agents = [agent for agent in agents if agent.config.spec.env_id == GRID_TOUCH_ID]
+    if grid_agents:
+        written += _evaluate_touch_grid(grid_agents, args)
+    debriding = [agent for agent in agents if agent.config.spec.env_id != GRID_TOUCH_ID or args.transfer]
+    if debriding:
+        written += _evaluate_debridement(debriding, args)
+    print("wrote " + ", ".join(str(p) for p in written))
+    return 0
+
+
+def _evaluate_touch_grid(agents: list, args: argparse.Namespace) -> list[Path]:
+    """The calibrators' touch-grid benchmark for GridTouch agents, and the comparison with --calibration."""
     from dvrk_gym.baselines.comparison import (
         BENCHMARK_SEED, agent_row, benchmark_agent, calibration_rows, format_comparison, setting_mismatches,
     )
     from dvrk_gym.calibration.benchmark import format_table, save_table
 
-    agents = [load_agent(path) for path in args.model]
-    labels = [agent.label for agent in agents]
-    if len(set(labels)) < len(labels):
-        raise ValueError(f"two models have the same agent, steps and seed ({labels}); give each once")
     rows, calibration = calibration_rows(args.calibration) if args.calibration is not None else ([], None)
     seed = args.seed if args.seed is not None else (calibration.seed if calibration is not None else 0)
     names = [agent.config.agent for agent in agents]
@@ -60,7 +96,6 @@ def _run_evaluate(args: argparse.Namespace) -> int:
     table = {key: benchmark_agent(agent, seed=BENCHMARK_SEED + seed, progress=not args.no_progress) for key, agent in zip(keys, agents)}
     text = format_table(table) + "\n" + "\n".join(f"{key}: {agent.label}, {agent.path}" for key, agent in zip(keys, agents))
     print(text)
-    args.out.mkdir(parents=True, exist_ok=True)
     save_table(table, args.out / "baseline_table.json")
     (args.out / "baseline_table.txt").write_text(text + "\n")
     written = [args.out / "baseline_table.json", args.out / "baseline_table.txt"]
@@ -73,20 +108,47 @@ def _run_evaluate(args: argparse.Namespace) -> int:
         (args.out / "comparison.txt").write_text(comparison + "\n")
         (args.out / "comparison.json").write_text(json.dumps({"rows": [row.__dict__ for row in rows], "notes": notes}, indent=1))
         written += [args.out / "comparison.txt", args.out / "comparison.json"]
-    print("wrote " + ", ".join(str(p) for p in written))
-    return 0
+    return written
+
+
+def _evaluate_debridement(agents: list, args: argparse.Namespace) -> list[Path]:
+    """Debridement trials for pick agents (and transferred GridTouch agents), beside the calibrators' with --calibration."""
+    from dvrk_gym.baselines.comparison import (
+        benchmark_debridement, calibration_debridement_rows, debridement_row, format_debridement_comparison, setting_mismatches,
+    )
+    from dvrk_gym.cli_debridement import format_trial_table
+
+    seed = args.seed if args.seed is not None else 0
+    texts, rows, notes = [], [], []
+    for agent in agents:
+        trials = benchmark_debridement(agent, args.trials, seed=seed, fragment=args.fragment, progress=not args.no_progress)
+        texts.append(format_trial_table(trials, agent.label, args.fragment, seed))
+        rows.append(debridement_row(agent.label, agent.env_steps, trials, str(agent.path)))
+    if args.calibration is not None:
+        resolution = agents[0].config.camera_resolution
+        calibrators, calibration = calibration_debridement_rows(args.calibration, args.trials, seed, args.fragment, resolution, progress=not args.no_progress)
+        rows = calibrators + rows
+        notes = [note for agent in agents for note in setting_mismatches(agent, calibration)]
+    text = "\n\n".join(texts + [format_debridement_comparison(rows, notes)])
+    print()
+    print(text)
+    (args.out / "debridement.txt").write_text(text + "\n")
+    data = {"seed": seed, "trials": args.trials, "fragment": args.fragment, "rows": [{**row.__dict__, "success_rate": row.success_rate} for row in rows], "notes": notes}
+    (args.out / "debridement.json").write_text(json.dumps(data, indent=1))
+    return [args.out / "debridement.txt", args.out / "debridement.json"]
 
 
 def _add_train(subparsers: argparse._SubParsersAction) -> None:
-    from dvrk_gym.baselines.agents import AGENTS
     from dvrk_gym.baselines.budgets import BUDGETS
+    from dvrk_gym.baselines.names import AGENT_DESCRIPTIONS as AGENTS
 
     train = subparsers.add_parser(
         "train",
-        help="train an agent on GridTouch-v0 for a budget of robot moves",
-        description="Train an agent on GridTouch-v0 (one touch per env step) and save the model (SB3 zip + settings JSON), "
-        "its learning curve (JSON) and a plot of evaluation error against env steps. Agents: "
-        + "; ".join(f"{name}: {spec.description}" for name, spec in AGENTS.items())
+        help="train an agent (GridTouch-v0 touches or Debridement-v0 picks) for a budget of robot moves",
+        description="Train an agent on GridTouch-v0 (one touch per env step) or Debridement-v0 (one pick per env step) and "
+        "save the model (SB3 zip + settings JSON), its learning curve (JSON) and a plot of it against env steps "
+        "(touch error; debridement success). Agents: "
+        + "; ".join(f"{name}: {description}" for name, description in AGENTS.items())
         + ". Budgets: " + ", ".join(f"{name} = {steps:,} env steps" for name, steps in BUDGETS.items()) + ".",
     )
     train.add_argument("--algo", choices=sorted(AGENTS), default="sac_her", help="the agent (default: %(default)s)")
@@ -99,9 +161,10 @@ def _add_train(subparsers: argparse._SubParsersAction) -> None:
     train.add_argument("--resolution", type=int, nargs=2, default=(1920, 1080), metavar=("W", "H"), help="endoscope image size; evaluate at the same (default: 1920 1080)")
     train.add_argument("--training-yaws", choices=("paper", "random"), default="paper", help="yaws of the training touches: a tour of the circles per paper yaw, or random (default: %(default)s)")
     train.add_argument("--reward", choices=("dense", "sparse"), help="GridTouch reward (default: the agent's, dense)")
+    train.add_argument("--fragment", choices=("pumpkin_seed", "raisin"), help="pick agents: what to pick (default: pumpkin_seed)")
     train.add_argument("--n-envs", type=int, default=1, help="parallel training envs (default: %(default)s; 1 was fastest on 2 cores)")
     train.add_argument("--vec-env", choices=("dummy", "subproc"), default="dummy", help="vector env for --n-envs > 1 (default: %(default)s)")
-    train.add_argument("--learning-starts", type=int, help="random moves before learning (default: the agent's, 200)")
+    train.add_argument("--learning-starts", type=int, help="random moves before learning (default: the agent's, 200; sac_pick 100)")
     train.add_argument("--eval-points", type=int, default=20, help="evaluations along the learning curve (default: %(default)s)")
     train.add_argument("--no-progress", action="store_true", help="no progress bar")
     train.set_defaults(func=_run_train)
@@ -110,22 +173,27 @@ def _add_train(subparsers: argparse._SubParsersAction) -> None:
 def _add_evaluate(subparsers: argparse._SubParsersAction) -> None:
     evaluate = subparsers.add_parser(
         "evaluate",
-        help="the calibrators' benchmark (35 circles x 6 yaw settings) for trained agents, and a comparison table",
-        description="Run trained agents through the calibrators' benchmark (35 circles x 6 yaw settings, the same "
-        "touch_grid protocol and seeds as 'dvrk-gym evaluate'), print the paper-style table, and with --calibration "
-        "a comparison of error against robot moves with RBT, DNN and DNN+RF. " + LOAD_WARNING,
+        help="the calibrators' benchmarks (touch grid; debridement trials) for trained agents, and comparison tables",
+        description="Run trained GridTouch agents through the calibrators' benchmark (35 circles x 6 yaw settings, the same "
+        "touch_grid protocol and seeds as 'dvrk-gym evaluate') and print the paper-style table; run pick agents (and, with "
+        "--transfer, GridTouch agents aimed at the fragments) through debridement trials of 8 picks (success, A/B/C, time "
+        "per fragment). With --calibration, the calibrators' rows beside them: their touch errors from the run's table, and "
+        "their debridement trials run here with the same seeds (as 'dvrk-gym debride'). " + LOAD_WARNING,
     )
     evaluate.add_argument("--model", type=Path, nargs="+", required=True, help="model.zip file(s) written by 'baseline train' (with their .json beside)")
     evaluate.add_argument("--out", type=Path, default=Path("dvrk_gym_out/baselines/evaluation"), help="output folder (default: %(default)s)")
     evaluate.add_argument("--calibration", type=Path, help="a calibration run folder with calibration_table.json (from 'dvrk-gym evaluate')")
-    evaluate.add_argument("--seed", type=int, help="benchmark seed, as a calibration run's --seed (default: the --calibration run's, else 0)")
+    evaluate.add_argument("--seed", type=int, help="touch grid: benchmark seed, as a calibration run's --seed (default: the --calibration run's, else 0); debridement: the trials' seed (default 0)")
+    evaluate.add_argument("--trials", type=int, default=15, help="debridement trials of 8 picks per method (default: %(default)s, the paper's)")
+    evaluate.add_argument("--fragment", choices=("pumpkin_seed", "raisin"), default="pumpkin_seed", help="debridement: what to pick (default: %(default)s)")
+    evaluate.add_argument("--transfer", action="store_true", help="also run GridTouch agents through the debridement trials (aimed by pick_policy)")
     evaluate.add_argument("--no-progress", action="store_true", help="no progress bar")
     evaluate.set_defaults(func=_run_evaluate)
 
 
 def add_commands(subparsers: argparse._SubParsersAction) -> None:
     """Register ``baseline`` with its sub-commands ``train`` and ``evaluate``."""
-    baseline = subparsers.add_parser("baseline", help="reinforcement-learning baselines (SAC+HER, SAC) against the calibrators")
+    baseline = subparsers.add_parser("baseline", help="reinforcement-learning baselines (SAC+HER, SAC, SAC on picks) against the calibrators")
     commands = baseline.add_subparsers(dest="baseline_command", required=True, metavar="SUBCOMMAND")
     _add_train(commands)
     _add_evaluate(commands)

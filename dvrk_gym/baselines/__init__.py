@@ -1,42 +1,56 @@
 """Reinforcement-learning baselines: learn the correction from reward, for the calibrator's robot moves.
 
-Issue 7 asks how an agent that learns where to send the robot from GridTouch-v0's reward
-compares with the two-phase calibrator for the same number of robot moves (5,476: the
-paper's Phase I poses and Phase II touches; and ten times that).
+Issue 7 asks how an agent that learns where to send the robot from reward compares with
+the two-phase calibrator for the same number of robot moves (5,476: the paper's Phase I
+poses and Phase II touches; and ten times that).
 
+- :mod:`~dvrk_gym.baselines.names`: the agents' names and envs (no heavy imports).
 - :mod:`~dvrk_gym.baselines.budgets`: the budgets in env steps.
 - :mod:`~dvrk_gym.baselines.wrappers`: GridTouch-v0 as the agents see it (goals scaled,
   ``(bx, by, bz)`` in [-1, 1], the yaw the episode asks for).
-- :mod:`~dvrk_gym.baselines.agents`: the agents, one table row each (SAC + HER, SAC).
+- :mod:`~dvrk_gym.baselines.picking`: Debridement-v0 (one pick per step) as the pick
+  agent sees it (the pick target, ``(bx, by, bz)`` in [-1, 1], a shaped reward).
+- :mod:`~dvrk_gym.baselines.agents`: the agents, one table row each (SAC + HER, SAC, SAC on picks).
 - :mod:`~dvrk_gym.baselines.training`: training with a learning curve.
 - :mod:`~dvrk_gym.baselines.checkpoints`: save (SB3 zip + JSON), load without unpickling.
 - :mod:`~dvrk_gym.baselines.curves`: learning curves as JSON and figures.
-- :mod:`~dvrk_gym.baselines.comparison`: the calibrators' benchmark for agents, and the
-  comparison table.
+- :mod:`~dvrk_gym.baselines.transfer`: any agent as a Debridement-v0 policy (:func:`pick_policy`).
+- :mod:`~dvrk_gym.baselines.comparison`: the calibrators' benchmarks (touch grid,
+  debridement trials) for agents, and the comparison tables.
 
-A Debridement agent (PPO or SAC on the pick target in primitive mode) waits for
-``dvrk_gym/Debridement-v0``; it will be a row of :data:`~dvrk_gym.baselines.agents.AGENTS`
-naming that env id, and a budget in :data:`~dvrk_gym.baselines.budgets.BUDGETS`.
+The names below are imported on first use, so that importing this package (for the
+command line's help, say) does not load torch or pybullet.
 
 Example::
 
-    from dvrk_gym.baselines import TrainConfig, train, save_agent, load_agent
+    from dvrk_gym.baselines import TrainConfig, train, save_agent, load_agent, pick_policy
 
     result = train(TrainConfig(agent="sac_her", steps=5476, seed=0))
     path = save_agent(result, "out/model.zip")
     agent = load_agent(path)  # only files this tool wrote
+    policy = pick_policy(agent)  # Debridement-v0 observation -> (bx, by, bz, yaw)
 """
 
-from dvrk_gym.baselines.agents import AGENTS, AgentSpec, build_model, get_agent
-from dvrk_gym.baselines.budgets import BUDGETS, CALIBRATOR_MOVES, resolve_budget
-from dvrk_gym.baselines.checkpoints import LoadedAgent, load_agent, save_agent
-from dvrk_gym.baselines.training import CurvePoint, TrainConfig, TrainResult, train
-from dvrk_gym.baselines.wrappers import wrap_grid_touch
+from __future__ import annotations
 
-__all__ = [
-    "AGENTS", "AgentSpec", "build_model", "get_agent",
-    "BUDGETS", "CALIBRATOR_MOVES", "resolve_budget",
-    "LoadedAgent", "load_agent", "save_agent",
-    "CurvePoint", "TrainConfig", "TrainResult", "train",
-    "wrap_grid_touch",
-]
+import importlib
+from typing import Any
+
+_EXPORTS = {
+    "AGENTS": "agents", "AgentSpec": "agents", "build_model": "agents", "get_agent": "agents",
+    "BUDGETS": "budgets", "CALIBRATOR_MOVES": "budgets", "resolve_budget": "budgets",
+    "LoadedAgent": "checkpoints", "load_agent": "checkpoints", "save_agent": "checkpoints",
+    "CurvePoint": "training", "TrainConfig": "training", "TrainResult": "training", "train": "training",
+    "wrap_grid_touch": "wrappers", "wrap_debridement": "picking", "pick_policy": "transfer",
+}
+
+__all__ = sorted(_EXPORTS)
+
+
+def __getattr__(name: str) -> Any:
+    """Import the module that defines ``name`` on first use (Python caches the module)."""
+    try:
+        module = _EXPORTS[name]
+    except KeyError:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}") from None
+    return getattr(importlib.import_module(f".{module}", __name__), name)

@@ -2,11 +2,10 @@
 
 An agent is named by an :class:`AgentSpec`: which environment it learns, with which
 stable-baselines3 algorithm and replay buffer, through which wrapper, with which env
-keywords and hyperparameters. Adding an agent is adding a row to :data:`AGENTS`. The
-Debridement agent (PPO or SAC on the pick target in primitive mode) waits for
-``dvrk_gym/Debridement-v0``, which does not exist yet: when it does, its row names that env
-id, its algorithm and a wrapper for its action space, and its budget goes in
-:data:`dvrk_gym.baselines.budgets.BUDGETS`.
+keywords and hyperparameters. Adding an agent is adding a row to :data:`AGENTS` (and its
+name, env and description to :mod:`dvrk_gym.baselines.names`). Two agents learn
+GridTouch-v0 (one touch per step), one learns Debridement-v0 in primitive mode (one pick
+per step); a budget counts env steps of either, i.e. robot moves.
 """
 
 from __future__ import annotations
@@ -18,9 +17,12 @@ from typing import Any, Callable
 import gymnasium as gym
 from stable_baselines3 import PPO, SAC, TD3
 from stable_baselines3.common.base_class import BaseAlgorithm
+from stable_baselines3.common.logger import Logger
 from stable_baselines3.common.vec_env import VecEnv
 from stable_baselines3.her import HerReplayBuffer
 
+from dvrk_gym.baselines.names import AGENT_DESCRIPTIONS, AGENT_ENVS
+from dvrk_gym.baselines.picking import wrap_debridement
 from dvrk_gym.baselines.wrappers import wrap_grid_touch
 
 ALGORITHMS: dict[str, type[BaseAlgorithm]] = {"SAC": SAC, "TD3": TD3, "PPO": PPO}
@@ -62,28 +64,25 @@ _GRID_TOUCH_SAC = {
     "policy_kwargs": {"net_arch": [256, 256]},
 }
 
-AGENTS: dict[str, AgentSpec] = {
-    "sac_her": AgentSpec(
-        name="sac_her",
-        env_id="dvrk_gym/GridTouch-v0",
-        algorithm="SAC",
-        her=True,
-        wrap=wrap_grid_touch,
-        description="SAC + HER (future goals) on GridTouch-v0",
-        env_kwargs={"reward_type": "dense"},
-        hyperparameters=_GRID_TOUCH_SAC,
-    ),
-    "sac": AgentSpec(
-        name="sac",
-        env_id="dvrk_gym/GridTouch-v0",
-        algorithm="SAC",
-        her=False,
-        wrap=wrap_grid_touch,
-        description="SAC on GridTouch-v0 (no relabelling)",
-        env_kwargs={"reward_type": "dense"},
-        hyperparameters=_GRID_TOUCH_SAC,
-    ),
+_PICK_SAC = {
+    **_GRID_TOUCH_SAC,
+    "learning_starts": 100,  # random picks over the workspace (a pick is about 0.5 s of simulation)
+    "gamma": 0.0,  # each pick is judged on its own: the next fragment does not depend on this pick's aim
 }
+
+
+def _sac(name: str, her: bool, wrap: Callable[[gym.Env, str | None], gym.Env], env_kwargs: dict[str, Any], hyperparameters: dict[str, Any]) -> AgentSpec:
+    """A SAC row; its env and description come from :mod:`dvrk_gym.baselines.names`."""
+    return AgentSpec(name, AGENT_ENVS[name], "SAC", her, wrap, AGENT_DESCRIPTIONS[name], env_kwargs, hyperparameters)
+
+
+AGENTS: dict[str, AgentSpec] = {
+    "sac_her": _sac("sac_her", True, wrap_grid_touch, {"reward_type": "dense"}, _GRID_TOUCH_SAC),
+    "sac": _sac("sac", False, wrap_grid_touch, {"reward_type": "dense"}, _GRID_TOUCH_SAC),
+    "sac_pick": _sac("sac_pick", False, wrap_debridement, {"fragment": "pumpkin_seed", "action_mode": "primitive"}, _PICK_SAC),
+}
+if set(AGENTS) != set(AGENT_DESCRIPTIONS):
+    raise RuntimeError(f"names.py lists {sorted(AGENT_DESCRIPTIONS)} but AGENTS has {sorted(AGENTS)}")
 
 
 def get_agent(name: str) -> AgentSpec:
@@ -107,4 +106,11 @@ def build_model(spec: AgentSpec, env: VecEnv, seed: int, overrides: dict[str, An
         kwargs.setdefault("replay_buffer_class", HerReplayBuffer)
         kwargs.setdefault("replay_buffer_kwargs", {"n_sampled_goal": 4, "goal_selection_strategy": "future"})
     algorithm = ALGORITHMS[spec.algorithm]
-    return algorithm("MultiInputPolicy", env, seed=seed, device=device, verbose=0, **kwargs)
+    model = algorithm("MultiInputPolicy", env, seed=seed, device=device, verbose=0, **kwargs)
+    model.set_logger(silent_logger())
+    return model
+
+
+def silent_logger() -> Logger:
+    """A logger that writes nothing and creates no folder (SB3's default makes ``/tmp/SB3-<date>``)."""
+    return Logger(folder=None, output_formats=[])

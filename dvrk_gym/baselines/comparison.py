@@ -1,10 +1,17 @@
-"""The agents on the calibrators' benchmark, and one table of error against robot moves.
+"""The agents on the calibrators' benchmarks, and tables of results against robot moves.
 
-An agent touches the 35 circles at the six yaw settings through the same
-:func:`~dvrk_gym.calibration.benchmark.touch_grid` and seeds as the calibrators in
-:func:`~dvrk_gym.calibration.pipeline.run_calibration`, so their rows are comparable. The
-calibrators' rows come from a calibration run folder (``calibration_table.json`` and
-``pipeline_config.json``, as ``dvrk-gym evaluate`` writes them).
+Touch grid (GridTouch agents): an agent touches the 35 circles at the six yaw settings
+through the same :func:`~dvrk_gym.calibration.benchmark.touch_grid` and seeds as the
+calibrators in :func:`~dvrk_gym.calibration.pipeline.run_calibration`, so their rows are
+comparable. The calibrators' rows come from a calibration run folder
+(``calibration_table.json`` and ``pipeline_config.json``, as ``dvrk-gym evaluate`` writes them).
+
+Debridement (any agent, through :func:`~dvrk_gym.baselines.transfer.pick_policy`): the
+paper's trials of eight picks on Debridement-v0, run by
+:func:`~dvrk_gym.cli_debridement.run_trials` with the same seeds for the agents and for
+the calibrators (loaded from the calibration run folder and aimed by
+``CalibratedPolicy(calibrator, target=fragment_target)``, as ``dvrk-gym debride`` does):
+success, outcomes A/B/C and time per fragment.
 """
 
 from __future__ import annotations
@@ -13,12 +20,14 @@ import json
 import logging
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Sequence
 
 import numpy as np
 
 from dvrk_gym.baselines.checkpoints import LoadedAgent
+from dvrk_gym.baselines.names import DEBRIDEMENT_ID, GRID_TOUCH_ID
 from dvrk_gym.baselines.training import make_agent_env
+from dvrk_gym.baselines.transfer import pick_policy
 from dvrk_gym.calibration.benchmark import YAW_SETTINGS, CircleErrors, touch_grid
 from dvrk_gym.calibration.pipeline import PipelineConfig
 from dvrk_gym.envs.grid_touch import N_CIRCLES
@@ -26,11 +35,14 @@ from dvrk_gym.sim.kinematics import PAPER_YAWS_RAD
 
 logger = logging.getLogger(__name__)
 
-GRID_TOUCH_ID = "dvrk_gym/GridTouch-v0"
 BENCHMARK_SEED = 1000
 """The seed the calibration pipeline's benchmark uses (its config seed 0 + 1000)."""
 PHASE2_TOUCHES_PER_RUN = N_CIRCLES * len(PAPER_YAWS_RAD)
 """Phase II touches of a calibration run: the 35 circles at the five paper yaws."""
+CALIBRATORS = ("rbt", "dnn", "dnn+rf")
+"""The calibrators of a calibration run folder, as ``dvrk-gym debride --calibrator`` names them."""
+DEBRIDEMENT_TRIALS = 15
+"""Trials of eight picks per method (the paper's)."""
 
 
 @dataclass(frozen=True)
@@ -90,13 +102,18 @@ def calibration_rows(folder: Path) -> tuple[list[ComparisonRow], PipelineConfig]
         raise FileNotFoundError(f"{table_path} not found: run 'dvrk-gym evaluate --out {folder}' first")
     summary = json.loads(table_path.read_text())["summary"]
     config = _pipeline_config(folder)
-    phase1 = config.n_trajectories * config.steps_per_trajectory
-    moves = {"RBT": phase1, "DNN": phase1, "DNN+RF": phase1 + PHASE2_TOUCHES_PER_RUN}
+    moves = calibrator_moves(config)
     rows = []
     for method, stats in summary.items():
         every = stats["all settings"]
         rows.append(ComparisonRow(method, moves.get(method, -1), every["mm"]["mean"], every["pixel"]["mean"], str(table_path)))
     return rows, config
+
+
+def calibrator_moves(config: PipelineConfig) -> dict[str, int]:
+    """Robot moves each calibrator of a run used: Phase I poses; DNN+RF adds the Phase II touches."""
+    phase1 = config.n_trajectories * config.steps_per_trajectory
+    return {"RBT": phase1, "DNN": phase1, "DNN+RF": phase1 + PHASE2_TOUCHES_PER_RUN}
 
 
 def _pipeline_config(folder: Path) -> PipelineConfig:
@@ -119,14 +136,136 @@ def setting_mismatches(agent: LoadedAgent, calibration: PipelineConfig) -> list[
     return notes
 
 
+def _moves(robot_moves: int) -> str:
+    return f"{robot_moves:,}" if robot_moves >= 0 else "?"
+
+
+def _text_table(title: str, header: str, lines: Sequence[str], notes: Sequence[str]) -> str:
+    return "\n".join([title, header, *lines, *(f"note: {note}" for note in notes)])
+
+
 def format_comparison(rows: list[ComparisonRow], notes: list[str] = ()) -> str:
     """Method, robot moves, mean mm and pixel error over the 35 circles x 6 settings."""
-    lines = [
+    return _text_table(
         "Touch error over the 35 circles x 6 yaw settings, for the robot moves each method used",
         f"{'method':<32}{'robot moves':>12}{'mean mm':>10}{'mean px':>10}",
-    ]
+        [f"{row.method:<32}{_moves(row.robot_moves):>12}{row.mm_error:>10.2f}{row.pixel_error:>10.1f}" for row in rows],
+        notes,
+    )
+
+
+@dataclass(frozen=True)
+class DebridementRow:
+    """One method's debridement trials.
+
+    Attributes:
+        method: its name.
+        robot_moves: robot moves used to build it (see :class:`ComparisonRow`).
+        picks: picks judged.
+        success: picks that delivered their fragment.
+        missed: outcome A (the jaws landed too far off).
+        slipped: outcome B (well placed, the fragment slipped).
+        pierced: outcome C (a raisin came up on one tip).
+        time_per_fragment_s: mean simulated seconds per pick.
+        source: where the method comes from.
+    """
+
+    method: str
+    robot_moves: int
+    picks: int
+    success: int
+    missed: int
+    slipped: int
+    pierced: int
+    time_per_fragment_s: float
+    source: str
+
+    @property
+    def success_rate(self) -> float:
+        return self.success / self.picks if self.picks else float("nan")
+
+
+def debridement_row(method: str, robot_moves: int, trials: Sequence[Any], source: str) -> DebridementRow:
+    """The row of a list of :class:`~dvrk_gym.cli_debridement.Trial`."""
+    from dvrk_gym.cli_debridement import totals
+
+    total = totals(list(trials))
+    return DebridementRow(method, robot_moves, total["picks"], total["success"], total["A"], total["B"], total["C"], total["time_per_fragment_s"], source)
+
+
+def run_debridement(policy: Any, n_trials: int, seed: int, bias: str, bias_seed: int, camera_resolution: tuple[int, int], fragment: str = "pumpkin_seed", progress: bool = False) -> list[Any]:
+    """``n_trials`` debridement trials of ``policy`` on a fresh Debridement-v0 (primitive mode)."""
+    import gymnasium as gym
+
+    from dvrk_gym.cli_debridement import run_trials
+
+    env = gym.make(DEBRIDEMENT_ID, fragment=fragment, bias=bias, bias_seed=bias_seed, camera_resolution=tuple(camera_resolution))
+    try:
+        return run_trials(env, policy, n_trials, seed=seed, progress=progress)
+    finally:
+        env.close()
+
+
+def benchmark_debridement(agent: LoadedAgent, n_trials: int = DEBRIDEMENT_TRIALS, seed: int = 0, fragment: str = "pumpkin_seed", progress: bool = False) -> list[Any]:
+    """The agent's debridement trials (GridTouch agents transferred by :func:`pick_policy`), in its world."""
+    config = agent.config
+    return run_debridement(pick_policy(agent), n_trials, seed, config.bias, config.bias_seed, config.camera_resolution, fragment, progress)
+
+
+def calibration_debridement_rows(
+    folder: Path,
+    n_trials: int = DEBRIDEMENT_TRIALS,
+    seed: int = 0,
+    fragment: str = "pumpkin_seed",
+    camera_resolution: tuple[int, int] | None = None,
+    calibrators: Sequence[str] = CALIBRATORS,
+    progress: bool = False,
+) -> tuple[list[DebridementRow], PipelineConfig]:
+    """The calibrators' debridement rows, run here as ``dvrk-gym debride`` runs them.
+
+    Args:
+        folder: a calibration run folder holding the calibrators' model files.
+        n_trials, seed, fragment: the trials (use the agents' seed for comparable fragments).
+        camera_resolution: the endoscope's image size (default: the calibration run's).
+        calibrators: which of :data:`CALIBRATORS`.
+
+    Raises:
+        ValueError: an unknown calibrator name.
+        FileNotFoundError: the folder lacks a calibrator's model file.
+    """
+    from dvrk_gym.calibration.policy import CalibratedPolicy
+    from dvrk_gym.cli_debridement import CALIBRATOR_FILES, CALIBRATOR_LABELS, load_calibrator
+    from dvrk_gym.envs.debridement import fragment_target
+
+    folder = Path(folder)
+    unknown = sorted(set(calibrators) - set(CALIBRATORS))
+    if unknown:
+        raise ValueError(f"unknown calibrator(s) {unknown}; valid: {list(CALIBRATORS)}")
+    config = _pipeline_config(folder)
+    moves = calibrator_moves(config)
+    resolution = tuple(camera_resolution or config.camera_resolution)
+    rows = []
+    for name in calibrators:
+        path = folder / CALIBRATOR_FILES[name]
+        if not path.exists():
+            raise FileNotFoundError(f"{path} not found: run 'dvrk-gym calibrate --out {folder}' first")
+        calibrator, _ = load_calibrator(folder, name)
+        policy = CalibratedPolicy(calibrator, target=fragment_target)
+        trials = run_debridement(policy, n_trials, seed, config.bias, config.bias_seed, resolution, fragment, progress)
+        label = CALIBRATOR_LABELS[name]
+        rows.append(debridement_row(label, moves[label], trials, str(path)))
+    return rows, config
+
+
+def format_debridement_comparison(rows: Sequence[DebridementRow], notes: Sequence[str] = ()) -> str:
+    """Method, robot moves, success, A/B/C and time per fragment, one row each."""
+    lines = []
     for row in rows:
-        moves = f"{row.robot_moves:,}" if row.robot_moves >= 0 else "?"
-        lines.append(f"{row.method:<32}{moves:>12}{row.mm_error:>10.2f}{row.pixel_error:>10.1f}")
-    lines += [f"note: {note}" for note in notes]
-    return "\n".join(lines)
+        success = f"{row.success}/{row.picks} {100 * row.success_rate:.0f}%" if row.picks else "0/0"
+        lines.append(f"{row.method:<32}{_moves(row.robot_moves):>12}{success:>15}{row.missed:>5}{row.slipped:>5}{row.pierced:>5}{row.time_per_fragment_s:>12.2f}")
+    return _text_table(
+        "Debridement (trials of 8 picks): success and time per fragment, for the robot moves each method used",
+        f"{'method':<32}{'robot moves':>12}{'success':>15}{'A':>5}{'B':>5}{'C':>5}{'s/fragment':>12}",
+        lines,
+        notes,
+    )

@@ -1,9 +1,15 @@
-"""Learning curves: touch error against training env steps, as JSON and as a figure."""
+"""Learning curves against training env steps, as JSON and as figures.
+
+GridTouch agents: mean touch error (mm). Pick agents: debridement success rate (and the
+mean true grip offset, mm, in the JSON). NaN values (a pick agent's pixel error) are
+written as JSON null.
+"""
 
 from __future__ import annotations
 
 import dataclasses
 import json
+import math
 from pathlib import Path
 from typing import Any, Sequence
 
@@ -11,25 +17,46 @@ from dvrk_gym.baselines.budgets import CALIBRATOR_MOVES
 from dvrk_gym.baselines.training import CurvePoint
 from dvrk_gym.calibration.benchmark import PAPER_MEAN_MM
 
+CURVE_METRICS = ("mm_error", "success_rate")
+"""What :func:`plot_curves` can draw: touch error or grip offset (mm), or success rate."""
+PAPER_DNN_RF_PICK_SUCCESS = 110 / 120
+"""The paper's DNN+RF debridement success on pumpkin seeds (110 of 120 picks)."""
+
+
+def _json_value(value: Any) -> Any:
+    return None if isinstance(value, float) and math.isnan(value) else value
+
 
 def save_curve(points: Sequence[CurvePoint], path: Path, meta: dict[str, Any]) -> Path:
-    """Write ``{"meta": ..., "points": [{env_steps, mm_error, pixel_error, success_rate}]}``."""
+    """Write ``{"meta": ..., "points": [{env_steps, mm_error, pixel_error, success_rate, time_per_fragment_s}]}``."""
     path = Path(path)
-    path.write_text(json.dumps({"meta": meta, "points": [dataclasses.asdict(p) for p in points]}, indent=1))
+    rows = [{key: _json_value(value) for key, value in dataclasses.asdict(p).items()} for p in points]
+    path.write_text(json.dumps({"meta": meta, "points": rows}, indent=1))
     return path
 
 
 def load_curve(path: Path) -> list[CurvePoint]:
-    """Read the points written by :func:`save_curve`."""
-    return [CurvePoint(**point) for point in json.loads(Path(path).read_text())["points"]]
+    """Read the points written by :func:`save_curve` (null errors back to NaN)."""
+    points = []
+    for point in json.loads(Path(path).read_text())["points"]:
+        for key in ("mm_error", "pixel_error", "success_rate"):
+            if point.get(key) is None:
+                point[key] = float("nan")
+        points.append(CurvePoint(**point))
+    return points
 
 
-def plot_curves(curves: dict[str, Sequence[CurvePoint]], path: Path, title: str = "") -> Path:
-    """Mean touch error (mm, log scale) against env steps, one line per agent.
+def plot_curves(curves: dict[str, Sequence[CurvePoint]], path: Path, title: str = "", metric: str = "mm_error") -> Path:
+    """One line per agent against env steps: mean touch error (mm, log scale) or success rate.
 
-    The paper's DNN+RF error is drawn at the calibrator's budget of robot moves, as a
-    reference point.
+    The paper's DNN+RF result (touch error, or debridement success on pumpkin seeds) is
+    drawn at the calibrator's budget of robot moves, as a reference point.
+
+    Raises:
+        ValueError: ``metric`` is not one of :data:`CURVE_METRICS`.
     """
+    if metric not in CURVE_METRICS:
+        raise ValueError(f"metric must be one of {CURVE_METRICS}, got {metric!r}")
     import matplotlib
 
     matplotlib.use("Agg")
@@ -37,13 +64,18 @@ def plot_curves(curves: dict[str, Sequence[CurvePoint]], path: Path, title: str 
 
     fig, ax = plt.subplots(figsize=(6.4, 4.0))
     for label, points in curves.items():
-        ax.plot([p.env_steps for p in points], [p.mm_error for p in points], marker="o", markersize=3, label=label)
-    ax.plot([CALIBRATOR_MOVES], [PAPER_MEAN_MM["DNN+RF"]], marker="*", markersize=12, linestyle="none", color="k", label="paper DNN+RF (5,476 moves)")
+        ax.plot([p.env_steps for p in points], [getattr(p, metric) for p in points], marker="o", markersize=3, label=label)
+    if metric == "mm_error":
+        reference, ylabel, default_title = PAPER_MEAN_MM["DNN+RF"], "mean touch error over 35 circles (mm)", "Learning curve on GridTouch-v0"
+        ax.set_yscale("log")
+    else:
+        reference, ylabel, default_title = PAPER_DNN_RF_PICK_SUCCESS, "debridement success rate", "Learning curve on Debridement-v0"
+        ax.set_ylim(-0.02, 1.02)
+    ax.plot([CALIBRATOR_MOVES], [reference], marker="*", markersize=12, linestyle="none", color="k", label="paper DNN+RF (5,476 moves)")
     ax.axvline(CALIBRATOR_MOVES, color="0.7", linestyle=":", linewidth=1)
-    ax.set_yscale("log")
     ax.set_xlabel("training env steps (robot moves)")
-    ax.set_ylabel("mean touch error over 35 circles (mm)")
-    ax.set_title(title or "Learning curve on GridTouch-v0", fontsize=10)
+    ax.set_ylabel(ylabel)
+    ax.set_title(title or default_title, fontsize=10)
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8)
     fig.tight_layout()

@@ -1,9 +1,11 @@
-"""Train an agent for a budget of env steps, measuring its touch error as it learns.
+"""Train an agent for a budget of env steps, measuring how well it does as it learns.
 
-Every training env step is one commanded touch, i.e. one robot move of the budget. The
-learning curve evaluates the deterministic policy on a separate env (same instrument) at
-evenly spaced points: the 35 circles once, the yaw cycling through the benchmark's six
-settings; these evaluation touches are measurements and are not counted in the budget.
+Every training env step is one robot move of the budget: a commanded touch (GridTouch-v0)
+or a pick (Debridement-v0). The learning curve evaluates the deterministic policy on a
+separate env (same instrument) at evenly spaced points. GridTouch agents: the 35 circles
+once, the yaw cycling through the benchmark's six settings (touch error). Pick agents:
+CURVE_TRIALS debridement trials of eight picks (success rate, grip offset, time per
+fragment). These evaluation moves are measurements and are not counted in the budget.
 """
 
 from __future__ import annotations
@@ -13,7 +15,7 @@ import dataclasses
 import logging
 import time
 from dataclasses import dataclass, field
-from typing import Any, Iterator
+from typing import Any, Callable, Iterator
 
 import gymnasium as gym
 import numpy as np
@@ -25,6 +27,8 @@ from tqdm.auto import tqdm
 
 import dvrk_gym  # noqa: F401  (registers the environments)
 from dvrk_gym.baselines.agents import AgentSpec, build_model, get_agent
+from dvrk_gym.baselines.names import DEBRIDEMENT_ID
+from dvrk_gym.baselines.picking import GripOffsetLog
 from dvrk_gym.baselines.wrappers import TRAINING_YAWS
 from dvrk_gym.calibration.benchmark import YAW_SETTINGS
 from dvrk_gym.envs.grid_touch import N_CIRCLES
@@ -33,6 +37,8 @@ from dvrk_gym.evaluation import run_episodes
 logger = logging.getLogger(__name__)
 
 VEC_ENVS = ("dummy", "subproc")
+CURVE_TRIALS = 2
+"""Debridement trials (of eight picks) per learning-curve point of a pick agent."""
 
 
 @dataclass(frozen=True)
@@ -50,10 +56,12 @@ class TrainConfig:
         bias: the cable bias preset.
         bias_seed: which instrument.
         camera_resolution: endoscope image size (width, height), pixels; evaluate at the same.
-        training_yaws: "paper" (a tour of the circles per paper yaw) or "random".
+        training_yaws: "paper" (a tour of the circles per paper yaw) or "random"
+            (GridTouch agents; a pick's yaw comes from its fragment).
         n_envs: parallel training envs (each step of the vector env is ``n_envs`` moves).
         vec_env: "dummy" (one process) or "subproc" (a process per env).
         eval_points: evaluations along the learning curve (plus one before training).
+        curve_trials: pick agents: debridement trials (of eight picks) per curve point.
         torch_threads: torch's intra-op threads while training (restored after). One is
             fastest here: small networks on 2 shared cores ran 12x slower with two threads.
         env_overrides: ``gym.make`` keywords replacing the agent's (``reward_type``...).
@@ -70,6 +78,7 @@ class TrainConfig:
     n_envs: int = 1
     vec_env: str = "dummy"
     eval_points: int = 20
+    curve_trials: int = CURVE_TRIALS
     torch_threads: int = 1
     env_overrides: dict[str, Any] = field(default_factory=dict)
     overrides: dict[str, Any] = field(default_factory=dict)
@@ -81,7 +90,7 @@ class TrainConfig:
             raise ValueError(f"training_yaws must be one of {TRAINING_YAWS}, got {self.training_yaws!r}")
         if self.vec_env not in VEC_ENVS:
             raise ValueError(f"vec_env must be one of {VEC_ENVS}, got {self.vec_env!r}")
-        for name in ("steps", "n_envs", "eval_points", "torch_threads"):
+        for name in ("steps", "n_envs", "eval_points", "curve_trials", "torch_threads"):
             if getattr(self, name) < 1:
                 raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
 
@@ -105,19 +114,23 @@ class TrainConfig:
 
 @dataclass(frozen=True)
 class CurvePoint:
-    """The policy's touch error after ``env_steps`` training moves (means over the circles).
+    """How the deterministic policy does after ``env_steps`` training moves.
 
     Attributes:
         env_steps: training env steps so far.
-        mm_error: mean touch error in the workspace plane, millimetres.
-        pixel_error: mean touch error in the left image, pixels.
-        success_rate: fraction of touches within the env's success radius.
+        mm_error: GridTouch: mean touch error in the workspace plane; pick agents: mean
+            true grip offset in the paper's plane from the fragment's centre; millimetres.
+        pixel_error: mean touch error in the left image, pixels (NaN for pick agents).
+        success_rate: fraction of touches within the env's success radius, or of picks
+            that delivered their fragment.
+        time_per_fragment_s: pick agents: mean simulated seconds per pick (None otherwise).
     """
 
     env_steps: int
     mm_error: float
     pixel_error: float
     success_rate: float
+    time_per_fragment_s: float | None = None
 
 
 @dataclass
@@ -172,6 +185,27 @@ def evaluate_curve_point(model: BaseAlgorithm, env: gym.Env, env_steps: int, see
     return CurvePoint(env_steps, mean("mm_error"), mean("pixel_error"), mean("is_success"))
 
 
+def evaluate_pick_curve_point(model: BaseAlgorithm, env: gym.Env, env_steps: int, seed: int, n_trials: int = CURVE_TRIALS) -> CurvePoint:
+    """Run ``n_trials`` debridement trials with the deterministic policy; success, grip offset, time."""
+    from dvrk_gym.cli_debridement import run_trials, totals
+
+    log = GripOffsetLog(env)
+    total = totals(run_trials(log, model, n_trials, seed=seed, progress=False))
+    offsets = [mm for mm in log.offsets_mm if mm is not None]
+    mean_offset = float(np.mean(offsets)) if offsets else float("nan")
+    return CurvePoint(env_steps, mean_offset, float("nan"), total["success"] / max(total["picks"], 1), total["time_per_fragment_s"])
+
+
+CurveEvaluator = Callable[[BaseAlgorithm, gym.Env, int, int], CurvePoint]
+
+
+def curve_evaluator(config: TrainConfig) -> CurveEvaluator:
+    """The learning-curve measurement of an agent's env: touch error, or debridement trials."""
+    if config.spec.env_id == DEBRIDEMENT_ID:
+        return lambda model, env, env_steps, seed: evaluate_pick_curve_point(model, env, env_steps, seed, config.curve_trials)
+    return evaluate_curve_point
+
+
 class LearningCurve(BaseCallback):
     """Evaluate at evenly spaced env steps and show a progress bar.
 
@@ -179,13 +213,15 @@ class LearningCurve(BaseCallback):
         env: the evaluation env (wrapped as the agent sees it).
         total_steps: the run's env steps.
         n_points: evaluations during training (after one at step 0).
-        seed: seed of every evaluation (the same touches each time).
+        seed: seed of every evaluation (the same touches, or fragments, each time).
         progress: show a progress bar.
+        evaluate: the measurement (default: GridTouch's touch error over the 35 circles).
     """
 
-    def __init__(self, env: gym.Env, total_steps: int, n_points: int, seed: int, progress: bool) -> None:
+    def __init__(self, env: gym.Env, total_steps: int, n_points: int, seed: int, progress: bool, evaluate: CurveEvaluator = evaluate_curve_point) -> None:
         super().__init__()
         self.eval_env = env
+        self.measure = evaluate
         self.marks = list(np.unique(np.linspace(0, total_steps, n_points + 1).round().astype(int)))
         self.seed = seed
         self.points: list[CurvePoint] = []
@@ -194,12 +230,12 @@ class LearningCurve(BaseCallback):
 
     def evaluate(self) -> None:
         start = time.perf_counter()
-        point = evaluate_curve_point(self.model, self.eval_env, self.num_timesteps, self.seed)
+        point = self.measure(self.model, self.eval_env, self.num_timesteps, self.seed)
         self.eval_seconds += time.perf_counter() - start
         self.points.append(point)
         self.marks = [m for m in self.marks if m > self.num_timesteps]
-        self._bar.set_postfix(mm=f"{point.mm_error:.2f}")
-        logger.info("%d env steps: %.2f mm, %.1f px", point.env_steps, point.mm_error, point.pixel_error)
+        self._bar.set_postfix(mm=f"{point.mm_error:.2f}", success=f"{point.success_rate:.2f}")
+        logger.info("%d env steps: %.2f mm, %.1f px, success %.2f", point.env_steps, point.mm_error, point.pixel_error, point.success_rate)
 
     def _on_training_start(self) -> None:
         self.evaluate()
@@ -238,7 +274,7 @@ def _train(config: TrainConfig, progress: bool) -> TrainResult:
     eval_env = make_agent_env(config, training=False)
     try:
         model = build_model(config.spec, train_env, config.seed, config.overrides)
-        curve = LearningCurve(eval_env, config.steps, config.eval_points, seed=config.seed + 10_000, progress=progress)
+        curve = LearningCurve(eval_env, config.steps, config.eval_points, seed=config.seed + 10_000, progress=progress, evaluate=curve_evaluator(config))
         start = time.perf_counter()
         model.learn(total_timesteps=config.steps, callback=curve)
         wall = time.perf_counter() - start

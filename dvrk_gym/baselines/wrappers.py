@@ -31,6 +31,11 @@ TRAINING_YAWS = ("paper", "random")
 """How training episodes choose their yaw: a tour of the 35 circles per paper yaw, or a random yaw each."""
 
 
+def scale_goal(goal_m: np.ndarray, center_m: np.ndarray = GOAL_CENTER_M, half_range_m: float = GOAL_HALF_RANGE_M) -> np.ndarray:
+    """Camera-frame points (..., 3) in metres to ``(goal - center) / half_range`` (float32)."""
+    return ((np.asarray(goal_m, dtype=np.float64) - np.asarray(center_m, dtype=np.float64)) / half_range_m).astype(np.float32)
+
+
 class TargetYawAction(gym.ActionWrapper):
     """Action ``(bx, by, bz)`` in metres; the yaw (rad) is the one the episode asks for.
 
@@ -76,7 +81,7 @@ class GoalScaling(gym.ObservationWrapper):
         self.observation_space = spaces.Dict(scaled)
 
     def _scale(self, goal_m: np.ndarray) -> np.ndarray:
-        return ((np.asarray(goal_m, dtype=np.float64) - self.center_m) / self.half_range_m).astype(np.float32)
+        return scale_goal(goal_m, self.center_m, self.half_range_m)
 
     def unscale(self, goal: np.ndarray) -> np.ndarray:
         """Scaled goals (..., 3) back to camera-frame metres."""
