@@ -11,6 +11,7 @@ from typing import Callable, Sequence
 from dvrk_gym.cli_baselines import add_commands as add_baseline_commands
 from dvrk_gym.cli_calibration import add_commands as add_calibration_commands
 from dvrk_gym.cli_debridement import add_commands as add_debridement_commands
+from dvrk_gym.cli_reproduce import add_commands as add_reproduce_commands
 
 Command = Callable[[argparse.Namespace], int]
 
@@ -48,6 +49,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("-v", "--verbose", action="store_true", help="log progress details")
     subparsers = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    add_reproduce_commands(subparsers)
     _add_demo(subparsers)
     add_calibration_commands(subparsers)
     add_debridement_commands(subparsers)

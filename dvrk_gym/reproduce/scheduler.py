@@ -1,0 +1,171 @@
+"""Run a small graph of cached tasks, in worker processes when asked.
+
+A task is a top-level function (so a worker process can import it) with keyword
+arguments, the names of the tasks it needs, and a rough cost. Its result, a JSON-able
+dict, is cached in ``cache_dir/<name>.json`` with the wall time it took; a re-run loads
+the cached results and runs only the rest, so an interrupted run resumes. Results do not
+depend on the number of workers: every task seeds itself and runs with one torch thread.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import logging
+import multiprocessing
+import time
+from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Iterator
+
+from tqdm.auto import tqdm
+
+logger = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class Task:
+    """One unit of work.
+
+    Attributes:
+        name: unique name; also the cache file's stem.
+        function: a module-level function returning a JSON-able dict.
+        kwargs: its keyword arguments (picklable).
+        needs: names of the tasks that must finish first.
+        cost_s: rough wall time, seconds: among ready tasks the costliest starts first.
+    """
+
+    name: str
+    function: Callable[..., dict[str, Any]]
+    kwargs: dict[str, Any] = field(default_factory=dict)
+    needs: tuple[str, ...] = ()
+    cost_s: float = 1.0
+
+
+class TaskError(RuntimeError):
+    """A task raised; the message names it (finished tasks stay cached)."""
+
+
+@contextlib.contextmanager
+def one_torch_thread() -> Iterator[None]:
+    """Run with one torch intra-op thread (restored after): the same numbers on any machine,
+    and no oversubscription when tasks run side by side."""
+    import torch
+
+    before = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(before)
+
+
+def _call(function: Callable[..., dict[str, Any]], kwargs: dict[str, Any]) -> tuple[dict[str, Any], float]:
+    start = time.perf_counter()
+    with one_torch_thread():
+        result = function(**kwargs)
+    return result, time.perf_counter() - start
+
+
+def _check_graph(tasks: list[Task]) -> None:
+    names = [task.name for task in tasks]
+    if len(set(names)) != len(names):
+        raise ValueError(f"task names must be unique: {sorted(n for n in set(names) if names.count(n) > 1)}")
+    for task in tasks:
+        unknown = set(task.needs) - set(names)
+        if unknown:
+            raise ValueError(f"task {task.name!r} needs unknown tasks {sorted(unknown)}")
+    done: set[str] = set()
+    pending = list(tasks)
+    while pending:
+        ready = [task for task in pending if set(task.needs) <= done]
+        if not ready:
+            raise ValueError(f"the tasks' needs form a cycle: {sorted(task.name for task in pending)}")
+        done |= {task.name for task in ready}
+        pending = [task for task in pending if task.name not in done]
+
+
+def run_tasks(tasks: list[Task], cache_dir: Path, workers: int = 1, progress: bool = True) -> dict[str, dict[str, Any]]:
+    """Run (or load from ``cache_dir``) every task; returns ``{name: result}``.
+
+    Each result gets ``wall_s`` (its wall time when it ran, seconds) and ``cached``
+    (True when this call loaded it).
+
+    Args:
+        tasks: the graph (needs must name tasks in the list; no cycles).
+        cache_dir: where results are cached as JSON.
+        workers: processes to run tasks in; 1 runs them here, one after another.
+        progress: show a bar over the tasks.
+
+    Raises:
+        TaskError: a task failed (the others that were running are awaited first).
+    """
+    if workers < 1:
+        raise ValueError(f"workers must be >= 1, got {workers}")
+    _check_graph(tasks)
+    cache_dir = Path(cache_dir)
+    cache_dir.mkdir(parents=True, exist_ok=True)
+    results: dict[str, dict[str, Any]] = {}
+    for task in tasks:
+        path = cache_dir / f"{task.name}.json"
+        if path.exists():
+            results[task.name] = {**json.loads(path.read_text()), "cached": True}
+    pending = sorted((task for task in tasks if task.name not in results), key=lambda task: -task.cost_s)
+    bar = tqdm(total=len(tasks), initial=len(results), desc="reproduce", unit="task", disable=not progress)
+
+    def finish(task: Task, result: dict[str, Any], seconds: float) -> None:
+        result = {**result, "wall_s": seconds}
+        (cache_dir / f"{task.name}.json").write_text(json.dumps(result, indent=1))
+        results[task.name] = {**result, "cached": False}
+        bar.update(1)
+        message = f"{task.name}: {seconds:.0f} s"
+        bar.write(message) if progress else logger.info(message)
+
+    def ready() -> list[Task]:
+        return [task for task in pending if all(need in results for need in task.needs)]
+
+    try:
+        if workers == 1:
+            while pending:
+                task = ready()[0]
+                pending.remove(task)
+                bar.set_postfix_str(task.name)
+                try:
+                    outcome = _call(task.function, task.kwargs)
+                except Exception as error:
+                    raise TaskError(f"task {task.name!r} failed: {type(error).__name__}: {error}") from error
+                finish(task, *outcome)
+        else:
+            _run_in_pool(pending, workers, ready, finish, bar)
+    finally:
+        bar.close()
+    return {task.name: results[task.name] for task in tasks}  # in the graph's order
+
+
+def _run_in_pool(pending: list[Task], workers: int, ready: Callable[[], list[Task]], finish: Callable[[Task, dict, float], None], bar: Any) -> None:
+    running: dict[Future, Task] = {}
+    failure: TaskError | None = None
+    context = multiprocessing.get_context("spawn")  # no forked torch or pybullet state
+    with ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool:
+        while pending or running:
+            if failure is None:
+                for task in ready():
+                    if len(running) >= workers:
+                        break
+                    pending.remove(task)
+                    running[pool.submit(_call, task.function, task.kwargs)] = task
+            if not running:
+                break
+            bar.set_postfix_str(", ".join(sorted(task.name for task in running.values())))
+            done, _ = wait(running, return_when=FIRST_COMPLETED)
+            for future in done:
+                task = running.pop(future)
+                try:
+                    finish(task, *future.result())
+                except Exception as error:  # noqa: BLE001  (reported after the running tasks end)
+                    if failure is None:
+                        failure = TaskError(f"task {task.name!r} failed: {type(error).__name__}: {error}")
+                        failure.__cause__ = error
+    if failure is not None:
+        raise failure

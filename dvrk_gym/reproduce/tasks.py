@@ -1,0 +1,151 @@
+"""The tasks of a reproduction. Each is a module-level function (a worker process imports
+it), seeds itself, writes its files under the run folder and returns a JSON-able summary.
+
+All lengths in the summaries are in the units their keys name (``_mm``, ``_px``, ``_s``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+MM_PER_M = 1e3
+
+
+def bias_field(figure: str, bias: str, bias_seed: int, seed: int, samples: int = 2000) -> dict[str, Any]:
+    """The cable model's error statistics and its rigid-residual field figure."""
+    from dvrk_gym.sim import bias as cable
+    from dvrk_gym.sim.bias_field import grid_rigid_means, plot_field
+
+    model = cable.CableModel(cable.resolve_bias(bias), bias_seed=bias_seed)
+    stats = cable.bias_statistics(model, np.random.default_rng(seed + 1), samples)
+    plot_field(model, Path(figure), "rigid")
+    return {
+        "figure": str(figure),
+        "samples": int(stats["n_samples"]),
+        "raw_mean_mm": stats["raw_mean_m"] * MM_PER_M,
+        "rigid_mean_mm": stats["rigid_mean_m"] * MM_PER_M,
+        "rigid_by_yaw_mm": [v * MM_PER_M for v in stats["rigid_mean_by_yaw_m"]],
+        "grid_rigid_by_yaw_mm": [v * MM_PER_M for v in grid_rigid_means(model)],
+        "smooth_mean_mm": stats["smooth_mean_m"] * MM_PER_M,
+        "hysteresis_gap_mm": stats["hysteresis_gap_m"] * MM_PER_M,
+        "hysteresis_gap_min_mm": stats["hysteresis_gap_min_m"] * MM_PER_M,
+    }
+
+
+def calibration(folder: str, pipeline: dict[str, Any], progress: bool = False) -> dict[str, Any]:
+    """The two-phase calibration and its benchmark (:func:`~dvrk_gym.calibration.pipeline.run_calibration`)."""
+    from dvrk_gym.calibration.pipeline import PipelineConfig, run_calibration
+
+    result = run_calibration(Path(folder), PipelineConfig(**pipeline), progress=progress)
+    phase1 = result["phase1"]
+    return {
+        "folder": str(folder),
+        "phase1": {"raw": int(phase1.n_raw), "kept": int(phase1.n_kept)},
+        "phase2_touches": int(len(result["phase2"].X)),
+        "summary": result["summary"],
+        "stage_s": result["timings_s"],
+        "figure": str(Path(folder) / "calibration_error_maps.png"),
+    }
+
+
+def search_model(calibration_folder: str, model: str, search: str, seed: int) -> dict[str, Any]:
+    """Cross-validate one model of the paper's search on the run's cleaned Phase I data."""
+    from dvrk_gym.calibration.phase1 import Phase1Data
+    from dvrk_gym.calibration.search import paper_models, run_search
+
+    quick = search == "quick"
+    specs = {spec.name: spec for spec in paper_models(quick=quick)}
+    if model not in specs:
+        raise ValueError(f"unknown model {model!r}; the {search} search has {sorted(specs)}")
+    data = Phase1Data.load(Path(calibration_folder) / "phase1.npz").cleaned()
+    (result,) = run_search(data.X, data.y, [specs[model]], seed=seed, quick=quick, progress=False)
+    return dataclasses.asdict(result)
+
+
+def search_models(search: str) -> list[str]:
+    """The names of the models a search of that kind scores, in the paper's order."""
+    from dvrk_gym.calibration.search import paper_models
+
+    return [spec.name for spec in paper_models(quick=search == "quick")]
+
+
+def debridement(calibration_folder: str, calibrator: str, fragment: str, trials: int, picks: int, seed: int,
+                resolution: tuple[int, int], out: str) -> dict[str, Any]:
+    """One cell of the paper's debridement table: ``trials`` trials with a calibrator."""
+    import gymnasium as gym
+
+    import dvrk_gym  # noqa: F401  (registers the environments)
+    from dvrk_gym.calibration.policy import CalibratedPolicy
+    from dvrk_gym.cli_debridement import CALIBRATOR_LABELS, FRAGMENT_LABELS, load_calibrator
+    from dvrk_gym.envs.debridement import fragment_target
+
+    model, settings = load_calibrator(Path(calibration_folder), calibrator)
+    env = gym.make(
+        "dvrk_gym/Debridement-v0", fragment=fragment, max_picks=picks, bias=settings["bias"],
+        bias_seed=int(settings["bias_seed"]), camera_resolution=tuple(resolution),
+    )
+    title = f"{CALIBRATOR_LABELS[calibrator]}, {FRAGMENT_LABELS[fragment]}"
+    return _debridement_cell(env, CalibratedPolicy(model, target=fragment_target), title, trials, seed, out,
+                             {"method": CALIBRATOR_LABELS[calibrator], "calibrator": calibrator, "fragment": fragment})
+
+
+def _debridement_cell(env: Any, policy: Any, title: str, trials: int, seed: int, out: str, meta: dict[str, Any]) -> dict[str, Any]:
+    """Run the trials of one cell, write its JSON and outcome grid, return its totals."""
+    import time
+
+    from dvrk_gym.cli_debridement import plot_outcome_grid, run_trials, save_trials, totals
+
+    try:
+        start = time.perf_counter()
+        results = run_trials(env, policy, trials, seed=seed, progress=False)
+        wall = time.perf_counter() - start
+    finally:
+        env.close()
+    out_path = Path(out)
+    out_path.parent.mkdir(parents=True, exist_ok=True)
+    save_trials(results, out_path.with_suffix(".json"), {**meta, "seed": seed})
+    figure = plot_outcome_grid(results, out_path.with_suffix(".png"), f"Debridement outcomes: {title} ({len(results)} trials)")
+    return {
+        **meta,
+        **totals(results),
+        "trials": len(results),
+        "rows": [",".join(t.outcomes) for t in results],
+        "wall_s_per_trial": wall / max(len(results), 1),
+        "figure": str(figure),
+    }
+
+
+def rl_agent(agent: str, steps: int, seed: int, eval_points: int, bias: str, bias_seed: int,
+             resolution: tuple[int, int], benchmark_seed: int, out: str) -> dict[str, Any]:
+    """Train an RL agent on GridTouch-v0 and benchmark it like the calibrators."""
+    from dvrk_gym.baselines.checkpoints import load_agent, save_agent
+    from dvrk_gym.baselines.comparison import agent_row, benchmark_agent
+    from dvrk_gym.baselines.curves import save_curve
+    from dvrk_gym.baselines.training import TrainConfig, train
+    from dvrk_gym.calibration.benchmark import table_summary
+
+    config = TrainConfig(agent=agent, steps=steps, seed=seed, bias=bias, bias_seed=bias_seed,
+                         camera_resolution=tuple(resolution), eval_points=eval_points)
+    result = train(config, progress=False)
+    folder = Path(out)
+    path = save_agent(result, folder / "model.zip")
+    save_curve(result.curve, folder / "learning_curve.json", {"agent": agent, "steps_per_second": result.steps_per_second})
+    loaded = load_agent(path)
+    settings = benchmark_agent(loaded, seed=benchmark_seed)
+    row = agent_row(loaded, settings)
+    return {
+        "agent": agent,
+        "label": loaded.label,
+        "model": str(path),
+        "env_steps": int(result.env_steps),
+        "steps_per_second": float(result.steps_per_second),
+        "train_s": float(result.train_seconds),
+        "curve": [dataclasses.asdict(point) for point in result.curve],
+        "mean_mm": row.mm_error,
+        "mean_px": row.pixel_error,
+        "summary": table_summary({agent: settings})[agent],
+    }

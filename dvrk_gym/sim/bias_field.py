@@ -1,0 +1,91 @@
+"""The cable model's tip-error field over the paper's grid, and its figure.
+
+One subplot per paper yaw (-90, -45, 0, 45, 90 deg). Each shows, on a 7 x 5 grid like the
+paper's 35 circles (pitch and roll from the paper's rule for that yaw, each point
+approached from rest, no noise), the x-y part of the tip error as arrows coloured by the
+3-D norm: the residual after a rigid fit per yaw (what the paper's rigid-body calibration
+leaves), or the raw error.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from dvrk_gym.sim import bias
+from dvrk_gym.sim import kinematics as kin
+
+GRID_SHAPE = (7, 5)
+"""Points along base x and y: the paper's 35 circles."""
+GRID_Z_M = -0.159
+"""Height of the grid: the middle of the paper's workspace, metres (base frame)."""
+FIELDS = ("rigid", "raw")
+MM_PER_M = 1e3
+
+
+def grid_errors(model: bias.CableModel, yaw_rad: float) -> tuple[np.ndarray, np.ndarray]:
+    """Reported touch points and raw tip errors (both (35, 3), metres) on the grid at one yaw."""
+    pitch, roll = kin.paper_pitch_roll(yaw_rad)
+    xs = np.linspace(*bias.WORKSPACE_X_M, GRID_SHAPE[0])
+    ys = np.linspace(*bias.WORKSPACE_Y_M, GRID_SHAPE[1])
+    reported, errors = [], []
+    for x in xs:
+        for y in ys:
+            pose = kin.pose_from_euler(np.array([x, y, GRID_Z_M]), yaw_rad, pitch, roll)
+            q_cmd = kin.inverse_kinematics(pose)
+            model.reset(q_cmd)
+            true = kin.touch_point(model.true_joints(q_cmd), model.true_dh)
+            reported.append(kin.touch_point(q_cmd))
+            errors.append(true - reported[-1])
+    return np.array(reported), np.array(errors)
+
+
+def grid_field(model: bias.CableModel, yaw_rad: float, field: str = "rigid") -> tuple[np.ndarray, np.ndarray]:
+    """Reported touch points and the ``field`` ("rigid" residual or "raw" error), metres."""
+    if field not in FIELDS:
+        raise ValueError(f"field must be one of {FIELDS}, got {field!r}")
+    reported, errors = grid_errors(model, yaw_rad)
+    if field == "rigid":
+        errors = bias.rigid_fit_residuals(reported, reported + errors)
+    return reported, errors
+
+
+def grid_rigid_means(model: bias.CableModel) -> list[float]:
+    """Per-yaw mean residual (m) of a rigid fit on the grid: the paper's RBT row, noiseless."""
+    return [float(np.linalg.norm(grid_field(model, yaw)[1], axis=1).mean()) for yaw in kin.PAPER_YAWS_RAD]
+
+
+def model_name(model: bias.CableModel) -> str:
+    """The preset name of the model's configuration, or 'custom'."""
+    return next((name for name, config in bias.BIAS_PRESETS.items() if config == model.config), "custom")
+
+
+def plot_field(model: bias.CableModel, path: Path, field: str = "rigid") -> Path:
+    """Write the figure of the raw or rigid-fit-residual field (PNG), one subplot per yaw."""
+    from matplotlib.figure import Figure
+
+    fields = [grid_field(model, yaw, field) for yaw in kin.PAPER_YAWS_RAD]
+    norms_mm = [np.linalg.norm(errors, axis=1) * MM_PER_M for _, errors in fields]
+    vmax = max(norm.max() for norm in norms_mm)
+    figure = Figure(figsize=(20, 4.6), layout="constrained")
+    axes = figure.subplots(1, len(kin.PAPER_YAWS_RAD))
+    for ax, yaw, (reported, errors), norm_mm in zip(axes, kin.PAPER_YAWS_RAD, fields, norms_mm):
+        tails, arrows = reported[:, :2] * MM_PER_M, errors[:, :2] * MM_PER_M
+        quiver = ax.quiver(tails[:, 0], tails[:, 1], arrows[:, 0], arrows[:, 1], norm_mm, cmap="viridis",
+                           clim=(0.0, vmax), angles="xy", scale_units="xy", scale=1.0, width=0.006)
+        ends = np.vstack([tails, tails + arrows])
+        pad_mm = 3.0  # room for the arrow heads
+        ax.set_xlim(ends[:, 0].min() - pad_mm, ends[:, 0].max() + pad_mm)
+        ax.set_ylim(ends[:, 1].min() - pad_mm, ends[:, 1].max() + pad_mm)
+        ax.set_title(f"yaw {np.rad2deg(yaw):+.0f} deg: mean {norm_mm.mean():.2f} mm")
+        ax.set_xlabel("base x (mm)")
+        ax.set_aspect("equal")
+    axes[0].set_ylabel("base y (mm)")
+    label = "after a rigid fit per yaw" if field == "rigid" else "raw"
+    figure.colorbar(quiver, ax=axes, label="3-D norm (mm)")
+    figure.suptitle(f"Cable model '{model_name(model)}', bias seed {model.bias_seed}: tip error {label} "
+                    "(arrows: its x-y part, 1:1 in mm; paper's pitch and roll for each yaw; noiseless)")
+    path = Path(path)
+    figure.savefig(path, dpi=110)
+    return path

@@ -1,0 +1,135 @@
+"""dvrk-gym reproduce: a tiny run end to end, resuming, determinism across workers, and
+the task scheduler."""
+
+import json
+import math
+
+import pytest
+
+from dvrk_gym.cli import main
+from dvrk_gym.reproduce import Profile, ReproduceConfig, build_tasks, run_reproduce
+from dvrk_gym.reproduce.scheduler import Task, TaskError, run_tasks
+
+TINY = Profile(
+    name="tiny", n_trajectories=2, steps_per_trajectory=30, dnn_epochs=20, search="quick", debridement_trials=1,
+    debridement_picks=2, rl_agents=("sac",), rl_steps=60, rl_eval_points=1, camera_resolution=(480, 270),
+)
+
+
+@pytest.fixture(scope="module")
+def tiny_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("reproduce")
+    return run_reproduce(ReproduceConfig(out=out, profile=TINY, workers=1, progress=False))
+
+
+def _numbers(value):
+    """Every number in a JSON tree (booleans are not numbers here)."""
+    if isinstance(value, dict):
+        for item in value.values():
+            yield from _numbers(item)
+    elif isinstance(value, list):
+        for item in value:
+            yield from _numbers(item)
+    elif isinstance(value, (int, float)) and not isinstance(value, bool):
+        yield value
+
+
+def test_tiny_reproduce_writes_report_results_and_figures(tiny_run):
+    out = tiny_run.report.parent
+    data = json.loads(tiny_run.results.read_text())
+    assert set(data["calibration"]) == {"RBT", "DNN", "DNN+RF"}
+    for row in data["calibration"].values():
+        assert math.isfinite(row["mean_mm"]) and row["mean_mm"] > 0
+        assert all(math.isfinite(v) for v in row["per_setting_px"].values())
+    cells = {(c["method"], c["fragment"]) for c in data["debridement"]}
+    assert cells == {(m, f) for m in ("DNN", "DNN+RF") for f in ("pumpkin_seed", "raisin")}
+    for cell in data["debridement"]:
+        assert cell["picks"] == 2 and cell["success"] + cell["A"] + cell["B"] + cell["C"] <= cell["picks"]
+        assert math.isfinite(cell["time_per_fragment_s"]) and cell["time_per_fragment_s"] > 0
+    (agent,) = data["rl"]
+    assert agent["env_steps"] == 60 and math.isfinite(agent["mean_mm"])
+    assert len(data["search"]) == 5 and all(math.isfinite(r["mean_mm2"]) for r in data["search"])
+    assert data["phase1"]["raw"] == 60
+    # finite numbers only: json writes NaN and inf as bare NaN/Infinity
+    numbers = list(_numbers(data))
+    assert len(numbers) > 200 and all(math.isfinite(n) for n in numbers)
+    for path in data["figures"].values():
+        assert (out / path).stat().st_size > 1000, path
+    report = tiny_run.report.read_text()
+    for heading in ("## Calibration error", "## Debridement", "## Model search", "## Reinforcement-learning baseline", "## Phase I data"):
+        assert heading in report
+    assert "| DNN+RF, paper | 10.5 | 14.2 | 12.8 | 12.1 | 8.9 | 14.7 | 1.08 |" in report  # the paper beside the simulation
+    assert "figures/bias_field.png" in report
+
+
+def test_rerun_resumes_from_the_cache_and_refuses_other_settings(tiny_run):
+    out = tiny_run.report.parent
+    again = run_reproduce(ReproduceConfig(out=out, profile=TINY, workers=1, progress=False))
+    assert set(again.data["task_cached"]) == {task.name for task in build_tasks(ReproduceConfig(out=out, profile=TINY))}
+    assert again.data["calibration"] == tiny_run.data["calibration"]
+    with pytest.raises(ValueError, match="other settings"):
+        run_reproduce(ReproduceConfig(out=out, profile=TINY, seed=1, progress=False))
+
+
+def test_two_workers_give_the_same_numbers(tiny_run, tmp_path):
+    two = run_reproduce(ReproduceConfig(out=tmp_path, profile=TINY, workers=2, progress=False))
+    assert two.data["calibration"] == tiny_run.data["calibration"]
+    assert two.data["debridement"] == [
+        {**cell, "figure": cell["figure"].replace(str(tiny_run.report.parent), str(tmp_path)), "wall_s_per_trial": two_cell["wall_s_per_trial"], "wall_s": two_cell["wall_s"]}
+        for cell, two_cell in zip(tiny_run.data["debridement"], two.data["debridement"])
+    ]
+    assert two.data["rl"][0]["mean_mm"] == tiny_run.data["rl"][0]["mean_mm"]
+    assert [r["mean_mm2"] for r in two.data["search"]] == [r["mean_mm2"] for r in tiny_run.data["search"]]
+
+
+def test_bad_settings_are_refused(tmp_path):
+    with pytest.raises(ValueError, match="workers"):
+        ReproduceConfig(out=tmp_path, workers=0)
+    with pytest.raises(ValueError, match="bias"):
+        ReproduceConfig(out=tmp_path, bias="rusty")
+    with pytest.raises(ValueError, match="search"):
+        Profile(name="x", search="exhaustive")
+    with pytest.raises(ValueError, match="debridement_trials"):
+        Profile(name="x", debridement_trials=0)
+    assert main(["reproduce", "--quick", "--out", str(tmp_path), "--workers", "0"]) == 2
+
+
+# ---------------------------------------------------------------- the scheduler
+def record(name: str, log: str) -> dict:
+    with open(log, "a") as handle:
+        handle.write(name + "\n")
+    return {"name": name}
+
+
+def fail(message: str) -> dict:
+    raise RuntimeError(message)
+
+
+def test_tasks_run_after_what_they_need_and_results_are_cached(tmp_path):
+    log = tmp_path / "log.txt"
+    graph = [
+        Task("c", record, {"name": "c", "log": str(log)}, needs=("a", "b"), cost_s=100),
+        Task("a", record, {"name": "a", "log": str(log)}, cost_s=1),
+        Task("b", record, {"name": "b", "log": str(log)}, needs=("a",), cost_s=5),
+    ]
+    results = run_tasks(graph, tmp_path / "cache", workers=1, progress=False)
+    assert log.read_text().split() == ["a", "b", "c"]
+    assert list(results) == ["c", "a", "b"] and results["c"]["name"] == "c" and not results["c"]["cached"]
+    again = run_tasks(graph, tmp_path / "cache", workers=1, progress=False)
+    assert log.read_text().split() == ["a", "b", "c"]  # nothing ran twice
+    assert all(r["cached"] for r in again.values())
+
+
+def test_bad_graphs_and_failures_are_reported(tmp_path):
+    log = str(tmp_path / "log.txt")
+    with pytest.raises(ValueError, match="unknown"):
+        run_tasks([Task("a", record, {"name": "a", "log": log}, needs=("z",))], tmp_path, progress=False)
+    with pytest.raises(ValueError, match="cycle"):
+        run_tasks([Task("a", record, needs=("b",)), Task("b", record, needs=("a",))], tmp_path, progress=False)
+    with pytest.raises(ValueError, match="unique"):
+        run_tasks([Task("a", record), Task("a", record)], tmp_path, progress=False)
+    graph = [Task("ok", record, {"name": "ok", "log": log}), Task("bad", fail, {"message": "boom"})]
+    for workers in (1, 2):
+        with pytest.raises(TaskError, match="'bad' failed: RuntimeError: boom"):
+            run_tasks(graph, tmp_path / f"cache{workers}", workers=workers, progress=False)
+        assert (tmp_path / f"cache{workers}" / "ok.json").exists()  # finished work stays cached
