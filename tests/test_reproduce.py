@@ -42,7 +42,7 @@ def test_tiny_reproduce_writes_report_results_and_figures(tiny_run):
         assert math.isfinite(row["mean_mm"]) and row["mean_mm"] > 0
         assert all(math.isfinite(v) for v in row["per_setting_px"].values())
     cells = {(c["method"], c["fragment"]) for c in data["debridement"]}
-    assert cells == {(m, f) for m in ("DNN", "DNN+RF") for f in ("pumpkin_seed", "raisin")}
+    assert cells == {(m, f) for m in ("DNN", "DNN+RF", "sac (RL)") for f in ("pumpkin_seed", "raisin")}
     for cell in data["debridement"]:
         assert cell["picks"] == 2 and cell["success"] + cell["A"] + cell["B"] + cell["C"] <= cell["picks"]
         assert math.isfinite(cell["time_per_fragment_s"]) and cell["time_per_fragment_s"] > 0

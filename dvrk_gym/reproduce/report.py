@@ -216,7 +216,8 @@ def _debridement_section(data: dict[str, Any]) -> list[str]:
     lines = ["## Debridement", "",
              f"Each cell: {cells[0]['trials']} trials x {data['settings']['profile']['debridement_picks']} fragments (the paper: 15 x 8). "
              "Outcomes: A missed (calibration), B slipped though the grip was placed well, C a raisin pulled out by one tip. "
-             f"Seconds per fragment are simulated time (the paper: {low}-{high} s).", ""]
+             f"Seconds per fragment are simulated time (the paper: {low}-{high} s). Rows marked (RL) aim the picks with "
+             "the RL agent trained on GridTouch-v0 below, fed the same target as the calibrators (the paper has no such row).", ""]
     lines += _table(["fragment", "calibrator", "success", "paper", "difference", "failures", "paper failures", "s/fragment"], rows) + [""]
     phases = list(data["debridement_paper_phase_s"])
     phase_rows = [[f"{c['fragment'].replace('_', ' ')}, {c['method']}", *(f"{c['phase_s'][p]:.2f}" for p in phases)] for c in cells]

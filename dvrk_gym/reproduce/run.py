@@ -113,6 +113,13 @@ def build_tasks(config: ReproduceConfig) -> list[Task]:
             "bias_seed": config.bias_seed, "resolution": resolution, "benchmark_seed": config.seed + BENCHMARK_SEED_OFFSET,
             "out": str(out / "baselines" / agent),
         }, cost_s=steps / 10.0 + 10))
+        for fragment in FRAGMENTS:
+            name = f"debridement_{agent}_{fragment}"
+            graph.append(Task(name, tasks.rl_debridement, {
+                "model": str(out / "baselines" / agent / "model.zip"), "fragment": fragment, "trials": profile.debridement_trials,
+                "picks": profile.debridement_picks, "seed": config.seed, "bias": config.bias, "bias_seed": config.bias_seed,
+                "resolution": resolution, "out": str(out / "debridement" / name),
+            }, needs=(f"rl_{agent}",), cost_s=0.6 * profile.debridement_picks * profile.debridement_trials))
     return graph
 
 

@@ -93,6 +93,25 @@ def debridement(calibration_folder: str, calibrator: str, fragment: str, trials:
                              {"method": CALIBRATOR_LABELS[calibrator], "calibrator": calibrator, "fragment": fragment})
 
 
+def rl_debridement(model: str, fragment: str, trials: int, picks: int, seed: int, bias: str, bias_seed: int,
+                   resolution: tuple[int, int], out: str) -> dict[str, Any]:
+    """One debridement cell with a trained GridTouch agent aiming the picks
+    (:func:`~dvrk_gym.baselines.transfer.pick_policy`), as the calibrators aim theirs."""
+    import gymnasium as gym
+
+    import dvrk_gym  # noqa: F401  (registers the environments)
+    from dvrk_gym.baselines.checkpoints import load_agent
+    from dvrk_gym.baselines.transfer import pick_policy
+    from dvrk_gym.cli_debridement import FRAGMENT_LABELS
+
+    agent = load_agent(Path(model))
+    env = gym.make("dvrk_gym/Debridement-v0", fragment=fragment, max_picks=picks, bias=bias, bias_seed=bias_seed,
+                   camera_resolution=tuple(resolution))
+    method = f"{agent.config.agent} (RL)"
+    return _debridement_cell(env, pick_policy(agent), f"{agent.label}, {FRAGMENT_LABELS[fragment]}", trials, seed, out,
+                             {"method": method, "calibrator": None, "agent": agent.label, "fragment": fragment})
+
+
 def _debridement_cell(env: Any, policy: Any, title: str, trials: int, seed: int, out: str, meta: dict[str, Any]) -> dict[str, Any]:
     """Run the trials of one cell, write its JSON and outcome grid, return its totals."""
     import time
