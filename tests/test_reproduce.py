@@ -75,7 +75,7 @@ def test_two_workers_give_the_same_numbers(tiny_run, tmp_path):
     two = run_reproduce(ReproduceConfig(out=tmp_path, profile=TINY, workers=2, progress=False))
     assert two.data["calibration"] == tiny_run.data["calibration"]
     assert two.data["debridement"] == [
-        {**cell, "figure": cell["figure"].replace(str(tiny_run.report.parent), str(tmp_path)), "wall_s_per_trial": two_cell["wall_s_per_trial"], "wall_s": two_cell["wall_s"]}
+        {**cell, "wall_s_per_trial": two_cell["wall_s_per_trial"], "wall_s": two_cell["wall_s"]}
         for cell, two_cell in zip(tiny_run.data["debridement"], two.data["debridement"])
     ]
     assert two.data["rl"][0]["mean_mm"] == tiny_run.data["rl"][0]["mean_mm"]

@@ -4,6 +4,7 @@ difference)."""
 
 from __future__ import annotations
 
+import os
 import platform
 from importlib import metadata
 from pathlib import Path
@@ -60,7 +61,8 @@ def collect_results(config: Any, task_results: dict[str, dict[str, Any]]) -> dic
     for name, cell in task_results.items():
         if name.startswith("debridement_"):
             paper = PAPER_RESULTS.get((cell["calibrator"], cell["fragment"]))
-            debridement.append({key: value for key, value in cell.items() if key not in ("cached",)} | {"paper": paper})
+            figure = os.path.relpath(cell["figure"], config.out) if Path(cell["figure"]).is_absolute() else cell["figure"]
+            debridement.append({key: value for key, value in cell.items() if key != "cached"} | {"paper": paper, "figure": figure})
     agents = [{k: v for k, v in result.items() if k != "cached"} for name, result in task_results.items() if name.startswith("rl_")]
     return {
         "settings": {**config.settings(), "workers": config.workers, "versions": _versions()},
@@ -86,7 +88,6 @@ def write_figures(folder: Path, data: dict[str, Any]) -> dict[str, str]:
     from dvrk_gym.calibration.search import SearchResult, plot_search
 
     folder = Path(folder)
-    run = folder.parent
     figures = {"bias_field": "figures/bias_field.png", "calibration_error_maps": "figures/calibration_error_maps.png"}
     if data["search"]:
         results = [SearchResult(**{**row, "fold_mm2": tuple(row["fold_mm2"])}) for row in data["search"]]
@@ -97,7 +98,7 @@ def write_figures(folder: Path, data: dict[str, Any]) -> dict[str, str]:
         plot_curves(curves, folder / "learning_curves.png", title="RL agents on GridTouch-v0: touch error against robot moves")
         figures["learning_curves"] = "figures/learning_curves.png"
     for cell in data["debridement"]:
-        figures[f"debridement {cell['method']} {cell['fragment']}"] = str(Path(cell["figure"]).relative_to(run)) if Path(cell["figure"]).is_absolute() else cell["figure"]
+        figures[Path(cell["figure"]).stem] = cell["figure"]
     return figures
 
 
@@ -224,7 +225,7 @@ def _debridement_section(data: dict[str, Any]) -> list[str]:
     phase_rows.append(["paper (frames / 25 fps)", *(f"{data['debridement_paper_phase_s'][p]:.2f}" for p in phases)])
     lines += ["Time per phase of a pick, seconds:", ""] + _table(["cell", *(p.replace("_", " ") for p in phases)], phase_rows) + [""]
     for cell in cells:
-        lines += _image(data, f"debridement {cell['method']} {cell['fragment']}", f"outcomes, {cell['method']}, {cell['fragment']}")
+        lines += _image(data, Path(cell["figure"]).stem, f"outcomes, {cell['method']}, {cell['fragment']}")
     return lines
 
 
