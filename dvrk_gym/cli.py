@@ -66,6 +66,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (ValueError, FileNotFoundError) as error:
         print(f"dvrk-gym {args.command}: error: {error}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        print(f"dvrk-gym {args.command}: interrupted (cached stages are kept: the same command resumes)", file=sys.stderr)
+        return 130
 
 
 if __name__ == "__main__":

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import sys
 from pathlib import Path
 
 DEFAULT_OUT = {"quick": Path("dvrk_gym_out/reproduce-quick"), "full": Path("dvrk_gym_out/reproduce")}
@@ -11,12 +12,17 @@ DEFAULT_OUT = {"quick": Path("dvrk_gym_out/reproduce-quick"), "full": Path("dvrk
 
 def _run_reproduce(args: argparse.Namespace) -> int:
     from dvrk_gym.reproduce import PROFILES, ReproduceConfig, run_reproduce
+    from dvrk_gym.reproduce.scheduler import TaskError
 
     profile = "quick" if args.quick else "full"
     out = args.out or DEFAULT_OUT[profile]
     config = ReproduceConfig(out=out, profile=PROFILES[profile], seed=args.seed, workers=args.workers,
                              bias=args.bias, bias_seed=args.bias_seed, progress=not args.no_progress)
-    run = run_reproduce(config)
+    try:
+        run = run_reproduce(config)
+    except TaskError as error:
+        print(f"dvrk-gym reproduce: {error}\n(the stages that finished are cached in {out}: the same command resumes)", file=sys.stderr)
+        return 1
     calibration = run.data["calibration"]
     print()
     print(f"{'method':<10}{'sim mm':>8}{'paper mm':>10}")

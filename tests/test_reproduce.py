@@ -133,3 +133,11 @@ def test_bad_graphs_and_failures_are_reported(tmp_path):
         with pytest.raises(TaskError, match="'bad' failed: RuntimeError: boom"):
             run_tasks(graph, tmp_path / f"cache{workers}", workers=workers, progress=False)
         assert (tmp_path / f"cache{workers}" / "ok.json").exists()  # finished work stays cached
+
+
+def test_the_task_that_unlocks_most_work_starts_first(tmp_path):
+    log = tmp_path / "log.txt"
+    step = lambda name, cost, needs=(): Task(name, record, {"name": name, "log": str(log)}, needs=needs, cost_s=cost)  # noqa: E731
+    graph = [step("big", 50), step("root", 10), step("leaf1", 30, ("root",)), step("leaf2", 30, ("root",))]
+    run_tasks(graph, tmp_path / "cache", workers=1, progress=False)
+    assert log.read_text().split() == ["root", "big", "leaf1", "leaf2"]  # root carries 70 s of work, big 50

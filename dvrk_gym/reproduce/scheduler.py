@@ -33,7 +33,9 @@ class Task:
         function: a module-level function returning a JSON-able dict.
         kwargs: its keyword arguments (picklable).
         needs: names of the tasks that must finish first.
-        cost_s: rough wall time, seconds: among ready tasks the costliest starts first.
+        cost_s: rough wall time, seconds. Among ready tasks, the one with the most work
+            riding on it (its cost plus that of every task that needs it, directly or
+            not) starts first, so that the stages that unlock others are not kept waiting.
     """
 
     name: str
@@ -86,6 +88,23 @@ def _check_graph(tasks: list[Task]) -> None:
         pending = [task for task in pending if task.name not in done]
 
 
+def _priorities(tasks: list[Task]) -> dict[str, float]:
+    """Each task's cost plus the costs of all the tasks that need it, directly or not."""
+    dependents: dict[str, set[str]] = {task.name: set() for task in tasks}
+    for task in tasks:
+        for need in task.needs:
+            dependents[need].add(task.name)
+    cost = {task.name: task.cost_s for task in tasks}
+
+    def below(name: str) -> set[str]:
+        found = set(dependents[name])
+        for child in dependents[name]:
+            found |= below(child)
+        return found
+
+    return {name: cost[name] + sum(cost[child] for child in below(name)) for name in cost}
+
+
 def run_tasks(tasks: list[Task], cache_dir: Path, workers: int = 1, progress: bool = True) -> dict[str, dict[str, Any]]:
     """Run (or load from ``cache_dir``) every task; returns ``{name: result}``.
 
@@ -111,7 +130,8 @@ def run_tasks(tasks: list[Task], cache_dir: Path, workers: int = 1, progress: bo
         path = cache_dir / f"{task.name}.json"
         if path.exists():
             results[task.name] = {**json.loads(path.read_text()), "cached": True}
-    pending = sorted((task for task in tasks if task.name not in results), key=lambda task: -task.cost_s)
+    priority = _priorities(tasks)
+    pending = sorted((task for task in tasks if task.name not in results), key=lambda task: -priority[task.name])
     bar = tqdm(total=len(tasks), initial=len(results), desc="reproduce", unit="task", disable=not progress)
 
     def finish(task: Task, result: dict[str, Any], seconds: float) -> None:
@@ -143,11 +163,23 @@ def run_tasks(tasks: list[Task], cache_dir: Path, workers: int = 1, progress: bo
     return {task.name: results[task.name] for task in tasks}  # in the graph's order
 
 
+@contextlib.contextmanager
+def _stop_workers_on_interrupt() -> Iterator[None]:
+    """On Ctrl-C (or any error escaping the loop) stop the workers now rather than let
+    them finish their tasks; finished tasks are cached already."""
+    try:
+        yield
+    except BaseException:
+        for child in multiprocessing.active_children():
+            child.terminate()
+        raise
+
+
 def _run_in_pool(pending: list[Task], workers: int, ready: Callable[[], list[Task]], finish: Callable[[Task, dict, float], None], bar: Any) -> None:
     running: dict[Future, Task] = {}
     failure: TaskError | None = None
     context = multiprocessing.get_context("spawn")  # no forked torch or pybullet state
-    with ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool:
+    with ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool, _stop_workers_on_interrupt():
         while pending or running:
             if failure is None:
                 for task in ready():
