@@ -262,10 +262,10 @@ def format_debridement_comparison(rows: Sequence[DebridementRow], notes: Sequenc
     lines = []
     for row in rows:
         success = f"{row.success}/{row.picks} {100 * row.success_rate:.0f}%" if row.picks else "0/0"
-        lines.append(f"{row.method:<32}{_moves(row.robot_moves):>12}{success:>15}{row.missed:>5}{row.slipped:>5}{row.pierced:>5}{row.time_per_fragment_s:>12.2f}")
+        lines.append(f"{row.method:<48}{_moves(row.robot_moves):>12}{success:>15}{row.missed:>5}{row.slipped:>5}{row.pierced:>5}{row.time_per_fragment_s:>12.2f}")
     return _text_table(
         "Debridement (trials of 8 picks): success and time per fragment, for the robot moves each method used",
-        f"{'method':<32}{'robot moves':>12}{'success':>15}{'A':>5}{'B':>5}{'C':>5}{'s/fragment':>12}",
+        f"{'method':<48}{'robot moves':>12}{'success':>15}{'A':>5}{'B':>5}{'C':>5}{'s/fragment':>12}",
         lines,
         notes,
     )
