@@ -32,7 +32,7 @@ def _run_reproduce(args: argparse.Namespace) -> int:
     for cell in run.data["debridement"]:
         paper = cell["paper"]
         paper_text = f"   paper {paper['success']}/120" if paper else ""
-        print(f"debridement {cell['method']:<7}{cell['fragment']:<14}{cell['success']:>4}/{cell['picks']:<4}{paper_text}")
+        print(f"debridement {cell['method']:<14}{cell['fragment']:<14}{cell['success']:>4}/{cell['picks']:<4}{paper_text}")
     for agent in run.data["rl"]:
         print(f"RL {agent['label']}: {agent['mean_mm']:.2f} mm after {agent['env_steps']:,} moves")
     print(f"\nwrote {run.report}, {run.results} and figures in {out / 'figures'} ({run.wall_s:.0f} s)")

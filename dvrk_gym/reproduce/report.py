@@ -33,6 +33,11 @@ def _versions() -> dict[str, str]:
     return versions
 
 
+def _relative(path: str, run_folder: Path) -> str:
+    """A path inside the run folder, relative to it (so the folder can be moved)."""
+    return os.path.relpath(os.path.abspath(path), os.path.abspath(run_folder))
+
+
 def collect_results(config: Any, task_results: dict[str, dict[str, Any]]) -> dict[str, Any]:
     """Everything the report shows, as plain numbers, from the tasks' summaries."""
     from dvrk_gym.cli_debridement import PAPER_RESULTS
@@ -61,12 +66,12 @@ def collect_results(config: Any, task_results: dict[str, dict[str, Any]]) -> dic
     for name, cell in task_results.items():
         if name.startswith("debridement_"):
             paper = PAPER_RESULTS.get((cell["calibrator"], cell["fragment"]))
-            figure = os.path.relpath(cell["figure"], config.out) if Path(cell["figure"]).is_absolute() else cell["figure"]
-            debridement.append({key: value for key, value in cell.items() if key != "cached"} | {"paper": paper, "figure": figure})
-    agents = [{k: v for k, v in result.items() if k != "cached"} for name, result in task_results.items() if name.startswith("rl_")]
+            debridement.append({key: value for key, value in cell.items() if key != "cached"} | {"paper": paper, "figure": _relative(cell["figure"], config.out)})
+    agents = [{k: v for k, v in result.items() if k != "cached"} | {"model": _relative(result["model"], config.out)}
+              for name, result in task_results.items() if name.startswith("rl_")]
     return {
         "settings": {**config.settings(), "workers": config.workers, "versions": _versions()},
-        "bias": {k: v for k, v in task_results["bias_field"].items() if k != "cached"},
+        "bias": {k: v for k, v in task_results["bias_field"].items() if k != "cached"} | {"figure": _relative(task_results["bias_field"]["figure"], config.out)},
         "phase1": {**phase1, "kept_fraction": phase1["kept"] / max(phase1["raw"], 1), "paper": PAPER_PHASE1},
         "search": search,
         "search_paper_mm2": PAPER_SEARCH_MM2,
@@ -126,8 +131,7 @@ def write_report(path: Path, data: dict[str, Any]) -> Path:
         "",
         f"Profile **{profile['name']}**, seed {settings['seed']}, cable bias `{settings['bias']}` "
         f"(instrument {settings['bias_seed']}), endoscope {profile['camera_resolution'][0]} x {profile['camera_resolution'][1]}, "
-        f"{settings['workers']} worker(s). Tasks took {data['wall_s']['tasks_total']:.0f} s in all; this call "
-        f"{data['wall_s']['this_call']:.0f} s{' (some tasks loaded from the cache)' if data['task_cached'] else ''}.",
+        f"{settings['workers']} worker(s). " + _timing_sentence(data),
         "",
         "Every figure from the simulation, with the paper's beside it and the difference. "
         "`results.json` holds the same numbers and more (per-setting statistics, learning curves, trial rows).",
@@ -141,6 +145,12 @@ def write_report(path: Path, data: dict[str, Any]) -> Path:
     path = Path(path)
     path.write_text("\n".join(lines))
     return path
+
+
+def _timing_sentence(data: dict[str, Any]) -> str:
+    calls = [call for call in data["calls"] if call["tasks_run"]]
+    runs = "; ".join(f"{call['wall_s'] / 60:.1f} min for {call['tasks_run']} tasks on {call['workers']} worker(s)" for call in calls)
+    return f"Wall time: {runs or 'every task was cached'} (the tasks' own times add up to {data['wall_s']['tasks_total'] / 60:.1f} min)."
 
 
 def _bias_section(data: dict[str, Any]) -> list[str]:
@@ -219,7 +229,7 @@ def _debridement_section(data: dict[str, Any]) -> list[str]:
              "Outcomes: A missed (calibration), B slipped though the grip was placed well, C a raisin pulled out by one tip. "
              f"Seconds per fragment are simulated time (the paper: {low}-{high} s). Rows marked (RL) aim the picks with "
              "the RL agent trained on GridTouch-v0 below, fed the same target as the calibrators (the paper has no such row).", ""]
-    lines += _table(["fragment", "calibrator", "success", "paper", "difference", "failures", "paper failures", "s/fragment"], rows) + [""]
+    lines += _table(["fragment", "method", "success", "paper", "difference", "failures", "paper failures", "s/fragment"], rows) + [""]
     phases = list(data["debridement_paper_phase_s"])
     phase_rows = [[f"{c['fragment'].replace('_', ' ')}, {c['method']}", *(f"{c['phase_s'][p]:.2f}" for p in phases)] for c in cells]
     phase_rows.append(["paper (frames / 25 fps)", *(f"{data['debridement_paper_phase_s'][p]:.2f}" for p in phases)])

@@ -75,6 +75,19 @@ def _file_name(text: str) -> str:
     return text.replace("+", "_")
 
 
+def _search_cost(model: str, search: str) -> float:
+    """Rough seconds to cross-validate one model of the search (measured on 2 busy cores)."""
+    from dvrk_gym.calibration.search import CHOSEN_NET, SWEEP_FOLDS
+
+    if not model.startswith("DNN"):
+        return 5.0
+    if search == "quick":
+        return 3.0
+    units, layers = (int(part[1:]) for part in model.split("_")[1:3])
+    per_fold = 5.0 if units < 300 or layers == 1 else 20.0 * (layers - 1)
+    return per_fold * (10 if model == CHOSEN_NET else SWEEP_FOLDS)
+
+
 def build_tasks(config: ReproduceConfig) -> list[Task]:
     """The task graph of a reproduction."""
     from dvrk_gym.baselines.budgets import resolve_budget
@@ -95,7 +108,7 @@ def build_tasks(config: ReproduceConfig) -> list[Task]:
              cost_s=phase1_s + 0.03 * profile.dnn_epochs + 15),
     ]
     for model in tasks.search_models(profile.search):
-        cost = (60.0 if profile.search == "paper" else 3.0) if model.startswith("DNN") else 2.0
+        cost = _search_cost(model, profile.search)
         graph.append(Task(f"search_{model}", tasks.search_model, {"calibration_folder": str(calibration_folder), "model": model, "search": profile.search, "seed": config.seed},
                           needs=("calibration",), cost_s=cost))
     for calibrator in CALIBRATORS:
@@ -154,11 +167,22 @@ def run_reproduce(config: ReproduceConfig) -> Reproduction:
     data = collect_results(config, task_results)
     data["figures"] = write_figures(config.out / "figures", data)
     wall = time.perf_counter() - start
-    data["wall_s"] = {"this_call": wall, "tasks_total": sum(r["wall_s"] for r in task_results.values())}
+    calls = _log_call(config, wall, tasks_run=sum(not result["cached"] for result in task_results.values()))
+    data["calls"] = calls
+    data["wall_s"] = {"this_call": wall, "all_calls": sum(call["wall_s"] for call in calls), "tasks_total": sum(r["wall_s"] for r in task_results.values())}
     results_path = config.out / "results.json"
     results_path.write_text(json.dumps(data, indent=1, default=_json_default))
     report_path = write_report(config.out / "report.md", data)
     return Reproduction(report_path, results_path, data, wall)
+
+
+def _log_call(config: ReproduceConfig, wall_s: float, tasks_run: int) -> list[dict[str, Any]]:
+    """Append this call to ``calls.json`` in the run folder (a resumed run has several)."""
+    path = config.out / "calls.json"
+    calls = json.loads(path.read_text()) if path.exists() else []
+    calls.append({"wall_s": wall_s, "tasks_run": tasks_run, "workers": config.workers, "finished": time.strftime("%Y-%m-%d %H:%M:%S")})
+    path.write_text(json.dumps(calls, indent=1))
+    return calls
 
 
 def _json_default(value: Any) -> Any:
