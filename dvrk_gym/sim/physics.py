@@ -6,8 +6,11 @@ worlds live in one process without seeing each other, and ``close()`` frees the 
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import os
+import sys
+from typing import Iterator
 
 import pybullet
 from pybullet_utils import bullet_client
@@ -20,6 +23,24 @@ DEFAULT_TIME_STEP_S = 1.0 / 240.0
 
 class PhysicsError(RuntimeError):
     """The physics server is closed, or a body name is unknown."""
+
+
+@contextlib.contextmanager
+def _quiet_stdout() -> Iterator[None]:
+    """Silence what C code prints to file descriptor 1 (a no-op where it cannot be redirected)."""
+    try:
+        sys.stdout.flush()
+        saved = os.dup(1)
+    except (OSError, ValueError):
+        yield
+        return
+    try:
+        with open(os.devnull, "w") as devnull:
+            os.dup2(devnull.fileno(), 1)
+            yield
+    finally:
+        os.dup2(saved, 1)
+        os.close(saved)
 
 
 class Physics:
@@ -37,9 +58,8 @@ class Physics:
                 "DISPLAY is not set; use render_mode='rgb_array' or None on a headless machine"
             )
         mode = pybullet.GUI if gui else pybullet.DIRECT
-        self._client: bullet_client.BulletClient | None = bullet_client.BulletClient(
-            connection_mode=mode
-        )
+        with _quiet_stdout():  # the server prints "argv[0]=" on every connection
+            self._client: bullet_client.BulletClient | None = bullet_client.BulletClient(connection_mode=mode)
         self.time_step_s = float(time_step_s)
         self._bodies: dict[str, int] = {}
         self._configure()
