@@ -98,10 +98,10 @@ def test_unknown_agent_and_training_yaws_are_refused():
 @pytest.mark.slow
 @pytest.mark.parametrize("agent", sorted(name for name, spec in AGENTS.items() if spec.env_id == GRID_TOUCH_ID))
 def test_each_grid_touch_agent_trains_saves_loads_and_runs_the_benchmark(agent, tmp_path):
-    config = TrainConfig(agent=agent, steps=120, camera_resolution=TINY, eval_points=2, overrides=FAST_NETWORK)
+    config = TrainConfig(agent=agent, steps=300, camera_resolution=TINY, eval_points=2, overrides=FAST_NETWORK)
     result = train(config, progress=False)
-    assert result.env_steps == 120
-    assert [p.env_steps for p in result.curve] == [0, 60, 120]
+    assert result.env_steps == 300
+    assert [p.env_steps for p in result.curve] == [0, 150, 300]
     assert all(np.isfinite([p.mm_error, p.pixel_error]).all() for p in result.curve)
     assert result.steps_per_second > 0
 
@@ -116,7 +116,7 @@ def test_each_grid_touch_agent_trains_saves_loads_and_runs_the_benchmark(agent, 
     for errors in table.values():
         assert errors.mm.shape == (N_CIRCLES,) and np.isfinite(errors.mm).all() and np.isfinite(errors.pixel).all()
     row = agent_row(loaded, table)
-    assert row.robot_moves == 120 and np.isfinite(row.mm_error)
+    assert row.robot_moves == 300 and np.isfinite(row.mm_error)
 
 
 def test_loading_needs_the_settings_written_beside_the_zip(tmp_path):

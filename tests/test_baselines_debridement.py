@@ -29,11 +29,18 @@ from dvrk_gym.baselines.transfer import GridTouchPickPolicy, PickAgentPolicy
 from dvrk_gym.baselines.wrappers import scale_goal
 from dvrk_gym.cli_baselines import add_commands
 from dvrk_gym.cli_debridement import Trial, run_trials, totals
-from dvrk_gym.envs.debridement import PICK_HIGH, PICK_LOW, fragment_target
+from dvrk_gym.envs.debridement import PICK_HIGH, PICK_LOW, PickTiming, fragment_target
 from dvrk_gym.sim.kinematics import PAPER_YAWS_RAD, nearest_paper_yaw
+from dvrk_gym.sim.motion import MotionLimits
 
 TINY = (320, 180)
 FAST = {"learning_starts": 20, "batch_size": 32, "gradient_steps": 1, "policy_kwargs": {"net_arch": [16, 16]}}
+FAST_PICKS = PickTiming(
+    travel=MotionLimits(max_speed_m_s=0.3, max_accel_m_s2=3.0), descend=MotionLimits(max_speed_m_s=0.15, max_accel_m_s2=1.5),
+    carry=MotionLimits(max_speed_m_s=0.15, max_accel_m_s2=1.5), grip_dwell_s=0.4, drop_fall_s=0.2, drop_dwell_s=0.2,
+)
+"""Picks in half the wall time (faster moves, shorter dwells), for training a few hundred of them in a test."""
+PICK_STEPS = 200
 
 
 @pytest.fixture(scope="module")
@@ -117,10 +124,11 @@ def test_models_log_nowhere():
 
 @pytest.mark.slow
 def test_pick_agent_trains_loads_acts_on_raw_observations_and_is_evaluated_by_the_cli(tmp_path, capsys):
-    config = TrainConfig(agent="sac_pick", steps=40, camera_resolution=TINY, eval_points=1, curve_trials=1, overrides=FAST)
+    config = TrainConfig(agent="sac_pick", steps=PICK_STEPS, camera_resolution=TINY, eval_points=1, curve_trials=1, overrides=FAST,
+                         env_overrides={"timing": FAST_PICKS})
     result = train(config, progress=False)
-    assert result.env_steps == 40 and result.steps_per_second > 0
-    assert [p.env_steps for p in result.curve] == [0, 40]
+    assert result.env_steps == PICK_STEPS and result.steps_per_second > 0
+    assert [p.env_steps for p in result.curve] == [0, PICK_STEPS]
     for point in result.curve:
         assert 0.0 <= point.success_rate <= 1.0 and np.isfinite(point.mm_error) and point.time_per_fragment_s > 0
         assert math.isnan(point.pixel_error)
@@ -147,7 +155,12 @@ def test_pick_agent_trains_loads_acts_on_raw_observations_and_is_evaluated_by_th
     assert "success" in capsys.readouterr().out
     rows = json.loads((tmp_path / "eval" / "debridement.json").read_text())["rows"]
     assert [r["method"] for r in rows] == [agent.label]
-    assert rows[0]["picks"] == 8 and rows[0]["robot_moves"] == 40
+    reloaded = make_agent_env(agent.config, training=False)  # the settings round-trip through model.json
+    try:
+        assert reloaded.unwrapped.config.timing == FAST_PICKS
+    finally:
+        reloaded.close()
+    assert rows[0]["picks"] == 8 and rows[0]["robot_moves"] == PICK_STEPS
     assert rows[0]["success"] + rows[0]["missed"] + rows[0]["slipped"] + rows[0]["pierced"] == 8
     assert np.isfinite(rows[0]["time_per_fragment_s"]) and rows[0]["time_per_fragment_s"] > 0
     assert not (tmp_path / "eval" / "baseline_table.json").exists()  # no GridTouch agent: no touch grid

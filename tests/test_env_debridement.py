@@ -394,3 +394,20 @@ def test_debride_command_writes_the_trial_table(tmp_path, capsys):
     assert len(written["trials"][0]["outcomes"].split(",")) == 8
     assert written["totals"]["success"] >= 6
     assert (tmp_path / "out" / "debridement_rbt_raisin.png").stat().st_size > 1000
+
+
+def test_nested_settings_can_be_given_as_dicts_and_bad_ones_are_refused():
+    import dataclasses
+
+    from dvrk_gym.envs.debridement import DebridementConfig, PickTiming
+    from dvrk_gym.sim.grasp import GripperConfig
+    from dvrk_gym.sim.motion import MotionLimits
+
+    timing = PickTiming(travel=MotionLimits(max_speed_m_s=0.1), grip_dwell_s=0.5)
+    gripper = GripperConfig(jaw_friction=1.2)
+    from_dicts = DebridementConfig(timing=dataclasses.asdict(timing), gripper=dataclasses.asdict(gripper))  # as JSON gives them
+    assert from_dicts.timing == timing and from_dicts.gripper == gripper
+    with pytest.raises(ValueError, match="grip_dwell"):
+        DebridementConfig(timing={"grip_dwell": 1.0})  # a misspelt field
+    with pytest.raises(ValueError, match="timing must be a PickTiming"):
+        DebridementConfig(timing=0.5)

@@ -160,6 +160,17 @@ class DebridementConfig(EnvConfig):
 
     def __post_init__(self) -> None:
         super().__post_init__()
+        # Settings read back from JSON (a saved agent's, say) hold the nested configs as dicts.
+        try:
+            if isinstance(self.timing, dict):
+                limits = {k: MotionLimits(**v) if isinstance(v, dict) else v for k, v in self.timing.items()}
+                object.__setattr__(self, "timing", PickTiming(**limits))
+            if isinstance(self.gripper, dict):
+                object.__setattr__(self, "gripper", GripperConfig(**self.gripper))
+        except TypeError as error:  # a misspelt field
+            raise ValueError(f"bad timing or gripper settings: {error}") from error
+        if not isinstance(self.timing, PickTiming) or not isinstance(self.gripper, GripperConfig):
+            raise ValueError(f"timing must be a PickTiming and gripper a GripperConfig (or their fields as dicts), got {type(self.timing).__name__} and {type(self.gripper).__name__}")
         if self.fragment not in FRAGMENT_TYPES:
             raise ValueError(f"fragment must be one of {sorted(FRAGMENT_TYPES)}, got {self.fragment!r}")
         if self.action_mode not in ACTION_MODES:
