@@ -89,6 +89,8 @@ def test_bad_settings_are_refused(tmp_path):
         ReproduceConfig(out=tmp_path, bias="rusty")
     with pytest.raises(ValueError, match="search"):
         Profile(name="x", search="exhaustive")
+    with pytest.raises(ValueError, match="rl_agents must be GridTouch-v0 agents"):
+        Profile(name="x", rl_agents=("sac_pick",))  # picks are judged by debridement, not the grid
     with pytest.raises(ValueError, match="debridement_trials"):
         Profile(name="x", debridement_trials=0)
     assert main(["reproduce", "--quick", "--out", str(tmp_path), "--workers", "0"]) == 2

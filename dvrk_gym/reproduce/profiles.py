@@ -50,6 +50,12 @@ class Profile:
         for name in ("n_trajectories", "steps_per_trajectory", "dnn_epochs", "debridement_trials", "debridement_picks", "rl_eval_points"):
             if int(getattr(self, name)) < 1:
                 raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
+        from dvrk_gym.baselines.names import AGENT_ENVS, GRID_TOUCH_ID
+
+        grid_agents = sorted(name for name, env_id in AGENT_ENVS.items() if env_id == GRID_TOUCH_ID)
+        unknown = [agent for agent in self.rl_agents if agent not in grid_agents]
+        if unknown:
+            raise ValueError(f"rl_agents must be GridTouch-v0 agents {grid_agents}, got {unknown}")
         if self.rl_steps is not None and self.rl_steps < 1:
             raise ValueError(f"rl_steps must be >= 1 or None, got {self.rl_steps}")
 
