@@ -11,6 +11,7 @@ from typing import Callable, Sequence
 from dvrk_gym.cli_baselines import add_commands as add_baseline_commands
 from dvrk_gym.cli_calibration import add_commands as add_calibration_commands
 from dvrk_gym.cli_debridement import add_commands as add_debridement_commands
+from dvrk_gym.cli_options import add_instrument_options
 from dvrk_gym.cli_reproduce import add_commands as add_reproduce_commands
 
 Command = Callable[[argparse.Namespace], int]
@@ -28,9 +29,7 @@ def _add_demo(subparsers: argparse._SubParsersAction) -> None:
         ),
     )
     parser.add_argument("--out", type=Path, default=Path("dvrk_gym_out/demo"), help="output folder (default: %(default)s)")
-    parser.add_argument("--bias", default="paper", help="cable bias preset: none, paper or severe (default: %(default)s)")
-    parser.add_argument("--bias-seed", type=int, default=0, help="which instrument to draw (default: %(default)s)")
-    parser.add_argument("--resolution", type=int, nargs=2, default=(1920, 1080), metavar=("W", "H"), help="endoscope image size in pixels (default: 1920 1080)")
+    add_instrument_options(parser)
     parser.add_argument("--circles", type=int, default=7, help="how many grid circles to touch, 1-35 (default: %(default)s)")
     parser.set_defaults(func=_run_demo)
 

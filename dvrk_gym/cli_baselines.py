@@ -10,6 +10,8 @@ import argparse
 import json
 from pathlib import Path
 
+from dvrk_gym.cli_options import add_instrument_options, add_progress_option
+
 LOAD_WARNING = (
     "Models are read back without unpickling (the policy weights with torch.load(weights_only=True), "
     "the settings from the JSON beside the zip), but only load model files this tool wrote, or that you trust: "
@@ -156,9 +158,7 @@ def _add_train(subparsers: argparse._SubParsersAction) -> None:
     train.add_argument("--steps", type=int, help="an explicit number of env steps (overrides --budget), for tests and quick runs")
     train.add_argument("--seed", type=int, default=0, help="seeds the model and the envs (default: %(default)s)")
     train.add_argument("--out", type=Path, help="output folder (default: dvrk_gym_out/baselines/<algo>_<budget>_seed<seed>)")
-    train.add_argument("--bias", default="paper", help="cable bias preset: none, paper or severe (default: %(default)s)")
-    train.add_argument("--bias-seed", type=int, default=0, help="which instrument to draw (default: %(default)s)")
-    train.add_argument("--resolution", type=int, nargs=2, default=(1920, 1080), metavar=("W", "H"), help="endoscope image size; evaluate at the same (default: 1920 1080)")
+    add_instrument_options(train)
     train.add_argument("--training-yaws", choices=("paper", "random"), default="paper", help="yaws of the training touches: a tour of the circles per paper yaw, or random (default: %(default)s)")
     train.add_argument("--reward", choices=("dense", "sparse"), help="GridTouch reward (default: the agent's, dense)")
     train.add_argument("--fragment", choices=("pumpkin_seed", "raisin"), help="pick agents: what to pick (default: pumpkin_seed)")
@@ -166,7 +166,7 @@ def _add_train(subparsers: argparse._SubParsersAction) -> None:
     train.add_argument("--vec-env", choices=("dummy", "subproc"), default="dummy", help="vector env for --n-envs > 1 (default: %(default)s)")
     train.add_argument("--learning-starts", type=int, help="random moves before learning (default: the agent's, 200; sac_pick 100)")
     train.add_argument("--eval-points", type=int, default=20, help="evaluations along the learning curve (default: %(default)s)")
-    train.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_progress_option(train)
     train.set_defaults(func=_run_train)
 
 
@@ -187,7 +187,7 @@ def _add_evaluate(subparsers: argparse._SubParsersAction) -> None:
     evaluate.add_argument("--trials", type=int, default=15, help="debridement trials of 8 picks per method (default: %(default)s, the paper's)")
     evaluate.add_argument("--fragment", choices=("pumpkin_seed", "raisin"), default="pumpkin_seed", help="debridement: what to pick (default: %(default)s)")
     evaluate.add_argument("--transfer", action="store_true", help="also run GridTouch agents through the debridement trials (aimed by pick_policy)")
-    evaluate.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_progress_option(evaluate)
     evaluate.set_defaults(func=_run_evaluate)
 
 

@@ -6,11 +6,11 @@ import argparse
 import json
 from pathlib import Path
 
+from dvrk_gym.cli_options import add_instrument_options
+
 
 def _add_world_options(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--bias", default="paper", help="cable bias preset: none, paper or severe (default: %(default)s)")
-    parser.add_argument("--bias-seed", type=int, default=0, help="which instrument to draw (default: %(default)s)")
-    parser.add_argument("--resolution", type=int, nargs=2, default=(1920, 1080), metavar=("W", "H"), help="endoscope image size (default: 1920 1080)")
+    add_instrument_options(parser)
     parser.add_argument("--seed", type=int, default=0, help="seeds collection, training and evaluation (default: %(default)s)")
 
 

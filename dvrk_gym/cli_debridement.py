@@ -21,6 +21,8 @@ from typing import Any
 
 import numpy as np
 
+from dvrk_gym.cli_options import add_instrument_options, add_progress_option
+
 logger = logging.getLogger(__name__)
 
 CALIBRATOR_FILES = {"rbt": "rbt.npz", "dnn": "dnn.npz", "dnn+rf": "two_phase.npz"}
@@ -51,6 +53,11 @@ class Trial:
     time_per_fragment_s: float
     phase_s: dict[str, float]
     sim_error: str | None = None
+
+
+def cell_name(method: str, fragment: str) -> str:
+    """File stem of one cell of the debridement table: ``debridement_dnn_rf_raisin``."""
+    return f"debridement_{method.replace('+', '_')}_{fragment}"
 
 
 def load_calibrator(folder: Path, name: str, bias: str = "paper", bias_seed: int = 0) -> tuple[Any, dict[str, Any]]:
@@ -223,7 +230,7 @@ def _run_debride(args: argparse.Namespace) -> int:
     text = format_trial_table(trials, args.calibrator, args.fragment, args.seed)
     print(text)
     args.out.mkdir(parents=True, exist_ok=True)
-    stem = f"debridement_{args.calibrator.replace('+', '_')}_{args.fragment}"
+    stem = cell_name(args.calibrator, args.fragment)
     meta = {"calibrator": args.calibrator, "fragment": args.fragment, "seed": args.seed, "calibration": str(args.calibration),
             "bias": bias, "bias_seed": bias_seed, "camera_resolution": list(args.resolution)}
     save_trials(trials, args.out / f"{stem}.json", meta)
@@ -250,8 +257,6 @@ def add_commands(subparsers: argparse._SubParsersAction) -> None:
     debride.add_argument("--calibration", type=Path, default=Path("dvrk_gym_out/calibration"), help="calibration run folder (default: %(default)s)")
     debride.add_argument("--seed", type=int, default=0, help="seeds the trials (default: %(default)s)")
     debride.add_argument("--out", type=Path, default=Path("dvrk_gym_out/debridement"), help="output folder (default: %(default)s)")
-    debride.add_argument("--resolution", type=int, nargs=2, default=(1920, 1080), metavar=("W", "H"), help="endoscope image size (default: 1920 1080)")
-    debride.add_argument("--bias", default="paper", help="cable bias preset, if the folder has no run yet (default: %(default)s)")
-    debride.add_argument("--bias-seed", type=int, default=0, help="which instrument, if the folder has no run yet (default: %(default)s)")
-    debride.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_instrument_options(debride, note=", if the folder has no run yet")
+    add_progress_option(debride)
     debride.set_defaults(func=_run_debride)

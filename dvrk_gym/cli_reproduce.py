@@ -7,6 +7,8 @@ import os
 import sys
 from pathlib import Path
 
+from dvrk_gym.cli_options import add_instrument_options, add_progress_option
+
 DEFAULT_OUT = {"quick": Path("dvrk_gym_out/reproduce-quick"), "full": Path("dvrk_gym_out/reproduce")}
 
 
@@ -56,7 +58,6 @@ def add_commands(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--workers", type=int, default=min(2, os.cpu_count() or 1),
                         help="processes running stages side by side; results do not depend on it (default: %(default)s)")
     parser.add_argument("--seed", type=int, default=0, help="seeds every stage (default: %(default)s)")
-    parser.add_argument("--bias", default="paper", help="cable bias preset: none, paper or severe (default: %(default)s)")
-    parser.add_argument("--bias-seed", type=int, default=0, help="which instrument (default: %(default)s)")
-    parser.add_argument("--no-progress", action="store_true", help="no progress bars")
+    add_instrument_options(parser, resolution=False)
+    add_progress_option(parser)
     parser.set_defaults(func=_run_reproduce)

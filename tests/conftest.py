@@ -1,5 +1,10 @@
 """Shared fixtures: small images keep the env tests fast; full-HD tests ask for it."""
 
+import json
+import subprocess
+import sys
+from pathlib import Path
+
 import gymnasium as gym
 import pytest
 
@@ -23,3 +28,9 @@ def make_env():
     yield _make
     for env in made:
         env.close()
+
+
+def json_from_fresh_process(code: str):
+    """Run ``code`` in a new Python process (in the tests' folder) and parse the JSON it prints last."""
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=Path(__file__).parent)
+    return json.loads(result.stdout.strip().splitlines()[-1])

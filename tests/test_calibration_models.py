@@ -22,6 +22,7 @@ from dvrk_gym.calibration.rigid import RigidBodyCalibrator, fit_rigid_transform
 from dvrk_gym.calibration.serialization import ModelFileError, write_model_file
 from dvrk_gym.calibration.tree_ensemble import TreeEnsemble
 from dvrk_gym.calibration.two_phase import TwoPhaseCalibrator
+from dvrk_gym.torch_threads import torch_threads
 
 ROLL_WRAP_TOL_M = 2e-4  # 0.2 mm; a raw-angle encoding would see a 359.8 deg jump
 
@@ -49,10 +50,8 @@ def _smooth_map(X: np.ndarray) -> np.ndarray:
 @pytest.fixture(scope="module", autouse=True)
 def one_torch_thread():
     """Tiny networks train several times faster on one thread than on contended cores."""
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
+    with torch_threads(1):
+        yield
 
 
 @pytest.fixture(scope="module")

@@ -2,8 +2,6 @@
 
 import json
 import math
-import subprocess
-import sys
 import warnings
 
 import gymnasium as gym
@@ -13,7 +11,7 @@ from gymnasium.error import ResetNeeded
 from gymnasium.utils.env_checker import check_env
 from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
-from conftest import SMALL
+from conftest import SMALL, json_from_fresh_process
 from dvrk_gym.envs.debridement import PAPER_PHASE_S, PHASES, fragment_target, image_angle_to_yaw
 from dvrk_gym.envs.grid_touch import tool_pose
 from dvrk_gym.sim import debridement_judge as judge
@@ -210,8 +208,7 @@ def test_observations_and_outcomes_are_identical_across_processes(make):
         f"env = gym.make({ENV_ID!r}, fragment='raisin', bias='paper', camera_resolution={SMALL!r})\n"
         "print(json.dumps(t._rollout(env, 3)))\n"
     )
-    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=__file__.rsplit("/", 1)[0])
-    there = json.loads(result.stdout.strip().splitlines()[-1])
+    there = json_from_fresh_process(code)
     assert json.loads(json.dumps(here)) == there
 
 

@@ -1,8 +1,6 @@
 """Behaviour every environment shares: API conformance, seeding, strict inputs, vector envs."""
 
 import json
-import subprocess
-import sys
 import warnings
 
 import gymnasium as gym
@@ -12,7 +10,7 @@ from gymnasium.error import ResetNeeded
 from gymnasium.utils.env_checker import check_env
 from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
-from conftest import ENV_IDS, SMALL
+from conftest import ENV_IDS, SMALL, json_from_fresh_process
 
 
 def _rollout(env, seed: int, n: int, action_seed: int = 123):
@@ -62,8 +60,7 @@ def test_observations_are_identical_across_processes(make_env, env_id):
         f"env = gym.make({env_id!r}, camera_resolution={SMALL!r})\n"
         "print(json.dumps(t._flatten(t._rollout(env, seed=3, n=3))))\n"
     )
-    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=__file__.rsplit("/", 1)[0])
-    there = json.loads(result.stdout.strip().splitlines()[-1])
+    there = json_from_fresh_process(code)
     assert here == there
 
 

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-import torch
 
 from dvrk_gym.calibration.datasets import PAPER_PHASE1_ROWS, load_paper_phase1
 from dvrk_gym.calibration.dnn import DNNCalibrator
@@ -16,6 +15,7 @@ from dvrk_gym.calibration.linear import LinearCalibrator
 from dvrk_gym.calibration.search import (
     cross_validate, format_table, paper_models, plot_search, run_search,
 )
+from dvrk_gym.torch_threads import torch_threads
 
 CHOSEN_NET_MAX_MM2 = 2.2
 LINEAR_RANGE_MM2 = (3.4, 4.0)
@@ -31,10 +31,8 @@ def paper_data() -> tuple[np.ndarray, np.ndarray]:
 
 @pytest.fixture(scope="module", autouse=True)
 def one_torch_thread():
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
+    with torch_threads(1):
+        yield
 
 
 def test_paper_data_loads_in_si_units(paper_data) -> None:

@@ -10,16 +10,14 @@ fragment). These evaluation moves are measurements and are not counted in the bu
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
 import logging
 import time
 from dataclasses import dataclass, field
-from typing import Any, Callable, Iterator
+from typing import Any, Callable
 
 import gymnasium as gym
 import numpy as np
-import torch
 from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecEnv
@@ -33,6 +31,7 @@ from dvrk_gym.baselines.wrappers import TRAINING_YAWS
 from dvrk_gym.calibration.benchmark import YAW_SETTINGS
 from dvrk_gym.envs.grid_touch import N_CIRCLES
 from dvrk_gym.evaluation import run_episodes
+from dvrk_gym.torch_threads import torch_threads
 
 logger = logging.getLogger(__name__)
 
@@ -250,17 +249,6 @@ class LearningCurve(BaseCallback):
         if not self.points or self.points[-1].env_steps != self.num_timesteps:
             self.evaluate()
         self._bar.close()
-
-
-@contextlib.contextmanager
-def torch_threads(n: int) -> Iterator[None]:
-    """Run the block with ``n`` torch intra-op threads, then restore the previous number."""
-    previous = torch.get_num_threads()
-    torch.set_num_threads(n)
-    try:
-        yield
-    finally:
-        torch.set_num_threads(previous)
 
 
 def train(config: TrainConfig, progress: bool = True) -> TrainResult:

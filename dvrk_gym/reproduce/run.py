@@ -71,10 +71,6 @@ def _stamp_folder(config: ReproduceConfig) -> None:
     stamp.write_text(json.dumps(wanted, indent=1))
 
 
-def _file_name(text: str) -> str:
-    return text.replace("+", "_")
-
-
 def _search_cost(model: str, search: str) -> float:
     """Rough seconds to cross-validate one model of the search (measured on 2 busy cores)."""
     from dvrk_gym.calibration.search import CHOSEN_NET, SWEEP_FOLDS
@@ -91,6 +87,7 @@ def _search_cost(model: str, search: str) -> float:
 def build_tasks(config: ReproduceConfig) -> list[Task]:
     """The task graph of a reproduction."""
     from dvrk_gym.baselines.budgets import resolve_budget
+    from dvrk_gym.cli_debridement import cell_name
 
     profile, out = config.profile, config.out
     figures = out / "figures"
@@ -113,7 +110,7 @@ def build_tasks(config: ReproduceConfig) -> list[Task]:
                           needs=("calibration",), cost_s=cost))
     for calibrator in CALIBRATORS:
         for fragment in FRAGMENTS:
-            name = f"debridement_{_file_name(calibrator)}_{fragment}"
+            name = cell_name(calibrator, fragment)
             graph.append(Task(name, tasks.debridement, {
                 "calibration_folder": str(calibration_folder), "calibrator": calibrator, "fragment": fragment,
                 "trials": profile.debridement_trials, "picks": profile.debridement_picks, "seed": config.seed,
@@ -127,7 +124,7 @@ def build_tasks(config: ReproduceConfig) -> list[Task]:
             "out": str(out / "baselines" / agent),
         }, cost_s=steps / 10.0 + 10))
         for fragment in FRAGMENTS:
-            name = f"debridement_{agent}_{fragment}"
+            name = cell_name(agent, fragment)
             graph.append(Task(name, tasks.rl_debridement, {
                 "model": str(out / "baselines" / agent / "model.zip"), "fragment": fragment, "trials": profile.debridement_trials,
                 "picks": profile.debridement_picks, "seed": config.seed, "bias": config.bias, "bias_seed": config.bias_seed,

@@ -21,6 +21,8 @@ from typing import Any, Callable, Iterator
 
 from tqdm.auto import tqdm
 
+from dvrk_gym.torch_threads import torch_threads
+
 logger = logging.getLogger(__name__)
 
 
@@ -49,23 +51,9 @@ class TaskError(RuntimeError):
     """A task raised; the message names it (finished tasks stay cached)."""
 
 
-@contextlib.contextmanager
-def one_torch_thread() -> Iterator[None]:
-    """Run with one torch intra-op thread (restored after): the same numbers on any machine,
-    and no oversubscription when tasks run side by side."""
-    import torch
-
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    try:
-        yield
-    finally:
-        torch.set_num_threads(before)
-
-
 def _call(function: Callable[..., dict[str, Any]], kwargs: dict[str, Any]) -> tuple[dict[str, Any], float]:
     start = time.perf_counter()
-    with one_torch_thread():
+    with torch_threads(1):  # the same numbers on any machine, no oversubscription side by side
         result = function(**kwargs)
     return result, time.perf_counter() - start
 

@@ -7,6 +7,7 @@ All lengths in the summaries are in the units their keys name (``_mm``, ``_px``,
 from __future__ import annotations
 
 import dataclasses
+import time
 from pathlib import Path
 from typing import Any
 
@@ -114,8 +115,6 @@ def rl_debridement(model: str, fragment: str, trials: int, picks: int, seed: int
 
 def _debridement_cell(env: Any, policy: Any, title: str, trials: int, seed: int, out: str, meta: dict[str, Any]) -> dict[str, Any]:
     """Run the trials of one cell, write its JSON and outcome grid, return its totals."""
-    import time
-
     from dvrk_gym.cli_debridement import plot_outcome_grid, run_trials, save_trials, totals
 
     try:
