@@ -38,12 +38,12 @@ from dvrk_gym.baselines.comparison import (
     debridement_row, format_comparison, format_debridement_comparison, setting_mismatches,
 )
 from dvrk_gym.baselines.curves import plot_curves, save_curve
-from dvrk_gym.baselines.names import DEBRIDEMENT_ID, GRID_TOUCH_ID
+from dvrk_gym.baselines.budgets import DEBRIDEMENT_ID, GRID_TOUCH_ID
 from dvrk_gym.baselines.training import TrainConfig, train
 from dvrk_gym.calibration.benchmark import format_table
 from dvrk_gym.calibration.pipeline import PipelineConfig, run_calibration
 from dvrk_gym.calibration.policy import CalibratedPolicy
-from dvrk_gym.cli_debridement import load_calibrator
+from dvrk_gym.cli.debridement import load_calibrator
 from dvrk_gym.envs.debridement import fragment_target
 
 VEC_SETTINGS = ((1, "dummy"), (2, "dummy"), (2, "subproc"))

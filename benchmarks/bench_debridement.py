@@ -18,7 +18,7 @@ import gymnasium as gym
 
 import dvrk_gym  # noqa: F401
 from dvrk_gym.calibration.policy import CalibratedPolicy
-from dvrk_gym.cli_debridement import CALIBRATOR_LABELS, PAPER_RESULTS, load_calibrator, run_trials, totals
+from dvrk_gym.cli.debridement import CALIBRATOR_LABELS, PAPER_RESULTS, load_calibrator, run_trials, totals
 from dvrk_gym.envs.debridement import PAPER_PHASE_S, PHASES, fragment_target
 
 

@@ -19,7 +19,7 @@ import time
 import torch
 
 from dvrk_gym.calibration.datasets import load_paper_phase1
-from dvrk_gym.calibration.dnn import DEFAULT_LEARNING_RATE, DNNCalibrator
+from dvrk_gym.calibration.models.dnn import DEFAULT_LEARNING_RATE, DNNCalibrator
 from dvrk_gym.calibration.search import (
     CHOSEN_NET, PAPER_EPOCHS, SWEEP_BATCH_SIZE, SWEEP_FOLDS, ModelSpec, format_table,
     paper_models, plot_search,

@@ -12,8 +12,8 @@ import time
 
 import numpy as np
 
-from dvrk_gym.sim import kinematics as kin
-from dvrk_gym.sim.camera import PAPER_INTRINSICS
+from dvrk_gym.sim.robot import kinematics as kin
+from dvrk_gym.sim.endoscope.camera import PAPER_INTRINSICS
 from dvrk_gym.envs.exploration import sample_paper_poses
 from dvrk_gym.sim.world import DvrkWorld, WorldConfig
 

@@ -17,9 +17,9 @@ from pathlib import Path
 
 import numpy as np
 
-from dvrk_gym.sim import bias
-from dvrk_gym.sim import kinematics as kin
-from dvrk_gym.sim.bias_field import FIELDS, MM_PER_M, grid_rigid_means, plot_field
+from dvrk_gym.sim.robot import bias
+from dvrk_gym.sim.robot import kinematics as kin
+from dvrk_gym.sim.robot.bias_field import FIELDS, MM_PER_M, grid_rigid_means, plot_field
 
 
 def print_table(rows: list[tuple[str, dict, list[float]]]) -> None:

@@ -13,9 +13,9 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from dvrk_gym.sim import kinematics as kin
+from dvrk_gym.sim.robot import kinematics as kin
 from dvrk_gym.sim.world import DvrkWorld, WorldConfig
-from dvrk_gym.sim.scene import grid_circle_centers
+from dvrk_gym.sim.physics.scene import grid_circle_centers
 
 APPROACH_HEIGHT_M = 0.012
 """The tool first goes this far above a circle, then down to touch it."""

@@ -15,13 +15,13 @@ from stable_baselines3.common.env_checker import check_env
 
 from dvrk_gym.baselines import AGENTS, BUDGETS, TrainConfig, load_agent, resolve_budget, save_agent, train, wrap_grid_touch
 from dvrk_gym.baselines.comparison import agent_row, benchmark_agent, calibration_rows, format_comparison
-from dvrk_gym.baselines.names import GRID_TOUCH_ID
+from dvrk_gym.baselines.budgets import GRID_TOUCH_ID
 from dvrk_gym.baselines.training import make_agent_env
 from dvrk_gym.baselines.wrappers import GoalScaling, TargetYawAction, TrainingYaws
 from dvrk_gym.calibration.benchmark import YAW_SETTINGS, CircleErrors, save_table
-from dvrk_gym.cli_baselines import add_commands
+from dvrk_gym.cli.baselines import add_commands
 from dvrk_gym.envs.grid_touch import ACTION_HIGH, ACTION_LOW, N_CIRCLES
-from dvrk_gym.sim.kinematics import PAPER_YAWS_RAD
+from dvrk_gym.sim.robot.kinematics import PAPER_YAWS_RAD
 
 TINY = (320, 180)
 FAST_NETWORK = {"learning_starts": 40, "batch_size": 64, "gradient_steps": 1, "policy_kwargs": {"net_arch": [32, 32]}}

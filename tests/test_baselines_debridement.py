@@ -20,18 +20,18 @@ from dvrk_gym.baselines.agents import build_model
 from dvrk_gym.baselines.checkpoints import LoadedAgent
 from dvrk_gym.baselines.comparison import calibration_debridement_rows, debridement_row, format_debridement_comparison
 from dvrk_gym.baselines.curves import load_curve, plot_curves, save_curve
-from dvrk_gym.baselines.names import AGENT_DESCRIPTIONS, AGENT_ENVS, DEBRIDEMENT_ID
+from dvrk_gym.baselines.budgets import AGENT_DESCRIPTIONS, AGENT_ENVS, DEBRIDEMENT_ID
 from dvrk_gym.baselines.picking import (
     MAX_PENALTY_MM, OFFSET_SCALE_MM, pick_action, pick_observation, shaped_pick_reward, unit_to_pick_box, wrap_debridement,
 )
 from dvrk_gym.baselines.training import make_agent_env, make_training_vec_env
 from dvrk_gym.baselines.transfer import GridTouchPickPolicy, PickAgentPolicy
 from dvrk_gym.baselines.wrappers import scale_goal
-from dvrk_gym.cli_baselines import add_commands
-from dvrk_gym.cli_debridement import Trial, run_trials, totals
+from dvrk_gym.cli.baselines import add_commands
+from dvrk_gym.cli.debridement import Trial, run_trials, totals
 from dvrk_gym.envs.debridement import PICK_HIGH, PICK_LOW, PickTiming, fragment_target
-from dvrk_gym.sim.kinematics import PAPER_YAWS_RAD, nearest_paper_yaw
-from dvrk_gym.sim.motion import MotionLimits
+from dvrk_gym.sim.robot.kinematics import PAPER_YAWS_RAD, nearest_paper_yaw
+from dvrk_gym.sim.robot.motion import MotionLimits
 
 TINY = (320, 180)
 FAST = {"learning_starts": 20, "batch_size": 32, "gradient_steps": 1, "policy_kwargs": {"net_arch": [16, 16]}}
@@ -247,7 +247,7 @@ def test_bad_names_are_refused_with_the_valid_ones(tmp_path):
 def test_baseline_help_imports_neither_torch_nor_pybullet():
     code = (
         "import sys\n"
-        "from dvrk_gym.cli import main\n"
+        "from dvrk_gym.cli.main import main\n"
         "sys.argv = ['dvrk-gym', 'baseline', 'train', '--help']\n"
         "try:\n    main()\nexcept SystemExit:\n    pass\n"
         "heavy = sorted(m for m in ('torch', 'pybullet', 'stable_baselines3') if m in sys.modules)\n"

@@ -1,4 +1,4 @@
-"""Tests for dvrk_gym.sim.bias (the cable model: why the dVRK misses)."""
+"""Tests for dvrk_gym.sim.robot.bias (the cable model: why the dVRK misses)."""
 
 from __future__ import annotations
 
@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 from scipy.stats import f_oneway
 
-from dvrk_gym.sim import bias
-from dvrk_gym.sim import kinematics as kin
+from dvrk_gym.sim.robot import bias
+from dvrk_gym.sim.robot import kinematics as kin
 
 MM = 1e-3
 STATISTICS_SAMPLES = 1500  # enough for stable means, fast enough (about a second)

@@ -14,15 +14,15 @@ import torch
 from scipy.spatial.transform import Rotation
 from sklearn.ensemble import RandomForestRegressor
 
-from dvrk_gym.calibration.dnn import DNNCalibrator
-from dvrk_gym.calibration.features import PAPER_YAWS_RAD, encode_euler, nearest_yaw_index
-from dvrk_gym.calibration.forests import ForestCalibrator, ResidualForests
-from dvrk_gym.calibration.linear import LinearCalibrator
-from dvrk_gym.calibration.rigid import RigidBodyCalibrator, fit_rigid_transform
-from dvrk_gym.calibration.serialization import ModelFileError, write_model_file
-from dvrk_gym.calibration.tree_ensemble import TreeEnsemble
-from dvrk_gym.calibration.two_phase import TwoPhaseCalibrator
-from dvrk_gym.torch_threads import torch_threads
+from dvrk_gym.calibration.models.dnn import DNNCalibrator
+from dvrk_gym.calibration.models.features import PAPER_YAWS_RAD, encode_euler, nearest_yaw_index
+from dvrk_gym.calibration.models.forests import ForestCalibrator, ResidualForests
+from dvrk_gym.calibration.models.linear import LinearCalibrator
+from dvrk_gym.calibration.models.rigid import RigidBodyCalibrator, fit_rigid_transform
+from dvrk_gym.calibration.models.serialization import ModelFileError, write_model_file
+from dvrk_gym.calibration.models.tree_ensemble import TreeEnsemble
+from dvrk_gym.calibration.models.two_phase import TwoPhaseCalibrator
+from dvrk_gym.utils.torch_threads import torch_threads
 
 ROLL_WRAP_TOL_M = 2e-4  # 0.2 mm; a raw-angle encoding would see a 359.8 deg jump
 

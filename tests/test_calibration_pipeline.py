@@ -10,9 +10,9 @@ from dvrk_gym.calibration.benchmark import YAW_SETTINGS, format_table, touch_gri
 from dvrk_gym.calibration.phase2 import Phase2Data, collect_phase2
 from dvrk_gym.calibration.pipeline import PipelineConfig, run_calibration
 from dvrk_gym.calibration.policy import CalibratedPolicy, calibrator_input
-from dvrk_gym.cli import main
-from dvrk_gym.evaluation import as_policy, load_policy_factory, run_episodes, summarize
-from dvrk_gym.sim import kinematics as kin
+from dvrk_gym.cli.main import main
+from dvrk_gym.evaluation.episodes import as_policy, load_policy_factory, run_episodes, summarize
+from dvrk_gym.sim.robot import kinematics as kin
 
 SMALL = (640, 360)
 

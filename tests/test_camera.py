@@ -1,4 +1,4 @@
-"""Tests for dvrk_gym.sim.camera (geometry, GL matrices and TinyRenderer agreement)."""
+"""Tests for dvrk_gym.sim.endoscope.camera (geometry, GL matrices and TinyRenderer agreement)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import pybullet
 import pytest
 from pybullet_utils import bullet_client
 
-from dvrk_gym.sim.camera import (
+from dvrk_gym.sim.endoscope.camera import (
     CAMERA_DISTANCE_M,
     PAPER_BASELINE_M,
     PAPER_INTRINSICS,

@@ -14,12 +14,12 @@ from stable_baselines3.common.env_checker import check_env as sb3_check_env
 from conftest import SMALL, json_from_fresh_process
 from dvrk_gym.envs.debridement import PAPER_PHASE_S, PHASES, fragment_target, image_angle_to_yaw
 from dvrk_gym.envs.grid_touch import tool_pose
-from dvrk_gym.sim import debridement_judge as judge
-from dvrk_gym.sim import kinematics as kin
-from dvrk_gym.sim.fragment_perception import detect_fragments
-from dvrk_gym.sim.fragments import FRAGMENT_TYPES, MIN_GAP_M, TRUNCATE_SD, outline_gap
-from dvrk_gym.sim.grasp import GRASP_TIP_CLEARANCE_M
-from dvrk_gym.sim.scene import WORKSPACE_CENTER_M
+from dvrk_gym.sim.table import judge
+from dvrk_gym.sim.robot import kinematics as kin
+from dvrk_gym.sim.endoscope.fragment_detection import detect_fragments
+from dvrk_gym.sim.table.fragments import FRAGMENT_TYPES, MIN_GAP_M, TRUNCATE_SD, outline_gap
+from dvrk_gym.sim.table.grasp import GRASP_TIP_CLEARANCE_M
+from dvrk_gym.sim.physics.scene import WORKSPACE_CENTER_M
 
 ENV_ID = "dvrk_gym/Debridement-v0"
 SURFACE_Z_M = float(WORKSPACE_CENTER_M[2])
@@ -361,9 +361,9 @@ def test_debride_command_writes_the_trial_table(tmp_path, capsys):
     prints the table and writes JSON, text and the outcome grid."""
     import argparse
 
-    from dvrk_gym.calibration.rigid import RigidBodyCalibrator
-    from dvrk_gym.cli_debridement import add_commands
-    from dvrk_gym.sim.camera import StereoCamera
+    from dvrk_gym.calibration.models.rigid import RigidBodyCalibrator
+    from dvrk_gym.cli.debridement import add_commands
+    from dvrk_gym.sim.endoscope.camera import StereoCamera
 
     rng = np.random.default_rng(0)
     camera = StereoCamera()
@@ -397,8 +397,8 @@ def test_nested_settings_can_be_given_as_dicts_and_bad_ones_are_refused():
     import dataclasses
 
     from dvrk_gym.envs.debridement import DebridementConfig, PickTiming
-    from dvrk_gym.sim.grasp import GripperConfig
-    from dvrk_gym.sim.motion import MotionLimits
+    from dvrk_gym.sim.table.grasp import GripperConfig
+    from dvrk_gym.sim.robot.motion import MotionLimits
 
     timing = PickTiming(travel=MotionLimits(max_speed_m_s=0.1), grip_dwell_s=0.5)
     gripper = GripperConfig(jaw_friction=1.2)

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from dvrk_gym.envs.grid_touch import N_CIRCLES, SURFACE_Z_M, tool_pose
-from dvrk_gym.sim import kinematics as kin
+from dvrk_gym.sim.robot import kinematics as kin
 
 
 def _nominal_action(env, circle_index: int, yaw: float = 0.0) -> np.ndarray:

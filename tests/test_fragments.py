@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
-from dvrk_gym.sim import kinematics as kin
-from dvrk_gym.sim import perception
-from dvrk_gym.sim.fragments import (
+from dvrk_gym.sim.robot import kinematics as kin
+from dvrk_gym.sim.endoscope import detection as perception
+from dvrk_gym.sim.table.fragments import (
     FRAGMENT_TYPES,
     MIN_GAP_M,
     ellipse_outline,
@@ -17,10 +17,10 @@ from dvrk_gym.sim.fragments import (
     sample_layout,
     spawn_fragments,
 )
-from dvrk_gym.sim.grasp import GRASP_TIP_CLEARANCE_M, JAW_LINKS, Gripper
-from dvrk_gym.sim.physics import Physics
-from dvrk_gym.sim.robot import PSMBody
-from dvrk_gym.sim.scene import WORKSPACE_CENTER_M, build_scene
+from dvrk_gym.sim.table.grasp import GRASP_TIP_CLEARANCE_M, JAW_LINKS, Gripper
+from dvrk_gym.sim.physics.client import Physics
+from dvrk_gym.sim.robot.body import PSMBody
+from dvrk_gym.sim.physics.scene import WORKSPACE_CENTER_M, build_scene
 
 PAPER_TABLE_MM = {  # (length, width, thickness): mean, sd
     "pumpkin_seed": ((12.4, 6.8, 2.4), (0.8, 0.3, 0.3)),

@@ -1,4 +1,4 @@
-"""Tests for dvrk_gym.sim.kinematics (PSM forward/inverse kinematics and helpers)."""
+"""Tests for dvrk_gym.sim.robot.kinematics (PSM forward/inverse kinematics and helpers)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from dvrk_gym.sim import kinematics as kin
+from dvrk_gym.sim.robot import kinematics as kin
 
 ZERO_Q = np.array([0.0, 0.0, 0.18, 0.0, 0.0, 0.0])
 # Hand-derived: tool x = base y, tool y = base x, tool z = -base z.
@@ -337,7 +337,7 @@ def test_nearest_paper_yaw_scalar_and_vectorised() -> None:
 
 
 def test_clamped_inverse_kinematics_equals_exact_ik_when_reachable_and_clamps_otherwise():
-    from dvrk_gym.sim.kinematics import inverse_kinematics_clamped
+    from dvrk_gym.sim.robot.kinematics import inverse_kinematics_clamped
 
     pose = kin.pose_from_euler([0.04, 0.04, -0.154], 0.0, np.radians(5), np.radians(-167))
     q, mask = inverse_kinematics_clamped(pose)

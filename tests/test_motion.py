@@ -5,8 +5,8 @@ import math
 import numpy as np
 import pytest
 
-from dvrk_gym.sim import kinematics as kin
-from dvrk_gym.sim.motion import CartesianMove, MotionLimits, SimClock, trapezoid_progress, trapezoid_timing
+from dvrk_gym.sim.robot import kinematics as kin
+from dvrk_gym.sim.robot.motion import CartesianMove, MotionLimits, SimClock, trapezoid_progress, trapezoid_timing
 
 
 def test_ten_centimetre_move_takes_distance_over_speed_plus_one_ramp():

@@ -28,7 +28,7 @@ def test_built_wheel_contains_data_files_and_console_script(tmp_path):
     for data_file in DATA_FILES:
         assert data_file in names
     entry_points = next(n for n in names if n.endswith("entry_points.txt"))
-    assert "dvrk-gym = dvrk_gym.cli:main" in zipfile.ZipFile(wheel).read(entry_points).decode()
+    assert "dvrk-gym = dvrk_gym.cli.main:main" in zipfile.ZipFile(wheel).read(entry_points).decode()
 
 
 def test_readme_test_command_is_the_one_ci_runs():

@@ -10,12 +10,12 @@ import numpy as np
 import pytest
 
 from dvrk_gym.calibration.datasets import PAPER_PHASE1_ROWS, load_paper_phase1
-from dvrk_gym.calibration.dnn import DNNCalibrator
-from dvrk_gym.calibration.linear import LinearCalibrator
+from dvrk_gym.calibration.models.dnn import DNNCalibrator
+from dvrk_gym.calibration.models.linear import LinearCalibrator
 from dvrk_gym.calibration.search import (
     cross_validate, format_table, paper_models, plot_search, run_search,
 )
-from dvrk_gym.torch_threads import torch_threads
+from dvrk_gym.utils.torch_threads import torch_threads
 
 CHOSEN_NET_MAX_MM2 = 2.2
 LINEAR_RANGE_MM2 = (3.4, 4.0)

@@ -6,7 +6,7 @@ import math
 
 import pytest
 
-from dvrk_gym.cli import main
+from dvrk_gym.cli.main import main
 from dvrk_gym.reproduce import Profile, ReproduceConfig, build_tasks, run_reproduce
 from dvrk_gym.reproduce.scheduler import Task, TaskError, run_tasks
 

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from dvrk_gym.sim import scene
-from dvrk_gym.sim.physics import Physics, PhysicsError
+from dvrk_gym.sim.physics import scene
+from dvrk_gym.sim.physics.client import Physics, PhysicsError
 
 
 @pytest.fixture

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from dvrk_gym.sim import kinematics as kin
-from dvrk_gym.sim.scene import grid_circle_centers
+from dvrk_gym.sim.robot import kinematics as kin
+from dvrk_gym.sim.physics.scene import grid_circle_centers
 from dvrk_gym.envs.exploration import sample_paper_poses
 from dvrk_gym.sim.world import DvrkWorld, WorldConfig
 

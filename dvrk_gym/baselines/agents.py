@@ -3,7 +3,7 @@
 An agent is named by an :class:`AgentSpec`: which environment it learns, with which
 stable-baselines3 algorithm and replay buffer, through which wrapper, with which env
 keywords and hyperparameters. Adding an agent is adding a row to :data:`AGENTS` (and its
-name, env and description to :mod:`dvrk_gym.baselines.names`). Two agents learn
+name, env and description to :mod:`dvrk_gym.baselines.budgets`). Two agents learn
 GridTouch-v0 (one touch per step), one learns Debridement-v0 in primitive mode (one pick
 per step); a budget counts env steps of either, i.e. robot moves.
 """
@@ -21,7 +21,7 @@ from stable_baselines3.common.logger import Logger
 from stable_baselines3.common.vec_env import VecEnv
 from stable_baselines3.her import HerReplayBuffer
 
-from dvrk_gym.baselines.names import AGENT_DESCRIPTIONS, AGENT_ENVS
+from dvrk_gym.baselines.budgets import AGENT_DESCRIPTIONS, AGENT_ENVS
 from dvrk_gym.baselines.picking import wrap_debridement
 from dvrk_gym.baselines.wrappers import wrap_grid_touch
 
@@ -72,7 +72,7 @@ _PICK_SAC = {
 
 
 def _sac(name: str, her: bool, wrap: Callable[[gym.Env, str | None], gym.Env], env_kwargs: dict[str, Any], hyperparameters: dict[str, Any]) -> AgentSpec:
-    """A SAC row; its env and description come from :mod:`dvrk_gym.baselines.names`."""
+    """A SAC row; its env and description come from :mod:`dvrk_gym.baselines.budgets`."""
     return AgentSpec(name, AGENT_ENVS[name], "SAC", her, wrap, AGENT_DESCRIPTIONS[name], env_kwargs, hyperparameters)
 
 

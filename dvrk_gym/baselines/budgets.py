@@ -1,4 +1,6 @@
-"""Training budgets in robot moves, matched to the two-phase calibrator's.
+"""The agents' names and envs, and their training budgets in robot moves, matched to the two-phase calibrator's.
+
+Importable without torch or pybullet: the command line builds its help and choices from here.
 
 The calibrator moves the robot 5,476 times: the paper's Phase I (57 trajectories of 93
 commanded poses, 5,301 moves) and Phase II (35 circles at each of 5 yaws, 175 touches). An
@@ -6,6 +8,18 @@ agent's env step is one commanded touch, so a budget is a number of env steps.
 """
 
 from __future__ import annotations
+
+GRID_TOUCH_ID = "dvrk_gym/GridTouch-v0"
+DEBRIDEMENT_ID = "dvrk_gym/Debridement-v0"
+
+AGENT_ENVS: dict[str, str] = {"sac_her": GRID_TOUCH_ID, "sac": GRID_TOUCH_ID, "sac_pick": DEBRIDEMENT_ID}
+"""The env each agent learns."""
+AGENT_DESCRIPTIONS: dict[str, str] = {
+    "sac_her": "SAC + HER (future goals) on GridTouch-v0",
+    "sac": "SAC on GridTouch-v0 (no relabelling)",
+    "sac_pick": "SAC on Debridement-v0's pick target (one pick per step, shaped reward)",
+}
+"""One line per agent, for help texts and tables."""
 
 PHASE1_MOVES = 57 * 93
 """Commanded poses of the paper's Phase I: 57 trajectories x 93 (5,301)."""

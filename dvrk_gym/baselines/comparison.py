@@ -8,7 +8,7 @@ comparable. The calibrators' rows come from a calibration run folder
 
 Debridement (any agent, through :func:`~dvrk_gym.baselines.transfer.pick_policy`): the
 paper's trials of eight picks on Debridement-v0, run by
-:func:`~dvrk_gym.cli_debridement.run_trials` with the same seeds for the agents and for
+:func:`~dvrk_gym.cli.debridement.run_trials` with the same seeds for the agents and for
 the calibrators (loaded from the calibration run folder and aimed by
 ``CalibratedPolicy(calibrator, target=fragment_target)``, as ``dvrk-gym debride`` does):
 success, outcomes A/B/C and time per fragment.
@@ -25,13 +25,13 @@ from typing import Any, Sequence
 import numpy as np
 
 from dvrk_gym.baselines.checkpoints import LoadedAgent
-from dvrk_gym.baselines.names import DEBRIDEMENT_ID, GRID_TOUCH_ID
+from dvrk_gym.baselines.budgets import DEBRIDEMENT_ID, GRID_TOUCH_ID
 from dvrk_gym.baselines.training import make_agent_env
 from dvrk_gym.baselines.transfer import pick_policy
 from dvrk_gym.calibration.benchmark import YAW_SETTINGS, CircleErrors, touch_grid
 from dvrk_gym.calibration.pipeline import PipelineConfig
 from dvrk_gym.envs.grid_touch import N_CIRCLES
-from dvrk_gym.sim.kinematics import PAPER_YAWS_RAD
+from dvrk_gym.sim.robot.kinematics import PAPER_YAWS_RAD
 
 logger = logging.getLogger(__name__)
 
@@ -186,8 +186,8 @@ class DebridementRow:
 
 
 def debridement_row(method: str, robot_moves: int, trials: Sequence[Any], source: str) -> DebridementRow:
-    """The row of a list of :class:`~dvrk_gym.cli_debridement.Trial`."""
-    from dvrk_gym.cli_debridement import totals
+    """The row of a list of :class:`~dvrk_gym.cli.debridement.Trial`."""
+    from dvrk_gym.cli.debridement import totals
 
     total = totals(list(trials))
     return DebridementRow(method, robot_moves, total["picks"], total["success"], total["A"], total["B"], total["C"], total["time_per_fragment_s"], source)
@@ -197,7 +197,7 @@ def run_debridement(policy: Any, n_trials: int, seed: int, bias: str, bias_seed:
     """``n_trials`` debridement trials of ``policy`` on a fresh Debridement-v0 (primitive mode)."""
     import gymnasium as gym
 
-    from dvrk_gym.cli_debridement import run_trials
+    from dvrk_gym.cli.debridement import run_trials
 
     env = gym.make(DEBRIDEMENT_ID, fragment=fragment, bias=bias, bias_seed=bias_seed, camera_resolution=tuple(camera_resolution))
     try:
@@ -234,7 +234,7 @@ def calibration_debridement_rows(
         FileNotFoundError: the folder lacks a calibrator's model file.
     """
     from dvrk_gym.calibration.policy import CalibratedPolicy
-    from dvrk_gym.cli_debridement import CALIBRATOR_FILES, CALIBRATOR_LABELS, load_calibrator
+    from dvrk_gym.cli.debridement import CALIBRATOR_FILES, CALIBRATOR_LABELS, load_calibrator
     from dvrk_gym.envs.debridement import fragment_target
 
     folder = Path(folder)

@@ -28,7 +28,7 @@ from gymnasium import spaces
 
 from dvrk_gym.baselines.wrappers import scale_goal
 from dvrk_gym.envs.debridement import PICK_HIGH, PICK_LOW, fragment_target
-from dvrk_gym.sim import kinematics as kin
+from dvrk_gym.sim.robot import kinematics as kin
 
 OFFSET_SCALE_MM = 2.0
 """Millimetres of grip offset that cost as much as a delivered fragment earns."""

@@ -25,13 +25,13 @@ from tqdm.auto import tqdm
 
 import dvrk_gym  # noqa: F401  (registers the environments)
 from dvrk_gym.baselines.agents import AgentSpec, build_model, get_agent
-from dvrk_gym.baselines.names import DEBRIDEMENT_ID
+from dvrk_gym.baselines.budgets import DEBRIDEMENT_ID
 from dvrk_gym.baselines.picking import GripOffsetLog
 from dvrk_gym.baselines.wrappers import TRAINING_YAWS
 from dvrk_gym.calibration.benchmark import YAW_SETTINGS
 from dvrk_gym.envs.grid_touch import N_CIRCLES
-from dvrk_gym.evaluation import run_episodes
-from dvrk_gym.torch_threads import torch_threads
+from dvrk_gym.evaluation.episodes import run_episodes
+from dvrk_gym.utils.torch_threads import torch_threads
 
 logger = logging.getLogger(__name__)
 
@@ -186,7 +186,7 @@ def evaluate_curve_point(model: BaseAlgorithm, env: gym.Env, env_steps: int, see
 
 def evaluate_pick_curve_point(model: BaseAlgorithm, env: gym.Env, env_steps: int, seed: int, n_trials: int = CURVE_TRIALS) -> CurvePoint:
     """Run ``n_trials`` debridement trials with the deterministic policy; success, grip offset, time."""
-    from dvrk_gym.cli_debridement import run_trials, totals
+    from dvrk_gym.cli.debridement import run_trials, totals
 
     log = GripOffsetLog(env)
     total = totals(run_trials(log, model, n_trials, seed=seed, progress=False))

@@ -21,7 +21,7 @@ from gymnasium import spaces
 from gymnasium.wrappers import RescaleAction
 
 from dvrk_gym.envs.grid_touch import N_CIRCLES
-from dvrk_gym.sim.kinematics import PAPER_YAWS_RAD
+from dvrk_gym.sim.robot.kinematics import PAPER_YAWS_RAD
 
 GOAL_CENTER_M = (0.0, 0.0, 0.19)
 """Camera-frame point mapped to 0 by :class:`GoalScaling`: about the phantom's centre, metres."""

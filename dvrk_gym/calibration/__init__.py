@@ -2,7 +2,7 @@
 baselines for the model search, the authors' data, and model files without pickle.
 
 The names below are imported lazily (PEP 562), so importing a light submodule such as
-``dvrk_gym.calibration.features`` does not pull in torch, scikit-learn and matplotlib.
+``dvrk_gym.calibration.models.features`` does not pull in torch, scikit-learn and matplotlib.
 """
 
 from __future__ import annotations
@@ -12,22 +12,22 @@ from typing import Any
 
 _EXPORTS = {
     "load_paper_phase1": "datasets",
-    "DNNCalibrator": "dnn",
-    "encode_euler": "features",
-    "encode_quaternion": "features",
-    "nearest_yaw_index": "features",
-    "ForestCalibrator": "forests",
-    "ResidualForests": "forests",
-    "LinearCalibrator": "linear",
-    "RigidBodyCalibrator": "rigid",
+    "DNNCalibrator": "models.dnn",
+    "encode_euler": "models.features",
+    "encode_quaternion": "models.features",
+    "nearest_yaw_index": "models.features",
+    "ForestCalibrator": "models.forests",
+    "ResidualForests": "models.forests",
+    "LinearCalibrator": "models.linear",
+    "RigidBodyCalibrator": "models.rigid",
     "SearchResult": "search",
     "cross_validate": "search",
     "format_table": "search",
     "paper_models": "search",
     "plot_search": "search",
     "run_search": "search",
-    "ModelFileError": "serialization",
-    "TwoPhaseCalibrator": "two_phase",
+    "ModelFileError": "models.serialization",
+    "TwoPhaseCalibrator": "models.two_phase",
 }
 
 __all__ = sorted(_EXPORTS)

@@ -18,8 +18,8 @@ import numpy as np
 
 from dvrk_gym.calibration.policy import CalibratedPolicy, Calibrator
 from dvrk_gym.envs.grid_touch import N_CIRCLES
-from dvrk_gym.evaluation import run_episodes, summarize
-from dvrk_gym.sim.scene import GRID_COLUMNS, GRID_ROWS
+from dvrk_gym.evaluation.episodes import run_episodes, summarize
+from dvrk_gym.sim.physics.scene import GRID_COLUMNS, GRID_ROWS
 
 logger = logging.getLogger(__name__)
 

@@ -17,7 +17,7 @@ from tqdm.auto import tqdm
 from dvrk_gym.calibration.records import ArrayRecord
 from dvrk_gym.calibration.policy import CalibratedPolicy, Calibrator, calibrator_input
 from dvrk_gym.envs.grid_touch import N_CIRCLES
-from dvrk_gym.sim.kinematics import PAPER_YAWS_RAD
+from dvrk_gym.sim.robot.kinematics import PAPER_YAWS_RAD
 
 
 @dataclass(frozen=True)

@@ -19,11 +19,11 @@ from typing import Any, Callable
 import gymnasium as gym
 
 from dvrk_gym.calibration.benchmark import calibration_table, format_table, plot_error_maps, save_table, table_summary
-from dvrk_gym.calibration.dnn import DNNCalibrator
+from dvrk_gym.calibration.models.dnn import DNNCalibrator
 from dvrk_gym.calibration.phase1 import PaperExplorationPolicy, Phase1Data, collect_phase1
 from dvrk_gym.calibration.phase2 import Phase2Data, collect_phase2
-from dvrk_gym.calibration.rigid import RigidBodyCalibrator
-from dvrk_gym.calibration.two_phase import TwoPhaseCalibrator
+from dvrk_gym.calibration.models.rigid import RigidBodyCalibrator
+from dvrk_gym.calibration.models.two_phase import TwoPhaseCalibrator
 
 logger = logging.getLogger(__name__)
 

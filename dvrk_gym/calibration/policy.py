@@ -12,7 +12,7 @@ from typing import Any, Callable, Protocol
 
 import numpy as np
 
-from dvrk_gym.sim import kinematics as kin
+from dvrk_gym.sim.robot import kinematics as kin
 
 Target = tuple[np.ndarray, float]
 """A camera-frame point (x, y, z) in metres and an angle in radians."""

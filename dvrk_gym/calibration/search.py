@@ -27,10 +27,10 @@ from matplotlib.figure import Figure
 from sklearn.model_selection import KFold
 from tqdm import tqdm
 
-from dvrk_gym.calibration.dnn import DNNCalibrator
-from dvrk_gym.calibration.features import check_inputs, check_targets
-from dvrk_gym.calibration.forests import ForestCalibrator
-from dvrk_gym.calibration.linear import LinearCalibrator
+from dvrk_gym.calibration.models.dnn import DNNCalibrator
+from dvrk_gym.calibration.models.features import check_inputs, check_targets
+from dvrk_gym.calibration.models.forests import ForestCalibrator
+from dvrk_gym.calibration.models.linear import LinearCalibrator
 
 __all__ = [
     "CHOSEN_NET",

@@ -16,7 +16,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium.error import ResetNeeded
 
-from dvrk_gym.sim.bias import BiasConfig
+from dvrk_gym.sim.robot.bias import BiasConfig
 from dvrk_gym.sim.world import DvrkWorld, WorldConfig
 
 
@@ -152,7 +152,7 @@ class DvrkEnv(gym.Env):
         """Names of the clamped action elements and joints, for ``info["clamped"]``."""
         names = [self.action_names[i] for i in np.flatnonzero(clamped)]
         if joints_clamped is not None:
-            from dvrk_gym.sim.kinematics import JOINT_NAMES
+            from dvrk_gym.sim.robot.kinematics import JOINT_NAMES
 
             names += [f"joint:{JOINT_NAMES[i]}" for i in np.flatnonzero(joints_clamped)]
         return names

@@ -2,8 +2,8 @@
 
 The paper's experiment: eight pumpkin seeds or raisins lie at random on the paper; the
 robot picks them one by one and drops them in a receptacle beside the phantom. Grasping
-happens through contact only (:mod:`dvrk_gym.sim.grasp`), so the paper's failure modes
-come out of the physics, and a judge (:mod:`dvrk_gym.sim.debridement_judge`) labels each
+happens through contact only (:mod:`dvrk_gym.sim.table.grasp`), so the paper's failure modes
+come out of the physics, and a judge (:mod:`dvrk_gym.sim.table.judge`) labels each
 pick from the simulator's truth.
 
 Two action modes:
@@ -19,7 +19,7 @@ Two action modes:
   control period; truncated after ``max_steps``.
 
 Observations hold only what the real robot has: its reported pose and jaw, and the
-fragments the endoscope sees (:mod:`dvrk_gym.sim.fragment_perception`). The truth is in
+fragments the endoscope sees (:mod:`dvrk_gym.sim.endoscope.fragment_detection`). The truth is in
 ``info`` under ``true_*`` names.
 """
 
@@ -39,13 +39,13 @@ from dvrk_gym.envs.exploration import CAMERA_BOX_HIGH_M, CAMERA_BOX_LOW_M, encod
 from dvrk_gym.envs.grid_touch import ACTION_HIGH as PICK_HIGH
 from dvrk_gym.envs.grid_touch import ACTION_LOW as PICK_LOW
 from dvrk_gym.envs.grid_touch import tool_pose
-from dvrk_gym.sim import debridement_judge as judge
-from dvrk_gym.sim import kinematics as kin
-from dvrk_gym.sim.fragment_perception import MAX_FRAGMENTS, FragmentDetection, FragmentObserver
-from dvrk_gym.sim.fragments import FRAGMENT_TYPES
-from dvrk_gym.sim.grasp import GRASP_TIP_CLEARANCE_M, GripperConfig
-from dvrk_gym.sim.motion import MotionLimits
-from dvrk_gym.sim.scene import RECEPTACLE_CENTER_M
+from dvrk_gym.sim.table import judge
+from dvrk_gym.sim.robot import kinematics as kin
+from dvrk_gym.sim.endoscope.fragment_detection import MAX_FRAGMENTS, FragmentDetection, FragmentObserver
+from dvrk_gym.sim.table.fragments import FRAGMENT_TYPES
+from dvrk_gym.sim.table.grasp import GRASP_TIP_CLEARANCE_M, GripperConfig
+from dvrk_gym.sim.robot.motion import MotionLimits
+from dvrk_gym.sim.physics.scene import RECEPTACLE_CENTER_M
 
 logger = logging.getLogger(__name__)
 

@@ -15,7 +15,7 @@ import numpy as np
 from gymnasium import spaces
 
 from dvrk_gym.envs.base import DvrkEnv, EnvConfig
-from dvrk_gym.sim import kinematics as kin
+from dvrk_gym.sim.robot import kinematics as kin
 from dvrk_gym.sim.world import StereoDetection
 
 SAFE_X_M = (0.005, 0.070)

@@ -23,8 +23,8 @@ from gymnasium import spaces
 
 from dvrk_gym.envs.base import DvrkEnv, EnvConfig
 from dvrk_gym.envs.exploration import CAMERA_BOX_HIGH_M, CAMERA_BOX_LOW_M, encode_reported
-from dvrk_gym.sim import kinematics as kin
-from dvrk_gym.sim.scene import GRID_COLUMNS, GRID_ROWS, WORKSPACE_CENTER_M, grid_circle_centers
+from dvrk_gym.sim.robot import kinematics as kin
+from dvrk_gym.sim.physics.scene import GRID_COLUMNS, GRID_ROWS, WORKSPACE_CENTER_M, grid_circle_centers
 
 N_CIRCLES = GRID_ROWS * GRID_COLUMNS
 ACTION_NAMES = ("bx", "by", "bz", "yaw")

@@ -50,7 +50,7 @@ class Profile:
         for name in ("n_trajectories", "steps_per_trajectory", "dnn_epochs", "debridement_trials", "debridement_picks", "rl_eval_points"):
             if int(getattr(self, name)) < 1:
                 raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
-        from dvrk_gym.baselines.names import AGENT_ENVS, GRID_TOUCH_ID
+        from dvrk_gym.baselines.budgets import AGENT_ENVS, GRID_TOUCH_ID
 
         grid_agents = sorted(name for name, env_id in AGENT_ENVS.items() if env_id == GRID_TOUCH_ID)
         unknown = [agent for agent in self.rl_agents if agent not in grid_agents]

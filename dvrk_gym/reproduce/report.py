@@ -40,7 +40,7 @@ def _relative(path: str, run_folder: Path) -> str:
 
 def collect_results(config: Any, task_results: dict[str, dict[str, Any]]) -> dict[str, Any]:
     """Everything the report shows, as plain numbers, from the tasks' summaries."""
-    from dvrk_gym.cli_debridement import PAPER_RESULTS
+    from dvrk_gym.cli.debridement import PAPER_RESULTS
     from dvrk_gym.envs.debridement import PAPER_PHASE_S
 
     calibration = task_results["calibration"]

@@ -53,7 +53,7 @@ class ReproduceConfig:
         object.__setattr__(self, "out", Path(self.out))
         if self.workers < 1:
             raise ValueError(f"workers must be >= 1, got {self.workers}")
-        from dvrk_gym.sim.bias import resolve_bias
+        from dvrk_gym.sim.robot.bias import resolve_bias
 
         resolve_bias(self.bias)  # a clear error for an unknown preset, before any work
 
@@ -87,7 +87,7 @@ def _search_cost(model: str, search: str) -> float:
 def build_tasks(config: ReproduceConfig) -> list[Task]:
     """The task graph of a reproduction."""
     from dvrk_gym.baselines.budgets import resolve_budget
-    from dvrk_gym.cli_debridement import cell_name
+    from dvrk_gym.cli.debridement import cell_name
 
     profile, out = config.profile, config.out
     figures = out / "figures"

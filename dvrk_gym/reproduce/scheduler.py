@@ -21,7 +21,7 @@ from typing import Any, Callable, Iterator
 
 from tqdm.auto import tqdm
 
-from dvrk_gym.torch_threads import torch_threads
+from dvrk_gym.utils.torch_threads import torch_threads
 
 logger = logging.getLogger(__name__)
 

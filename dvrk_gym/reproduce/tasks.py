@@ -18,8 +18,8 @@ MM_PER_M = 1e3
 
 def bias_field(figure: str, bias: str, bias_seed: int, seed: int, samples: int = 2000) -> dict[str, Any]:
     """The cable model's error statistics and its rigid-residual field figure."""
-    from dvrk_gym.sim import bias as cable
-    from dvrk_gym.sim.bias_field import grid_rigid_means, plot_field
+    from dvrk_gym.sim.robot import bias as cable
+    from dvrk_gym.sim.robot.bias_field import grid_rigid_means, plot_field
 
     model = cable.CableModel(cable.resolve_bias(bias), bias_seed=bias_seed)
     stats = cable.bias_statistics(model, np.random.default_rng(seed + 1), samples)
@@ -81,7 +81,7 @@ def debridement(calibration_folder: str, calibrator: str, fragment: str, trials:
 
     import dvrk_gym  # noqa: F401  (registers the environments)
     from dvrk_gym.calibration.policy import CalibratedPolicy
-    from dvrk_gym.cli_debridement import CALIBRATOR_LABELS, FRAGMENT_LABELS, load_calibrator
+    from dvrk_gym.cli.debridement import CALIBRATOR_LABELS, FRAGMENT_LABELS, load_calibrator
     from dvrk_gym.envs.debridement import fragment_target
 
     model, settings = load_calibrator(Path(calibration_folder), calibrator)
@@ -103,7 +103,7 @@ def rl_debridement(model: str, fragment: str, trials: int, picks: int, seed: int
     import dvrk_gym  # noqa: F401  (registers the environments)
     from dvrk_gym.baselines.checkpoints import load_agent
     from dvrk_gym.baselines.transfer import pick_policy
-    from dvrk_gym.cli_debridement import FRAGMENT_LABELS
+    from dvrk_gym.cli.debridement import FRAGMENT_LABELS
 
     agent = load_agent(Path(model))
     env = gym.make("dvrk_gym/Debridement-v0", fragment=fragment, max_picks=picks, bias=bias, bias_seed=bias_seed,
@@ -115,7 +115,7 @@ def rl_debridement(model: str, fragment: str, trials: int, picks: int, seed: int
 
 def _debridement_cell(env: Any, policy: Any, title: str, trials: int, seed: int, out: str, meta: dict[str, Any]) -> dict[str, Any]:
     """Run the trials of one cell, write its JSON and outcome grid, return its totals."""
-    from dvrk_gym.cli_debridement import plot_outcome_grid, run_trials, save_trials, totals
+    from dvrk_gym.cli.debridement import plot_outcome_grid, run_trials, save_trials, totals
 
     try:
         start = time.perf_counter()

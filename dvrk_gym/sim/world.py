@@ -5,7 +5,7 @@ cable-driven robot apart:
 
 * what the robot *reports*: ``FK_nominal(q_cmd)``, the pose its encoders imply, and
 * where it *is*: ``FK(q_true, true_dh)``, after the cables have had their say
-  (:mod:`dvrk_gym.sim.bias`); this drives the PyBullet body, and the cameras see it.
+  (:mod:`dvrk_gym.sim.robot.bias`); this drives the PyBullet body, and the cameras see it.
 
 Agents may use the reported pose and what the cameras see (pixels, triangulated
 positions); the truth accessors are named ``true_*`` and are for evaluation only.
@@ -19,16 +19,16 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
 
-from dvrk_gym.sim import kinematics as kin
-from dvrk_gym.sim.bias import BiasConfig, CableModel, resolve_bias
-from dvrk_gym.sim.camera import PAPER_INTRINSICS, PixelWindow, StereoCamera, default_camera_pose
-from dvrk_gym.sim.fragments import FRAGMENTS_PER_TRIAL, Fragment, FragmentType, sample_fragment_sizes, sample_layout, spawn_fragments
-from dvrk_gym.sim.grasp import Gripper, GripperConfig
-from dvrk_gym.sim.motion import CartesianMove, MotionLimits, SimClock, trapezoid_progress
-from dvrk_gym.sim.perception import Blob, detect_circles, detect_marker, match_to_expected
-from dvrk_gym.sim.physics import Physics
-from dvrk_gym.sim.robot import PSMBody, marker_corners, marker_face_samples, marker_position
-from dvrk_gym.sim.scene import CIRCLE_RADIUS_M, WORKSPACE_CENTER_M, SceneBodies, build_scene, grid_circle_centers
+from dvrk_gym.sim.robot import kinematics as kin
+from dvrk_gym.sim.robot.bias import BiasConfig, CableModel, resolve_bias
+from dvrk_gym.sim.endoscope.camera import PAPER_INTRINSICS, PixelWindow, StereoCamera, default_camera_pose
+from dvrk_gym.sim.table.fragments import FRAGMENTS_PER_TRIAL, Fragment, FragmentType, sample_fragment_sizes, sample_layout, spawn_fragments
+from dvrk_gym.sim.table.grasp import Gripper, GripperConfig
+from dvrk_gym.sim.robot.motion import CartesianMove, MotionLimits, SimClock, trapezoid_progress
+from dvrk_gym.sim.endoscope.detection import Blob, detect_circles, detect_marker, match_to_expected
+from dvrk_gym.sim.physics.client import Physics
+from dvrk_gym.sim.robot.body import PSMBody, marker_corners, marker_face_samples, marker_position
+from dvrk_gym.sim.physics.scene import CIRCLE_RADIUS_M, WORKSPACE_CENTER_M, SceneBodies, build_scene, grid_circle_centers
 
 HOME_JOINTS = np.array([0.0, 0.0, 0.05, 0.0, 0.0, 0.0])
 """A retracted configuration: the tool is 34 mm below the RCM, far outside the camera's view."""
@@ -282,7 +282,7 @@ class DvrkWorld:
         Sizes, positions and orientations are drawn from ``rng`` (the paper's sizes, at
         least 3 mm apart, any orientation); the fragments settle for
         FRAGMENT_SETTLE_STEPS physics steps (not counted on the clock). From now on the
-        robot moves through a :class:`~dvrk_gym.sim.grasp.Gripper`.
+        robot moves through a :class:`~dvrk_gym.sim.table.grasp.Gripper`.
 
         Raises:
             RuntimeError: if fragments were added since the last :meth:`rebuild`.

@@ -8,11 +8,11 @@ import sys
 from pathlib import Path
 from typing import Callable, Sequence
 
-from dvrk_gym.cli_baselines import add_commands as add_baseline_commands
-from dvrk_gym.cli_calibration import add_commands as add_calibration_commands
-from dvrk_gym.cli_debridement import add_commands as add_debridement_commands
-from dvrk_gym.cli_options import add_instrument_options
-from dvrk_gym.cli_reproduce import add_commands as add_reproduce_commands
+from dvrk_gym.cli.baselines import add_commands as add_baseline_commands
+from dvrk_gym.cli.calibration import add_commands as add_calibration_commands
+from dvrk_gym.cli.debridement import add_commands as add_debridement_commands
+from dvrk_gym.cli.options import add_instrument_options
+from dvrk_gym.cli.reproduce import add_commands as add_reproduce_commands
 
 Command = Callable[[argparse.Namespace], int]
 

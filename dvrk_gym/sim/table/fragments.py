@@ -3,7 +3,7 @@
 A fragment is one rigid ellipsoid (a convex hull) with a compliance of its own: a
 Kelvin-Voigt element across the jaws (``stiffness_n_m``, ``damping_n_s_m``). While the
 jaws hold it they close past where they first touched it by grip force / stiffness, so
-they really reach into its hull by its compression (see :mod:`dvrk_gym.sim.grasp`);
+they really reach into its hull by its compression (see :mod:`dvrk_gym.sim.table.grasp`);
 :meth:`Fragment.compression` tracks that squeeze, and after release it springs back
 with the time constant damping / stiffness (a raisin slowly, a seed at once).
 
@@ -23,7 +23,7 @@ Two details matter at millimetre scale:
   ellipsoid.
 * A fragment weighs about 0.1 g, too light for the contact solver to pass a grip of a
   newton through it, so holding is not left to friction alone; see
-  :mod:`dvrk_gym.sim.grasp`.
+  :mod:`dvrk_gym.sim.table.grasp`.
 
 Sizes follow the paper's table (mm, mean +- sd, length x width x thickness): pumpkin
 seed 12.4+-0.8 x 6.8+-0.3 x 2.4+-0.3; raisin 12.3+-1.5 x 5.9+-1.1 x 4.2+-0.5.
@@ -38,9 +38,9 @@ from typing import Sequence
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from dvrk_gym.sim import meshes
-from dvrk_gym.sim.physics import Physics
-from dvrk_gym.sim.scene import PHANTOM_SIZE_M, WORKSPACE_CENTER_M
+from dvrk_gym.sim.physics import meshes
+from dvrk_gym.sim.physics.client import Physics
+from dvrk_gym.sim.physics.scene import PHANTOM_SIZE_M, WORKSPACE_CENTER_M
 
 COLLISION_MARGIN_M = 1.0e-4
 """Collision margin of a fragment's hull (Bullet's default, 1 mm, is half a seed)."""

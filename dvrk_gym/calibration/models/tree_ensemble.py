@@ -14,7 +14,7 @@ from typing import Mapping
 import numpy as np
 from sklearn.ensemble import RandomForestRegressor
 
-from dvrk_gym.calibration.serialization import require_array
+from dvrk_gym.calibration.models.serialization import require_array
 
 __all__ = ["TreeEnsemble", "fit_forest"]
 

@@ -1,6 +1,6 @@
 """The PSM with a Large Needle Driver as a PyBullet multibody, built from a DH table.
 
-The body's links are the frames of the modified-DH chain in :mod:`dvrk_gym.sim.kinematics`
+The body's links are the frames of the modified-DH chain in :mod:`dvrk_gym.sim.robot.kinematics`
 (its joint i is pybullet joint i - 1), so the wrist-yaw link frame equals
 ``link_frames(q, dh)[5]`` for the same table. Only the tool is drawn: the 8 mm shaft
 (through the remote centre of motion), the wrist, two 10 mm jaws, and a red marker (the
@@ -15,9 +15,9 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from dvrk_gym.sim import kinematics as kin
-from dvrk_gym.sim import meshes
-from dvrk_gym.sim.physics import Physics
+from dvrk_gym.sim.robot import kinematics as kin
+from dvrk_gym.sim.physics import meshes
+from dvrk_gym.sim.physics.client import Physics
 
 SHAFT_RADIUS_M = 0.0042
 SHAFT_LENGTH_M = 0.25

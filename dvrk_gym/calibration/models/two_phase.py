@@ -13,10 +13,10 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from dvrk_gym.calibration.dnn import DNNCalibrator
-from dvrk_gym.calibration.features import check_inputs, check_targets
-from dvrk_gym.calibration.forests import ResidualForests
-from dvrk_gym.calibration.serialization import SavableModel
+from dvrk_gym.calibration.models.dnn import DNNCalibrator
+from dvrk_gym.calibration.models.features import check_inputs, check_targets
+from dvrk_gym.calibration.models.forests import ResidualForests
+from dvrk_gym.calibration.models.serialization import SavableModel
 
 __all__ = ["TwoPhaseCalibrator"]
 

@@ -6,7 +6,7 @@
 - :class:`ForestCalibrator` is the model search's ``RFs_tA_dB``: one forest from the
   calibration inputs to the base position.
 
-Both predict with :class:`~dvrk_gym.calibration.tree_ensemble.TreeEnsemble`, so a fitted
+Both predict with :class:`~dvrk_gym.calibration.models.tree_ensemble.TreeEnsemble`, so a fitted
 and a loaded model run the same code and agree bit for bit.
 """
 
@@ -16,11 +16,11 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from dvrk_gym.calibration.features import (
+from dvrk_gym.calibration.models.features import (
     PAPER_YAWS_RAD, check_inputs, check_targets, encode_euler, nearest_yaw_index,
 )
-from dvrk_gym.calibration.serialization import SavableModel, require_names
-from dvrk_gym.calibration.tree_ensemble import TreeEnsemble, fit_forest
+from dvrk_gym.calibration.models.serialization import SavableModel, require_names
+from dvrk_gym.calibration.models.tree_ensemble import TreeEnsemble, fit_forest
 
 __all__ = ["ForestCalibrator", "ResidualForests"]
 

@@ -12,8 +12,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from dvrk_gym.sim import meshes
-from dvrk_gym.sim.physics import Physics
+from dvrk_gym.sim.physics import meshes
+from dvrk_gym.sim.physics.client import Physics
 
 WORKSPACE_CENTER_M = np.array([0.040, 0.042, -0.164])
 """Centre of the paper's top surface, (x, y, z) in metres, base frame."""

@@ -3,7 +3,7 @@
 ``dvrk-gym debride`` loads a calibrator from a calibration run folder (running the
 two-phase pipeline there first if it holds no models), and runs the paper's debridement
 trials with it: each trial is one Debridement-v0 episode of eight picks, run through
-:func:`dvrk_gym.evaluation.run_episodes` with a
+:func:`dvrk_gym.evaluation.episodes.run_episodes` with a
 :class:`~dvrk_gym.calibration.policy.CalibratedPolicy` whose target is the next fragment
 the endoscope sees, so any policy can be judged the same way. It prints and writes the
 trial table (one row per trial: the outcome string, successes, time per fragment) with
@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from dvrk_gym.cli_options import add_instrument_options, add_progress_option
+from dvrk_gym.cli.options import add_instrument_options, add_progress_option
 
 logger = logging.getLogger(__name__)
 
@@ -71,10 +71,10 @@ def load_calibrator(folder: Path, name: str, bias: str = "paper", bias_seed: int
         folder: a folder written by ``dvrk-gym calibrate`` or ``evaluate``.
         name: "rbt", "dnn" or "dnn+rf".
     """
-    from dvrk_gym.calibration.dnn import DNNCalibrator
+    from dvrk_gym.calibration.models.dnn import DNNCalibrator
     from dvrk_gym.calibration.pipeline import PipelineConfig, run_calibration
-    from dvrk_gym.calibration.rigid import RigidBodyCalibrator
-    from dvrk_gym.calibration.two_phase import TwoPhaseCalibrator
+    from dvrk_gym.calibration.models.rigid import RigidBodyCalibrator
+    from dvrk_gym.calibration.models.two_phase import TwoPhaseCalibrator
 
     if name not in CALIBRATOR_FILES:
         raise ValueError(f"unknown calibrator {name!r}; expected one of {sorted(CALIBRATOR_FILES)}")
@@ -96,12 +96,12 @@ def run_trials(env: Any, policy: Any, n_trials: int, seed: int = 0, progress: bo
 
     Args:
         env: a Debridement-v0 environment in primitive mode.
-        policy: anything :func:`dvrk_gym.evaluation.run_episodes` accepts.
+        policy: anything :func:`dvrk_gym.evaluation.episodes.run_episodes` accepts.
         n_trials: how many trials (episodes).
         seed: the first trial's reset seed; the rest continue its stream.
     """
     from dvrk_gym.envs.debridement import PHASES
-    from dvrk_gym.evaluation import run_episodes
+    from dvrk_gym.evaluation.episodes import run_episodes
 
     results = run_episodes(env, policy, n_trials, seed=seed, progress=progress, description="debridement trials")
     trials = []
@@ -115,7 +115,7 @@ def run_trials(env: Any, policy: Any, n_trials: int, seed: int = 0, progress: bo
 
 def totals(trials: list[Trial]) -> dict[str, Any]:
     """Counts over all trials: picks, success, A, B, C; mean time per fragment and phases (s)."""
-    from dvrk_gym.sim.debridement_judge import outcome_counts
+    from dvrk_gym.sim.table.judge import outcome_counts
 
     every = [o for t in trials for o in t.outcomes]
     counts = outcome_counts(every)

@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from dvrk_gym.sim.kinematics import PAPER_YAWS_RAD
+from dvrk_gym.sim.robot.kinematics import PAPER_YAWS_RAD
 
 __all__ = [
     "INPUT_COLUMNS",

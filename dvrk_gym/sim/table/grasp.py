@@ -43,10 +43,10 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
-from dvrk_gym.sim import kinematics as kin
-from dvrk_gym.sim.fragments import Fragment
-from dvrk_gym.sim.physics import Physics
-from dvrk_gym.sim.robot import JAW_A_INDEX, JAW_B_INDEX, WRIST_YAW_INDEX, PSMBody
+from dvrk_gym.sim.robot import kinematics as kin
+from dvrk_gym.sim.table.fragments import Fragment
+from dvrk_gym.sim.physics.client import Physics
+from dvrk_gym.sim.robot.body import JAW_A_INDEX, JAW_B_INDEX, WRIST_YAW_INDEX, PSMBody
 
 GRASP_TIP_CLEARANCE_M = 0.0007
 """Where to stop the closed jaw tip above the paper before closing, m. With the paper's

@@ -6,7 +6,7 @@ import argparse
 import json
 from pathlib import Path
 
-from dvrk_gym.cli_options import add_instrument_options
+from dvrk_gym.cli.options import add_instrument_options
 
 
 def _add_world_options(parser: argparse.ArgumentParser) -> None:
@@ -77,7 +77,7 @@ def _evaluate_policy(args: argparse.Namespace) -> int:
     import gymnasium as gym
 
     import dvrk_gym  # noqa: F401
-    from dvrk_gym.evaluation import load_policy_factory, run_episodes, summarize
+    from dvrk_gym.evaluation.episodes import load_policy_factory, run_episodes, summarize
 
     factory = load_policy_factory(args.policy)
     env = gym.make(args.env, bias=args.bias, bias_seed=args.bias_seed, camera_resolution=tuple(args.resolution))

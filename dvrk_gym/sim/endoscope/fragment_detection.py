@@ -30,9 +30,9 @@ from typing import TYPE_CHECKING
 import cv2
 import numpy as np
 
-from dvrk_gym.sim.camera import PAPER_INTRINSICS, PixelWindow, StereoCamera
-from dvrk_gym.sim.perception import RED_HUE_MAX
-from dvrk_gym.sim.scene import PHANTOM_SIZE_M, WORKSPACE_CENTER_M
+from dvrk_gym.sim.endoscope.camera import PAPER_INTRINSICS, PixelWindow, StereoCamera
+from dvrk_gym.sim.endoscope.detection import RED_HUE_MAX
+from dvrk_gym.sim.physics.scene import PHANTOM_SIZE_M, WORKSPACE_CENTER_M
 
 if TYPE_CHECKING:
     from pybullet_utils.bullet_client import BulletClient

@@ -14,8 +14,8 @@ from typing import Any, Mapping
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from dvrk_gym.calibration.features import PAPER_YAWS_RAD, check_inputs, check_targets, nearest_yaw_index
-from dvrk_gym.calibration.serialization import SavableModel, require_array, require_names
+from dvrk_gym.calibration.models.features import PAPER_YAWS_RAD, check_inputs, check_targets, nearest_yaw_index
+from dvrk_gym.calibration.models.serialization import SavableModel, require_array, require_names
 
 __all__ = ["RigidBodyCalibrator", "fit_rigid_transform"]
 

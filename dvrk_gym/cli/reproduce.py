@@ -7,7 +7,7 @@ import os
 import sys
 from pathlib import Path
 
-from dvrk_gym.cli_options import add_instrument_options, add_progress_option
+from dvrk_gym.cli.options import add_instrument_options, add_progress_option
 
 DEFAULT_OUT = {"quick": Path("dvrk_gym_out/reproduce-quick"), "full": Path("dvrk_gym_out/reproduce")}
 

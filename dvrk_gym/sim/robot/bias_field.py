@@ -13,8 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
-from dvrk_gym.sim import bias
-from dvrk_gym.sim import kinematics as kin
+from dvrk_gym.sim.robot import bias
+from dvrk_gym.sim.robot import kinematics as kin
 
 GRID_SHAPE = (7, 5)
 """Points along base x and y: the paper's 35 circles."""

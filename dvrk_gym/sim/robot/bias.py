@@ -24,7 +24,7 @@ The error terms, each in its own function below:
 The ``paper`` preset is tuned (see the notes above ``_PAPER``) so that, over the paper's
 workspace and rotation ranges, a rigid fit per paper yaw leaves about 4.5 mm and a
 smooth error model about 0.9 mm, as in the paper; :func:`bias_statistics` measures this.
-Joint vectors follow :data:`dvrk_gym.sim.kinematics.JOINT_NAMES` (rad, insertion in m).
+Joint vectors follow :data:`dvrk_gym.sim.robot.kinematics.JOINT_NAMES` (rad, insertion in m).
 """
 
 from __future__ import annotations
@@ -36,7 +36,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 from sklearn.preprocessing import PolynomialFeatures
 
-from dvrk_gym.sim import kinematics as kin
+from dvrk_gym.sim.robot import kinematics as kin
 
 __all__ = [
     "BiasConfig", "BIAS_PRESETS", "resolve_bias", "CableModel", "bias_statistics",

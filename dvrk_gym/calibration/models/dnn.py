@@ -18,8 +18,8 @@ import torch
 from torch import nn
 from tqdm import tqdm
 
-from dvrk_gym.calibration.features import check_inputs, check_targets, encode_euler
-from dvrk_gym.calibration.serialization import SavableModel, require_array, require_names
+from dvrk_gym.calibration.models.features import check_inputs, check_targets, encode_euler
+from dvrk_gym.calibration.models.serialization import SavableModel, require_array, require_names
 
 __all__ = ["ACTIVATIONS", "DEFAULT_BATCH_SIZE", "DEFAULT_LEARNING_RATE", "DNNCalibrator"]
 

@@ -7,8 +7,8 @@ from typing import Any, Callable, Mapping
 import numpy as np
 from sklearn.linear_model import LinearRegression
 
-from dvrk_gym.calibration.features import check_inputs, check_targets, encode_euler, encode_quaternion
-from dvrk_gym.calibration.serialization import SavableModel, require_array, require_names
+from dvrk_gym.calibration.models.features import check_inputs, check_targets, encode_euler, encode_quaternion
+from dvrk_gym.calibration.models.serialization import SavableModel, require_array, require_names
 
 __all__ = ["LinearCalibrator"]
 

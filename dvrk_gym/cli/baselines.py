@@ -10,7 +10,7 @@ import argparse
 import json
 from pathlib import Path
 
-from dvrk_gym.cli_options import add_instrument_options, add_progress_option
+from dvrk_gym.cli.options import add_instrument_options, add_progress_option
 
 LOAD_WARNING = (
     "Models are read back without unpickling (the policy weights with torch.load(weights_only=True), "
@@ -25,7 +25,7 @@ def _run_train(args: argparse.Namespace) -> int:
     from dvrk_gym.baselines.curves import plot_curves, save_curve
     from dvrk_gym.baselines.training import TrainConfig, train
 
-    from dvrk_gym.baselines.names import AGENT_ENVS, DEBRIDEMENT_ID
+    from dvrk_gym.baselines.budgets import AGENT_ENVS, DEBRIDEMENT_ID
 
     steps = resolve_budget(args.budget, args.steps)
     picks = AGENT_ENVS[args.algo] == DEBRIDEMENT_ID
@@ -64,7 +64,7 @@ def _run_train(args: argparse.Namespace) -> int:
 
 def _run_evaluate(args: argparse.Namespace) -> int:
     from dvrk_gym.baselines.checkpoints import load_agent
-    from dvrk_gym.baselines.names import GRID_TOUCH_ID
+    from dvrk_gym.baselines.budgets import GRID_TOUCH_ID
 
     if args.trials < 1:
         raise ValueError(f"--trials must be >= 1, got {args.trials}")
@@ -118,7 +118,7 @@ def _evaluate_debridement(agents: list, args: argparse.Namespace) -> list[Path]:
     from dvrk_gym.baselines.comparison import (
         benchmark_debridement, calibration_debridement_rows, debridement_row, format_debridement_comparison, setting_mismatches,
     )
-    from dvrk_gym.cli_debridement import format_trial_table
+    from dvrk_gym.cli.debridement import format_trial_table
 
     seed = args.seed if args.seed is not None else 0
     texts, rows, notes = [], [], []
@@ -142,7 +142,7 @@ def _evaluate_debridement(agents: list, args: argparse.Namespace) -> list[Path]:
 
 def _add_train(subparsers: argparse._SubParsersAction) -> None:
     from dvrk_gym.baselines.budgets import BUDGETS
-    from dvrk_gym.baselines.names import AGENT_DESCRIPTIONS as AGENTS
+    from dvrk_gym.baselines.budgets import AGENT_DESCRIPTIONS as AGENTS
 
     train = subparsers.add_parser(
         "train",

@@ -8,7 +8,7 @@ Each pick ends in one of the paper's outcomes:
 * ``"C"`` a raisin came up on one jaw tip (pierced) and was not delivered.
 
 Where the jaws landed is measured when they start to close: the true closed-jaw tip
-(:func:`dvrk_gym.sim.kinematics.touch_point`) against where the fragment lay before the
+(:func:`dvrk_gym.sim.robot.kinematics.touch_point`) against where the fragment lay before the
 pick, in the fragment's own axes, as a fraction of its half length and half width
 (:func:`offset_ratio`; 1 is on its outline). At most WELL_PLACED_RATIO counts as well
 placed; the jaws, 10 mm apart when open, then straddle the fragment across its width and
@@ -24,7 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from dvrk_gym.sim.scene import RECEPTACLE_CENTER_M, RECEPTACLE_INNER_SIZE_M, RECEPTACLE_WALL_HEIGHT_M
+from dvrk_gym.sim.physics.scene import RECEPTACLE_CENTER_M, RECEPTACLE_INNER_SIZE_M, RECEPTACLE_WALL_HEIGHT_M
 
 SUCCESS = "-"
 MISSED = "A"

@@ -1,0 +1,1 @@
+"""Small helpers with no simulator knowledge: torch thread counts, cached run folders."""
