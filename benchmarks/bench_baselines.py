@@ -31,19 +31,26 @@ import gymnasium as gym
 import numpy as np
 
 from dvrk_gym.baselines.agents import AGENTS
-from dvrk_gym.baselines.budgets import BUDGETS, resolve_budget
+from dvrk_gym.baselines.budgets import BUDGETS, DEBRIDEMENT_ID, GRID_TOUCH_ID, resolve_budget
 from dvrk_gym.baselines.checkpoints import LoadedAgent, load_agent, save_agent
 from dvrk_gym.baselines.comparison import (
-    BENCHMARK_SEED, agent_row, benchmark_agent, benchmark_debridement, calibration_debridement_rows, calibration_rows,
-    debridement_row, format_comparison, format_debridement_comparison, setting_mismatches,
+    BENCHMARK_SEED,
+    agent_row,
+    benchmark_agent,
+    benchmark_debridement,
+    calibration_debridement_rows,
+    calibration_rows,
+    debridement_row,
+    format_comparison,
+    format_debridement_comparison,
+    setting_mismatches,
 )
 from dvrk_gym.baselines.curves import plot_curves, save_curve
-from dvrk_gym.baselines.budgets import DEBRIDEMENT_ID, GRID_TOUCH_ID
 from dvrk_gym.baselines.training import TrainConfig, train
 from dvrk_gym.calibration.benchmark import format_table
+from dvrk_gym.calibration.loading import load_calibrator
 from dvrk_gym.calibration.pipeline import PipelineConfig, run_calibration
 from dvrk_gym.calibration.policy import CalibratedPolicy
-from dvrk_gym.cli.debridement import load_calibrator
 from dvrk_gym.envs.debridement import fragment_target
 
 VEC_SETTINGS = ((1, "dummy"), (2, "dummy"), (2, "subproc"))
@@ -56,13 +63,18 @@ def is_pick_agent(name: str) -> bool:
 
 def throughput(rate_steps: int, pick_rate_steps: int, agents: list[str]) -> None:
     """Print training env steps/s per agent and vector-env setting."""
-    print(f"Training throughput (GridTouch agents {rate_steps} env steps, pick agents {pick_rate_steps}; learning from step 50; evaluations not timed)")
+    print(
+        f"Training throughput (GridTouch agents {rate_steps} env steps, pick agents {pick_rate_steps}; "
+        "learning from step 50; evaluations not timed)"
+    )
     print(f"{'agent':<10}{'envs':>6}{'vec env':>10}{'env steps/s':>14}")
     for agent in agents:
         picks = is_pick_agent(agent)
         for n_envs, vec_env in VEC_SETTINGS[:1] if picks else VEC_SETTINGS:
             steps = pick_rate_steps if picks else rate_steps
-            config = TrainConfig(agent=agent, steps=steps, n_envs=n_envs, vec_env=vec_env, eval_points=1, curve_trials=1, overrides={"learning_starts": 50})
+            config = TrainConfig(
+                agent=agent, steps=steps, n_envs=n_envs, vec_env=vec_env, eval_points=1, curve_trials=1, overrides={"learning_starts": 50}
+            )
             result = train(config, progress=False)
             print(f"{agent:<10}{n_envs:>6}{vec_env:>10}{result.steps_per_second:>14.2f}", flush=True)
     print()
@@ -92,7 +104,10 @@ def pick_timing(calibration_dir: Path, resolutions: list[tuple[int, int]], trial
                     done = terminated or truncated
         finally:
             env.close()
-        print(f"{f'{width}x{height}':>12}{np.mean(steps):>12.3f}{np.std(steps):>8.3f}{np.mean(resets):>13.3f}{f'{successes}/{len(steps)}':>10}", flush=True)
+        print(
+            f"{f'{width}x{height}':>12}{np.mean(steps):>12.3f}{np.std(steps):>8.3f}{np.mean(resets):>13.3f}{f'{successes}/{len(steps)}':>10}",
+            flush=True,
+        )
     print()
 
 
@@ -101,17 +116,33 @@ def train_agents(args: argparse.Namespace, steps: int, pick_steps: int, calibrat
     agents, curves = [], {}
     for agent_name in args.agents:
         budget = pick_steps if is_pick_agent(agent_name) else steps
-        config = TrainConfig(agent=agent_name, steps=budget, seed=args.seed, camera_resolution=calibration.camera_resolution, bias=calibration.bias, bias_seed=calibration.bias_seed)
+        config = TrainConfig(
+            agent=agent_name,
+            steps=budget,
+            seed=args.seed,
+            camera_resolution=calibration.camera_resolution,
+            bias=calibration.bias,
+            bias_seed=calibration.bias_seed,
+        )
         start = time.perf_counter()
         result = train(config, progress=not args.no_progress)
         path = save_agent(result, args.out / f"{agent_name}_{budget}_seed{args.seed}" / "model.zip")
         save_curve(result.curve, path.parent / "learning_curve.json", {"agent": agent_name, "steps_per_second": result.steps_per_second})
         curves.setdefault(is_pick_agent(agent_name), {})[f"{agent_name}, seed {args.seed}"] = result.curve
-        print(f"{agent_name}: trained {result.env_steps} steps at {result.steps_per_second:.2f} steps/s in {result.train_seconds:.0f} s; with evaluations {time.perf_counter() - start:.0f} s", flush=True)
+        print(
+            f"{agent_name}: trained {result.env_steps} steps at {result.steps_per_second:.2f} steps/s in {result.train_seconds:.0f} s; "
+            f"with evaluations {time.perf_counter() - start:.0f} s",
+            flush=True,
+        )
         agents.append(load_agent(path))
     for picks, group in curves.items():
         name = "learning_curves_debridement.png" if picks else "learning_curves.png"
-        plot_curves(group, args.out / name, title=f"Agents on {'Debridement' if picks else 'GridTouch'}-v0, seed {args.seed}", metric="success_rate" if picks else "mm_error")
+        plot_curves(
+            group,
+            args.out / name,
+            title=f"Agents on {'Debridement' if picks else 'GridTouch'}-v0, seed {args.seed}",
+            metric="success_rate" if picks else "mm_error",
+        )
     return agents
 
 
@@ -133,7 +164,9 @@ def comparison(args: argparse.Namespace, steps: int, pick_steps: int) -> None:
     if grid_agents:
         names = [agent.config.agent for agent in grid_agents]
         keys = names if len(set(names)) == len(names) else [f"{name}#{i + 1}" for i, name in enumerate(names)]
-        table = {key: benchmark_agent(agent, seed=BENCHMARK_SEED + calibration.seed) for key, agent in zip(keys, grid_agents)}  # the calibrators' touches
+        table = {
+            key: benchmark_agent(agent, seed=BENCHMARK_SEED + calibration.seed) for key, agent in zip(keys, grid_agents)
+        }  # the calibrators' touches
         rows += [agent_row(agent, table[key]) for key, agent in zip(keys, grid_agents)]
         print()
         print(format_table(table))
@@ -157,14 +190,22 @@ def main() -> None:
     parser.add_argument("--budget", choices=sorted(BUDGETS), default="calibrator", help="training budget (default: %(default)s)")
     parser.add_argument("--steps", type=int, help="train the GridTouch agents for this many env steps instead of the budget")
     parser.add_argument("--pick-steps", type=int, help="train the pick agents for this many picks instead of the budget")
-    parser.add_argument("--agents", nargs="*", choices=sorted(AGENTS), default=sorted(AGENTS), help="agents to train (default: all; none with --agents and no names)")
+    parser.add_argument(
+        "--agents",
+        nargs="*",
+        choices=sorted(AGENTS),
+        default=sorted(AGENTS),
+        help="agents to train (default: all; none with --agents and no names)",
+    )
     parser.add_argument("--models", nargs="*", type=Path, default=[], help="trained model.zip files to include as they are")
     parser.add_argument("--calibration", type=Path, help="a calibration run folder (default: run one in --out/calibration)")
     parser.add_argument("--out", type=Path, default=Path("dvrk_gym_out/bench_baselines"), help="output folder (default: %(default)s)")
     parser.add_argument("--seed", type=int, default=0, help="seed of training and touch-grid benchmark (default: %(default)s)")
     parser.add_argument("--trials", type=int, default=15, help="debridement trials of 8 picks per method, seed 0 (default: %(default)s)")
     parser.add_argument("--rate-steps", type=int, default=400, help="env steps per GridTouch throughput measurement (default: %(default)s)")
-    parser.add_argument("--pick-rate-steps", type=int, default=150, help="picks per pick-agent throughput measurement (default: %(default)s)")
+    parser.add_argument(
+        "--pick-rate-steps", type=int, default=150, help="picks per pick-agent throughput measurement (default: %(default)s)"
+    )
     parser.add_argument("--timing-trials", type=int, default=2, help="trials per resolution for the pick wall time (default: %(default)s)")
     parser.add_argument("--skip-rates", action="store_true", help="skip the throughput and pick-time measurements")
     parser.add_argument("--skip-comparison", action="store_true", help="only measure training throughput")

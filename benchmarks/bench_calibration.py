@@ -16,6 +16,7 @@ from pathlib import Path
 import torch
 
 import dvrk_gym  # noqa: F401
+from dvrk_gym import paper
 from dvrk_gym.calibration.benchmark import format_table
 from dvrk_gym.calibration.pipeline import PipelineConfig, run_calibration
 
@@ -23,8 +24,8 @@ from dvrk_gym.calibration.pipeline import PipelineConfig, run_calibration
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, default=None, help="run folder (default: a new temporary one)")
-    parser.add_argument("--trajectories", type=int, default=57, help="Phase I trajectories (default: %(default)s)")
-    parser.add_argument("--epochs", type=int, default=1000, help="DNN epochs (default: %(default)s)")
+    parser.add_argument("--trajectories", type=int, default=paper.PHASE1_TRAJECTORIES, help="Phase I trajectories (default: %(default)s)")
+    parser.add_argument("--epochs", type=int, default=paper.DNN_EPOCHS, help="DNN epochs (default: %(default)s)")
     args = parser.parse_args()
     torch.set_num_threads(1)
     out = args.out or Path(tempfile.mkdtemp(prefix="dvrk_gym_calibration_"))
@@ -34,7 +35,11 @@ def main() -> None:
     print(format_table(result["table"]))
     print()
     phase1 = result["phase1"]
-    print(f"Phase I: {phase1.n_raw} raw samples, {phase1.n_kept} kept ({phase1.n_kept / phase1.n_raw:.0%}; the paper: 5256, 1939, 37%)")
+    raw, kept = paper.PHASE1_RAW_SAMPLES, paper.PHASE1_KEPT_SAMPLES
+    print(
+        f"Phase I: {phase1.n_raw} raw samples, {phase1.n_kept} kept "
+        f"({phase1.n_kept / phase1.n_raw:.0%}; the paper: {raw}, {kept}, {kept / raw:.0%})"
+    )
     print(f"{'stage':<12}{'wall s':>10}")
     for stage, seconds in result["timings_s"].items():
         print(f"{stage:<12}{seconds:>10.1f}")

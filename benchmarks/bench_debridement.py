@@ -17,16 +17,23 @@ from pathlib import Path
 import gymnasium as gym
 
 import dvrk_gym  # noqa: F401
+from dvrk_gym import paper
+from dvrk_gym.calibration.loading import load_calibrator
 from dvrk_gym.calibration.policy import CalibratedPolicy
-from dvrk_gym.cli.debridement import CALIBRATOR_LABELS, PAPER_RESULTS, load_calibrator, run_trials, totals
-from dvrk_gym.envs.debridement import PAPER_PHASE_S, PHASES, fragment_target
+from dvrk_gym.envs.debridement import fragment_target
+from dvrk_gym.envs.picks import PHASES
+from dvrk_gym.evaluation.trials import run_trials, totals
+from dvrk_gym.paper import DEBRIDEMENT_PHASE_S as PAPER_PHASE_S
 
 
 def bench_cell(folder: Path, calibrator_name: str, fragment: str, trials: int, seed: int, resolution: tuple[int, int]) -> dict:
     """Run one cell of the table; returns its totals and the wall seconds per trial."""
     calibrator, settings = load_calibrator(folder, calibrator_name)
     env = gym.make(
-        "dvrk_gym/Debridement-v0", fragment=fragment, bias=settings["bias"], bias_seed=int(settings["bias_seed"]),
+        "dvrk_gym/Debridement-v0",
+        fragment=fragment,
+        bias=settings["bias"],
+        bias_seed=int(settings["bias_seed"]),
         camera_resolution=resolution,
     )
     try:
@@ -40,12 +47,24 @@ def bench_cell(folder: Path, calibrator_name: str, fragment: str, trials: int, s
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--calibration", type=Path, default=Path("dvrk_gym_out/calibration"), help="calibration run folder (default: %(default)s)")
+    parser.add_argument(
+        "--calibration", type=Path, default=Path("dvrk_gym_out/calibration"), help="calibration run folder (default: %(default)s)"
+    )
     parser.add_argument("--trials", type=int, default=15, help="trials per cell (the paper: %(default)s)")
-    parser.add_argument("--calibrators", nargs="+", default=["dnn", "dnn+rf"], choices=sorted(CALIBRATOR_LABELS), help="calibrators (default: dnn dnn+rf)")
-    parser.add_argument("--fragments", nargs="+", default=["pumpkin_seed", "raisin"], choices=["pumpkin_seed", "raisin"], help="fragment kinds (default: both)")
+    parser.add_argument(
+        "--calibrators", nargs="+", default=["dnn", "dnn+rf"], choices=sorted(paper.METHOD_LABELS), help="calibrators (default: dnn dnn+rf)"
+    )
+    parser.add_argument(
+        "--fragments",
+        nargs="+",
+        default=["pumpkin_seed", "raisin"],
+        choices=["pumpkin_seed", "raisin"],
+        help="fragment kinds (default: both)",
+    )
     parser.add_argument("--seed", type=int, default=0, help="seed of the first trial (default: %(default)s)")
-    parser.add_argument("--resolution", type=int, nargs=2, default=(1920, 1080), metavar=("W", "H"), help="endoscope image size (default: 1920 1080)")
+    parser.add_argument(
+        "--resolution", type=int, nargs=2, default=(1920, 1080), metavar=("W", "H"), help="endoscope image size (default: 1920 1080)"
+    )
     parser.add_argument("--rows", action="store_true", help="also print every trial's outcome string")
     args = parser.parse_args()
     header = f"{'fragment':<14}{'calibrator':<10}{'success':>15}{'A':>5}{'B':>5}{'C':>5}{'s/fragment':>12}{'wall s/trial':>14}{'paper':>26}"
@@ -54,16 +73,20 @@ def main() -> None:
     for fragment in args.fragments:
         for name in args.calibrators:
             cell = bench_cell(args.calibration, name, fragment, args.trials, args.seed, tuple(args.resolution))
-            paper = PAPER_RESULTS.get((name, fragment))
-            paper_text = f"{paper['success']}/120 A{paper['A']} B{paper['B']} C{paper['C']}" if paper else "-"
+            reference = paper.DEBRIDEMENT_RESULTS.get((name, fragment))
+            picks = paper.DEBRIDEMENT_PICKS_PER_CELL
+            paper_text = f"{reference['success']}/{picks} A{reference['A']} B{reference['B']} C{reference['C']}" if reference else "-"
             success = f"{cell['success']}/{cell['picks']} ({100 * cell['success'] / max(cell['picks'], 1):.0f}%)"
-            print(f"{fragment:<14}{CALIBRATOR_LABELS[name]:<10}{success:>15}{cell['A']:>5}{cell['B']:>5}{cell['C']:>5}"
-                  f"{cell['time_per_fragment_s']:>12.2f}{cell['wall_s_per_trial']:>14.1f}{paper_text:>26}", flush=True)
+            print(
+                f"{fragment:<14}{paper.METHOD_LABELS[name]:<10}{success:>15}{cell['A']:>5}{cell['B']:>5}{cell['C']:>5}"
+                f"{cell['time_per_fragment_s']:>12.2f}{cell['wall_s_per_trial']:>14.1f}{paper_text:>26}",
+                flush=True,
+            )
             if args.rows:
                 print("    " + " | ".join(cell["rows"]))
             if cell["sim_errors"]:
                 print(f"    {cell['sim_errors']} trial(s) ended with a physics failure")
-            phase_lines.append(f"{fragment:<14}{CALIBRATOR_LABELS[name]:<10}" + "".join(f"{cell['phase_s'][p]:>16.2f}" for p in PHASES))
+            phase_lines.append(f"{fragment:<14}{paper.METHOD_LABELS[name]:<10}" + "".join(f"{cell['phase_s'][p]:>16.2f}" for p in PHASES))
     print()
     print(f"{'phases, s':<24}" + "".join(f"{p:>16}" for p in PHASES))
     for line in phase_lines:

@@ -18,11 +18,18 @@ import time
 
 import torch
 
+from dvrk_gym import paper
 from dvrk_gym.calibration.datasets import load_paper_phase1
 from dvrk_gym.calibration.models.dnn import DEFAULT_LEARNING_RATE, DNNCalibrator
 from dvrk_gym.calibration.search import (
-    CHOSEN_NET, PAPER_EPOCHS, SWEEP_BATCH_SIZE, SWEEP_FOLDS, ModelSpec, format_table,
-    paper_models, plot_search,
+    CHOSEN_NET,
+    PAPER_EPOCHS,
+    SWEEP_BATCH_SIZE,
+    SWEEP_FOLDS,
+    ModelSpec,
+    format_table,
+    paper_models,
+    plot_search,
     run_search,
 )
 
@@ -36,30 +43,29 @@ def _time_training(X, y, epochs: int) -> tuple[float, float]:
 
 def _search_specs(args: argparse.Namespace) -> list[ModelSpec]:
     print(f"model search: every net batch {SWEEP_BATCH_SIZE}, lr {DEFAULT_LEARNING_RATE:g}")
-    return paper_models(epochs=args.epochs, sweep_folds=args.sweep_folds or None,
-                        quick=args.quick)
+    return paper_models(epochs=args.epochs, sweep_folds=args.sweep_folds or None, quick=args.quick)
 
 
 def _chosen_specs(args: argparse.Namespace) -> list[ModelSpec]:
     """Linear, forest and the chosen net with the DNNCalibrator defaults (full batch)."""
     epochs = min(args.epochs, 30) if args.quick else args.epochs
     default = DNNCalibrator()
-    print(f"chosen net with DNNCalibrator defaults: batch {default.batch_size}, "
-          f"lr {default.learning_rate:g}, {epochs} epochs")
+    print(f"chosen net with DNNCalibrator defaults: batch {default.batch_size}, lr {default.learning_rate:g}, {epochs} epochs")
     specs = [spec for spec in paper_models() if spec.name in ("Lin_EA", "Lin_Q", "RFs_t100_dN")]
-    return specs + [ModelSpec(CHOSEN_NET, "DNN", epochs=epochs, make=lambda seed: DNNCalibrator(
-        epochs=epochs, seed=seed, progress=False))]
+    return specs + [ModelSpec(CHOSEN_NET, "DNN", epochs=epochs, make=lambda seed: DNNCalibrator(epochs=epochs, seed=seed, progress=False))]
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--threads", type=int, default=1, help="torch threads (default: %(default)s)")
     parser.add_argument("--folds", type=int, default=10, help="CV folds (default: %(default)s)")
-    parser.add_argument("--epochs", type=int, default=PAPER_EPOCHS,
-                        help="epochs of every net (default: %(default)s)")
-    parser.add_argument("--sweep-folds", type=int, default=SWEEP_FOLDS,
-                        help="folds scored for the 23 other nets with --search; 0 for all "
-                             "(default: %(default)s)")
+    parser.add_argument("--epochs", type=int, default=PAPER_EPOCHS, help="epochs of every net (default: %(default)s)")
+    parser.add_argument(
+        "--sweep-folds",
+        type=int,
+        default=SWEEP_FOLDS,
+        help="folds scored for the 23 other nets with --search; 0 for all (default: %(default)s)",
+    )
     parser.add_argument("--search", action="store_true", help="run the paper's full model search")
     parser.add_argument("--plot", default="model_search.png", help="figure path with --search")
     parser.add_argument("--quick", action="store_true", help="smoke run (few epochs and folds)")
@@ -68,13 +74,18 @@ def main() -> None:
     logging.basicConfig(level=logging.WARNING)
     torch.set_num_threads(args.threads)
     X, y = load_paper_phase1()
-    print(f"authors' Phase I data: {X.shape[0]} rows; torch {torch.__version__}, "
-          f"{torch.get_num_threads()} thread(s)")
+    print(f"authors' Phase I data: {X.shape[0]} rows; torch {torch.__version__}, {torch.get_num_threads()} thread(s)")
 
     specs = _search_specs(args) if args.search else _chosen_specs(args)
     wall, cpu = time.perf_counter(), time.process_time()
     results = run_search(X, y, models=specs, folds=args.folds, seed=args.seed, quick=args.quick)
     print(format_table(results))
+    print(
+        "the paper (mm^2): "
+        + ", ".join(f"{name} {mm2}" for name, mm2 in paper.SEARCH_MM2.items())
+        + "; the authors' code on these rows: "
+        + ", ".join(f"{name} {mm2}" for name, mm2 in paper.AUTHORS_CV_MM2.items())
+    )
     print(f"search time: wall {time.perf_counter() - wall:.0f} s, CPU {time.process_time() - cpu:.0f} s")
     if args.search:
         plot_search(results, args.plot)
@@ -82,8 +93,7 @@ def main() -> None:
 
     epochs = min(args.epochs, 30) if args.quick else args.epochs
     wall, cpu = _time_training(X, y, epochs)
-    print(f"DNN {CHOSEN_NET} training with defaults, {X.shape[0]} rows x {epochs} epochs: "
-          f"wall {wall:.1f} s, CPU {cpu:.1f} s")
+    print(f"DNN {CHOSEN_NET} training with defaults, {X.shape[0]} rows x {epochs} epochs: wall {wall:.1f} s, CPU {cpu:.1f} s")
 
 
 if __name__ == "__main__":

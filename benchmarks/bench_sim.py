@@ -12,9 +12,10 @@ import time
 
 import numpy as np
 
-from dvrk_gym.sim.robot import kinematics as kin
-from dvrk_gym.sim.endoscope.camera import PAPER_INTRINSICS
 from dvrk_gym.envs.exploration import sample_paper_poses
+from dvrk_gym.sim.endoscope.camera import PAPER_INTRINSICS
+from dvrk_gym.sim.robot import kinematics as kin
+from dvrk_gym.sim.robot.ik import inverse_kinematics
 from dvrk_gym.sim.world import DvrkWorld, WorldConfig
 
 
@@ -31,10 +32,10 @@ def main() -> None:
     args = parser.parse_args()
     rng = np.random.default_rng(0)
     poses = sample_paper_poses(rng, args.n)
-    joints = [kin.inverse_kinematics(p) for p in poses]
+    joints = [inverse_kinematics(p) for p in poses]
 
     fk = _rate(lambda i: kin.forward_kinematics(joints[i % len(joints)]), 20000)
-    ik = _rate(lambda i: kin.inverse_kinematics(poses[i % len(poses)]), 20000)
+    ik = _rate(lambda i: inverse_kinematics(poses[i % len(poses)]), 20000)
 
     world = DvrkWorld(WorldConfig(bias="paper"))
     seen = 0

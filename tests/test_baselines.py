@@ -9,13 +9,12 @@ import gymnasium as gym
 import numpy as np
 import pytest
 from gymnasium.wrappers import RescaleAction
-
-import dvrk_gym  # noqa: F401
 from stable_baselines3.common.env_checker import check_env
 
+import dvrk_gym  # noqa: F401
 from dvrk_gym.baselines import AGENTS, BUDGETS, TrainConfig, load_agent, resolve_budget, save_agent, train, wrap_grid_touch
-from dvrk_gym.baselines.comparison import agent_row, benchmark_agent, calibration_rows, format_comparison
 from dvrk_gym.baselines.budgets import GRID_TOUCH_ID
+from dvrk_gym.baselines.comparison import agent_row, benchmark_agent, calibration_rows, format_comparison
 from dvrk_gym.baselines.training import make_agent_env
 from dvrk_gym.baselines.wrappers import GoalScaling, TargetYawAction, TrainingYaws
 from dvrk_gym.calibration.benchmark import YAW_SETTINGS, CircleErrors, save_table
@@ -109,7 +108,9 @@ def test_each_grid_touch_agent_trains_saves_loads_and_runs_the_benchmark(agent, 
     env = make_agent_env(config, training=False)
     observation, _ = env.reset(seed=3, options={"yaw": "random"})
     env.close()
-    np.testing.assert_array_equal(loaded.model.predict(observation, deterministic=True)[0], result.model.predict(observation, deterministic=True)[0])
+    np.testing.assert_array_equal(
+        loaded.model.predict(observation, deterministic=True)[0], result.model.predict(observation, deterministic=True)[0]
+    )
 
     table = benchmark_agent(loaded)
     assert list(table) == [label for label, _ in YAW_SETTINGS]
@@ -131,11 +132,22 @@ def test_loading_needs_the_settings_written_beside_the_zip(tmp_path):
 def _fake_calibration_run(folder, mm_by_method):
     folder.mkdir()
     table = {
-        method: {label: CircleErrors(pixel=np.full(N_CIRCLES, 11.3 * mm), mm=np.full(N_CIRCLES, mm), yaw=np.zeros(N_CIRCLES)) for label, _ in YAW_SETTINGS}
+        method: {
+            label: CircleErrors(pixel=np.full(N_CIRCLES, 11.3 * mm), mm=np.full(N_CIRCLES, mm), yaw=np.zeros(N_CIRCLES))
+            for label, _ in YAW_SETTINGS
+        }
         for method, mm in mm_by_method.items()
     }
     save_table(table, folder / "calibration_table.json")
-    config = {"bias": "paper", "bias_seed": 0, "camera_resolution": list(TINY), "dnn_epochs": 10, "n_trajectories": 57, "seed": 0, "steps_per_trajectory": 93}
+    config = {
+        "bias": "paper",
+        "bias_seed": 0,
+        "camera_resolution": list(TINY),
+        "dnn_epochs": 10,
+        "n_trajectories": 57,
+        "seed": 0,
+        "steps_per_trajectory": 93,
+    }
     (folder / "pipeline_config.json").write_text(json.dumps(config))
 
 
@@ -153,8 +165,23 @@ def test_cli_train_then_evaluate_round_trip(tmp_path, capsys):
     add_commands(parser.add_subparsers(dest="command", required=True))
     out = tmp_path / "run"
     args = parser.parse_args(
-        ["baseline", "train", "--algo", "sac", "--steps", "30", "--learning-starts", "20", "--resolution", *map(str, TINY),
-         "--eval-points", "1", "--out", str(out), "--no-progress"]
+        [
+            "baseline",
+            "train",
+            "--algo",
+            "sac",
+            "--steps",
+            "30",
+            "--learning-starts",
+            "20",
+            "--resolution",
+            *map(str, TINY),
+            "--eval-points",
+            "1",
+            "--out",
+            str(out),
+            "--no-progress",
+        ]
     )
     assert args.func(args) == 0
     for name in ("model.zip", "model.json", "learning_curve.json", "learning_curve.png"):
@@ -164,7 +191,17 @@ def test_cli_train_then_evaluate_round_trip(tmp_path, capsys):
 
     _fake_calibration_run(tmp_path / "cal", {"RBT": 6.0, "DNN": 2.0, "DNN+RF": 1.0})
     args = parser.parse_args(
-        ["baseline", "evaluate", "--model", str(out / "model.zip"), "--calibration", str(tmp_path / "cal"), "--out", str(tmp_path / "eval"), "--no-progress"]
+        [
+            "baseline",
+            "evaluate",
+            "--model",
+            str(out / "model.zip"),
+            "--calibration",
+            str(tmp_path / "cal"),
+            "--out",
+            str(tmp_path / "eval"),
+            "--no-progress",
+        ]
     )
     assert args.func(args) == 0
     printed = capsys.readouterr().out

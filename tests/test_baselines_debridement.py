@@ -17,27 +17,37 @@ import pytest
 import dvrk_gym  # noqa: F401
 from dvrk_gym.baselines import AGENTS, TrainConfig, load_agent, pick_policy, save_agent, train
 from dvrk_gym.baselines.agents import build_model
+from dvrk_gym.baselines.budgets import AGENT_DESCRIPTIONS, AGENT_ENVS, DEBRIDEMENT_ID
 from dvrk_gym.baselines.checkpoints import LoadedAgent
 from dvrk_gym.baselines.comparison import calibration_debridement_rows, debridement_row, format_debridement_comparison
 from dvrk_gym.baselines.curves import load_curve, plot_curves, save_curve
-from dvrk_gym.baselines.budgets import AGENT_DESCRIPTIONS, AGENT_ENVS, DEBRIDEMENT_ID
 from dvrk_gym.baselines.picking import (
-    MAX_PENALTY_MM, OFFSET_SCALE_MM, pick_action, pick_observation, shaped_pick_reward, unit_to_pick_box, wrap_debridement,
+    MAX_PENALTY_MM,
+    OFFSET_SCALE_MM,
+    pick_action,
+    pick_observation,
+    shaped_pick_reward,
+    unit_to_pick_box,
+    wrap_debridement,
 )
 from dvrk_gym.baselines.training import make_agent_env, make_training_vec_env
 from dvrk_gym.baselines.transfer import GridTouchPickPolicy, PickAgentPolicy
 from dvrk_gym.baselines.wrappers import scale_goal
 from dvrk_gym.cli.baselines import add_commands
-from dvrk_gym.cli.debridement import Trial, run_trials, totals
 from dvrk_gym.envs.debridement import PICK_HIGH, PICK_LOW, PickTiming, fragment_target
+from dvrk_gym.evaluation.trials import Trial, run_trials, totals
 from dvrk_gym.sim.robot.kinematics import PAPER_YAWS_RAD, nearest_paper_yaw
 from dvrk_gym.sim.robot.motion import MotionLimits
 
 TINY = (320, 180)
 FAST = {"learning_starts": 20, "batch_size": 32, "gradient_steps": 1, "policy_kwargs": {"net_arch": [16, 16]}}
 FAST_PICKS = PickTiming(
-    travel=MotionLimits(max_speed_m_s=0.3, max_accel_m_s2=3.0), descend=MotionLimits(max_speed_m_s=0.15, max_accel_m_s2=1.5),
-    carry=MotionLimits(max_speed_m_s=0.15, max_accel_m_s2=1.5), grip_dwell_s=0.4, drop_fall_s=0.2, drop_dwell_s=0.2,
+    travel=MotionLimits(max_speed_m_s=0.3, max_accel_m_s2=3.0),
+    descend=MotionLimits(max_speed_m_s=0.15, max_accel_m_s2=1.5),
+    carry=MotionLimits(max_speed_m_s=0.15, max_accel_m_s2=1.5),
+    grip_dwell_s=0.4,
+    drop_fall_s=0.2,
+    drop_dwell_s=0.2,
 )
 """Picks in half the wall time (faster moves, shorter dwells), for training a few hundred of them in a test."""
 PICK_STEPS = 200
@@ -83,9 +93,15 @@ def test_pick_observation_is_the_calibrated_policys_target_scaled_with_a_paper_y
 
 
 def test_shaped_reward_charges_grip_offset_and_height_in_millimetres():
-    assert shaped_pick_reward(1.0, {"true_grip_offset_m": np.array([0.0003, 0.0004]), "true_tip_above_fragment_m": -0.001}) == pytest.approx(1 - 0.5 / OFFSET_SCALE_MM)
-    assert shaped_pick_reward(0.0, {"true_grip_offset_m": np.array([0.003, 0.004]), "true_tip_above_fragment_m": 0.002}) == pytest.approx(-(5 + 2) / OFFSET_SCALE_MM)
-    assert shaped_pick_reward(0.0, {"true_grip_offset_m": np.array([0.5, 0.0]), "true_tip_above_fragment_m": 0.0}) == pytest.approx(-MAX_PENALTY_MM / OFFSET_SCALE_MM)
+    assert shaped_pick_reward(
+        1.0, {"true_grip_offset_m": np.array([0.0003, 0.0004]), "true_tip_above_fragment_m": -0.001}
+    ) == pytest.approx(1 - 0.5 / OFFSET_SCALE_MM)
+    assert shaped_pick_reward(0.0, {"true_grip_offset_m": np.array([0.003, 0.004]), "true_tip_above_fragment_m": 0.002}) == pytest.approx(
+        -(5 + 2) / OFFSET_SCALE_MM
+    )
+    assert shaped_pick_reward(0.0, {"true_grip_offset_m": np.array([0.5, 0.0]), "true_tip_above_fragment_m": 0.0}) == pytest.approx(
+        -MAX_PENALTY_MM / OFFSET_SCALE_MM
+    )
     assert shaped_pick_reward(0.0, {"true_grip_offset_m": None}) == pytest.approx(-MAX_PENALTY_MM / OFFSET_SCALE_MM)
 
 
@@ -124,8 +140,15 @@ def test_models_log_nowhere():
 
 @pytest.mark.slow
 def test_pick_agent_trains_loads_acts_on_raw_observations_and_is_evaluated_by_the_cli(tmp_path, capsys):
-    config = TrainConfig(agent="sac_pick", steps=PICK_STEPS, camera_resolution=TINY, eval_points=1, curve_trials=1, overrides=FAST,
-                         env_overrides={"timing": FAST_PICKS})
+    config = TrainConfig(
+        agent="sac_pick",
+        steps=PICK_STEPS,
+        camera_resolution=TINY,
+        eval_points=1,
+        curve_trials=1,
+        overrides=FAST,
+        env_overrides={"timing": FAST_PICKS},
+    )
     result = train(config, progress=False)
     assert result.env_steps == PICK_STEPS and result.steps_per_second > 0
     assert [p.env_steps for p in result.curve] == [0, PICK_STEPS]
@@ -150,7 +173,9 @@ def test_pick_agent_trains_loads_acts_on_raw_observations_and_is_evaluated_by_th
         wrapped.close()
     np.testing.assert_allclose(policy(raw), expected, atol=1e-6)
 
-    args = _cli().parse_args(["baseline", "evaluate", "--model", str(path), "--trials", "1", "--out", str(tmp_path / "eval"), "--no-progress"])
+    args = _cli().parse_args(
+        ["baseline", "evaluate", "--model", str(path), "--trials", "1", "--out", str(tmp_path / "eval"), "--no-progress"]
+    )
     assert args.func(args) == 0
     assert "success" in capsys.readouterr().out
     rows = json.loads((tmp_path / "eval" / "debridement.json").read_text())["rows"]

@@ -1,4 +1,4 @@
-"""Tests for dvrk_gym.sim.robot.bias (the cable model: why the dVRK misses)."""
+"""Tests for the cable bias: its presets (sim.robot.bias), the cable model (sim.robot.cables) and its statistics."""
 
 from __future__ import annotations
 
@@ -8,19 +8,29 @@ import numpy as np
 import pytest
 from scipy.stats import f_oneway
 
-from dvrk_gym.sim.robot import bias
+from dvrk_gym.sim.robot import ik
 from dvrk_gym.sim.robot import kinematics as kin
+from dvrk_gym.sim.robot.bias import BIAS_PRESETS, BiasConfig, draw_instrument, resolve_bias
+from dvrk_gym.sim.robot.bias_statistics import (
+    APPROACH_DELTA,
+    bias_statistics,
+    hysteresis_gaps,
+    per_yaw_rigid_residuals,
+    sample_bias,
+    sample_paper_commands,
+)
+from dvrk_gym.sim.robot.cables import CableModel, play_radii
 
 MM = 1e-3
 STATISTICS_SAMPLES = 1500  # enough for stable means, fast enough (about a second)
 
 
 def _commands(n: int, seed: int = 0) -> np.ndarray:
-    q_cmd, _ = bias.sample_paper_commands(np.random.default_rng(seed), n)
+    q_cmd, _ = sample_paper_commands(np.random.default_rng(seed), n)
     return q_cmd
 
 
-def _tip_error(model: bias.CableModel, q_cmd: np.ndarray) -> np.ndarray:
+def _tip_error(model: CableModel, q_cmd: np.ndarray) -> np.ndarray:
     """True minus reported touch point (m) of one noiseless move from rest."""
     model.reset(q_cmd)
     return kin.touch_point(model.true_joints(q_cmd), model.true_dh) - kin.touch_point(q_cmd)
@@ -28,44 +38,44 @@ def _tip_error(model: bias.CableModel, q_cmd: np.ndarray) -> np.ndarray:
 
 @pytest.fixture(scope="module")
 def paper_statistics() -> dict:
-    model = bias.CableModel(bias.resolve_bias("paper"), bias_seed=0)
-    return bias.bias_statistics(model, np.random.default_rng(1), STATISTICS_SAMPLES)
+    model = CableModel(resolve_bias("paper"), bias_seed=0)
+    return bias_statistics(model, np.random.default_rng(1), STATISTICS_SAMPLES)
 
 
 def test_none_preset_goes_exactly_where_told() -> None:
-    model = bias.CableModel(bias.resolve_bias("none"), bias_seed=7)
+    model = CableModel(resolve_bias("none"), bias_seed=7)
     assert model.true_dh == kin.PSM_DH
     noise = np.random.default_rng(3)
     for q_cmd in _commands(50):
         q_true = model.true_joints(q_cmd, noise)
         np.testing.assert_array_equal(q_true, q_cmd)
-    statistics = bias.bias_statistics(model, np.random.default_rng(4), 200)
+    statistics = bias_statistics(model, np.random.default_rng(4), 200)
     assert statistics["raw_mean_m"] == 0.0
     assert statistics["hysteresis_gap_m"] == 0.0
 
 
 def test_unknown_preset_lists_the_valid_names() -> None:
     with pytest.raises(ValueError, match="unknown bias preset 'papr'") as error:
-        bias.resolve_bias("papr")
+        resolve_bias("papr")
     for name in ("none", "paper", "severe"):
         assert repr(name) in str(error.value)
 
 
 def test_resolve_bias_returns_a_config_unchanged() -> None:
-    config = bias.BiasConfig(sag_m=2e-3)
-    assert bias.resolve_bias(config) is config
-    assert bias.resolve_bias("paper") is bias.BIAS_PRESETS["paper"]
+    config = BiasConfig(sag_m=2e-3)
+    assert resolve_bias(config) is config
+    assert resolve_bias("paper") is BIAS_PRESETS["paper"]
 
 
 def test_negative_or_nan_magnitude_is_rejected() -> None:
     with pytest.raises(ValueError, match="sag_m"):
-        bias.BiasConfig(sag_m=-1e-3)
+        BiasConfig(sag_m=-1e-3)
     with pytest.raises(ValueError, match="wrist_stretch"):
-        bias.BiasConfig(wrist_stretch=float("nan"))
+        BiasConfig(wrist_stretch=float("nan"))
 
 
 def test_severe_is_about_twice_paper() -> None:
-    paper, severe = bias.BIAS_PRESETS["paper"], bias.BIAS_PRESETS["severe"]
+    paper, severe = BIAS_PRESETS["paper"], BIAS_PRESETS["severe"]
     for field in dataclasses.fields(paper):
         assert getattr(severe, field.name) == pytest.approx(2 * getattr(paper, field.name))
 
@@ -83,11 +93,11 @@ def test_paper_smooth_model_removes_most_but_not_all(paper_statistics: dict) -> 
 
 
 def test_paper_rigid_residual_differs_between_yaw_groups() -> None:
-    model = bias.CableModel(bias.BIAS_PRESETS["paper"], bias_seed=0)
+    model = CableModel(BIAS_PRESETS["paper"], bias_seed=0)
     # The differences are about 15% of a residual whose sd is half its mean: it takes
     # a few thousand samples to show them clearly.
-    samples = bias.sample_bias(model, np.random.default_rng(1), 3000)
-    norms = np.linalg.norm(bias.per_yaw_rigid_residuals(samples), axis=1)
+    samples = sample_bias(model, np.random.default_rng(1), 3000)
+    norms = np.linalg.norm(per_yaw_rigid_residuals(samples), axis=1)
     groups = [norms[samples.yaw_group == g] for g in range(len(kin.PAPER_YAWS_RAD))]
     # Positions are drawn alike for every yaw, so only orientation can separate them.
     assert f_oneway(*groups).pvalue < 1e-4
@@ -95,32 +105,36 @@ def test_paper_rigid_residual_differs_between_yaw_groups() -> None:
     assert means.max() - means.min() > 0.08 * means.mean()
 
 
-@pytest.mark.parametrize("euler_a_deg, euler_b_deg", [
-    ((-60.0, 5.0, -165.0), (60.0, 5.0, -165.0)),  # yaw alone
-    ((0.0, -15.0, -165.0), (0.0, 25.0, -165.0)),  # pitch alone
-    ((0.0, 5.0, -180.0), (0.0, 5.0, -150.0)),  # roll alone
-])
+@pytest.mark.parametrize(
+    "euler_a_deg, euler_b_deg",
+    [
+        ((-60.0, 5.0, -165.0), (60.0, 5.0, -165.0)),  # yaw alone
+        ((0.0, -15.0, -165.0), (0.0, 25.0, -165.0)),  # pitch alone
+        ((0.0, 5.0, -180.0), (0.0, 5.0, -150.0)),  # roll alone
+    ],
+)
 def test_paper_tip_error_depends_on_orientation_not_only_position(
-        euler_a_deg: tuple[float, float, float], euler_b_deg: tuple[float, float, float]) -> None:
-    model = bias.CableModel(bias.BIAS_PRESETS["paper"], bias_seed=0)
+    euler_a_deg: tuple[float, float, float], euler_b_deg: tuple[float, float, float]
+) -> None:
+    model = CableModel(BIAS_PRESETS["paper"], bias_seed=0)
     position = np.array([0.04, 0.04, -0.16])
     error_a, error_b = (
-        _tip_error(model, kin.inverse_kinematics(kin.pose_from_euler(position, *np.deg2rad(euler))))
-        for euler in (euler_a_deg, euler_b_deg))
+        _tip_error(model, ik.inverse_kinematics(kin.pose_from_euler(position, *np.deg2rad(euler)))) for euler in (euler_a_deg, euler_b_deg)
+    )
     assert np.linalg.norm(error_a - error_b) > 0.15 * MM
 
 
 def test_paper_hysteresis_gap_is_at_least_0_3_mm(paper_statistics: dict) -> None:
-    model = bias.CableModel(bias.BIAS_PRESETS["paper"], bias_seed=0)
-    all_joints, _ = bias.hysteresis_gaps(model, _commands(50))
+    model = CableModel(BIAS_PRESETS["paper"], bias_seed=0)
+    all_joints, _ = hysteresis_gaps(model, _commands(50))
     assert all_joints.min() >= 0.3 * MM
     assert paper_statistics["hysteresis_gap_min_m"] >= 0.3 * MM
 
 
 def test_opposite_approaches_land_on_opposite_sides() -> None:
-    model = bias.CableModel(bias.BIAS_PRESETS["paper"], bias_seed=0)
+    model = CableModel(BIAS_PRESETS["paper"], bias_seed=0)
     q_cmd = _commands(1)[0]
-    delta = bias.APPROACH_DELTA
+    delta = APPROACH_DELTA
     model.reset(q_cmd - delta)
     from_below = model.true_joints(q_cmd)
     model.reset(q_cmd + delta)
@@ -128,22 +142,32 @@ def test_opposite_approaches_land_on_opposite_sides() -> None:
     assert np.all(from_below < from_above)  # each joint lags behind its approach
     # Having come down onto q_cmd, a small move back up stays inside every play: the
     # joints do not move at all.
-    nudge = 0.05 * bias._play_radii(model.config).min(axis=0)
+    nudge = 0.05 * play_radii(model.config).min(axis=0)
     np.testing.assert_allclose(model.true_joints(q_cmd + nudge), from_above, rtol=0, atol=1e-12)
 
 
 def test_same_seed_gives_same_instrument_and_noise() -> None:
-    config = bias.BIAS_PRESETS["paper"]
-    first, second = bias.CableModel(config, bias_seed=11), bias.CableModel(config, bias_seed=11)
+    config = BIAS_PRESETS["paper"]
+    first, second = CableModel(config, bias_seed=11), CableModel(config, bias_seed=11)
     assert first.true_dh == second.true_dh
     noise_a, noise_b = np.random.default_rng(5), np.random.default_rng(5)
     for q_cmd in _commands(20):
         np.testing.assert_array_equal(first.true_joints(q_cmd, noise_a), second.true_joints(q_cmd, noise_b))
 
 
+def test_the_model_uses_the_instrument_its_seed_draws_and_cannot_change_it() -> None:
+    config = BIAS_PRESETS["paper"]
+    model, drawn = CableModel(config, bias_seed=11), draw_instrument(config, 11)
+    assert model.true_dh == drawn.true_dh
+    for name in ("homing_offsets", "wrist_coupling", "outer_gains"):
+        np.testing.assert_array_equal(getattr(model.instrument, name), getattr(drawn, name))
+        with pytest.raises(ValueError, match="read-only"):
+            getattr(drawn, name)[0] = 0.0
+
+
 def test_another_seed_gives_another_instrument() -> None:
-    config = bias.BIAS_PRESETS["paper"]
-    first, other = bias.CableModel(config, bias_seed=11), bias.CableModel(config, bias_seed=12)
+    config = BIAS_PRESETS["paper"]
+    first, other = CableModel(config, bias_seed=11), CableModel(config, bias_seed=12)
     assert first.true_dh != other.true_dh
     q_cmd = _commands(1)[0]
     first.reset(q_cmd)
@@ -152,20 +176,19 @@ def test_another_seed_gives_another_instrument() -> None:
 
 
 def test_noise_is_drawn_once_per_move_from_the_passed_generator() -> None:
-    model = bias.CableModel(bias.BIAS_PRESETS["paper"], bias_seed=0)
+    model = CableModel(BIAS_PRESETS["paper"], bias_seed=0)
     q_cmd = _commands(1)[0]
     model.reset(q_cmd)
     quiet = model.true_joints(q_cmd)
     noisy = [model.true_joints(q_cmd, np.random.default_rng(s)) for s in range(2)]
     assert not np.array_equal(noisy[0], noisy[1])
     assert np.array_equal(model.true_joints(q_cmd), quiet)  # no generator, no noise
-    tip_scatter = [np.linalg.norm(kin.touch_point(q, model.true_dh) - kin.touch_point(quiet, model.true_dh))
-                   for q in noisy]
+    tip_scatter = [np.linalg.norm(kin.touch_point(q, model.true_dh) - kin.touch_point(quiet, model.true_dh)) for q in noisy]
     assert max(tip_scatter) < 1.0 * MM
 
 
 def test_reported_pose_is_never_the_truth_under_paper() -> None:
-    model = bias.CableModel(bias.BIAS_PRESETS["paper"], bias_seed=0)
+    model = CableModel(BIAS_PRESETS["paper"], bias_seed=0)
     noise = np.random.default_rng(2)
     q_cmd = _commands(300)
     model.reset(q_cmd[0])
@@ -176,7 +199,7 @@ def test_reported_pose_is_never_the_truth_under_paper() -> None:
 
 
 def test_state_round_trip_reproduces_the_next_move_bit_for_bit() -> None:
-    model = bias.CableModel(bias.BIAS_PRESETS["paper"], bias_seed=0)
+    model = CableModel(BIAS_PRESETS["paper"], bias_seed=0)
     q_cmd = _commands(12)
     model.reset(q_cmd[0])
     for q in q_cmd[:10]:
@@ -189,15 +212,15 @@ def test_state_round_trip_reproduces_the_next_move_bit_for_bit() -> None:
 
 
 def test_first_move_without_reset_starts_at_rest() -> None:
-    config = bias.BIAS_PRESETS["paper"]
-    fresh, rested = bias.CableModel(config), bias.CableModel(config)
+    config = BIAS_PRESETS["paper"]
+    fresh, rested = CableModel(config), CableModel(config)
     q_cmd = _commands(1)[0]
     rested.reset(q_cmd)
     np.testing.assert_array_equal(fresh.true_joints(q_cmd), rested.true_joints(q_cmd))
 
 
 def test_set_state_rejects_a_malformed_state() -> None:
-    model = bias.CableModel(bias.BIAS_PRESETS["paper"])
+    model = CableModel(BIAS_PRESETS["paper"])
     with pytest.raises(ValueError, match="shape"):
         model.set_state(np.zeros(6))
     half_nan = model.get_state()
@@ -208,7 +231,7 @@ def test_set_state_rejects_a_malformed_state() -> None:
 
 @pytest.mark.parametrize("index", range(6))
 def test_nan_command_raises_naming_the_element(index: int) -> None:
-    model = bias.CableModel(bias.BIAS_PRESETS["paper"])
+    model = CableModel(BIAS_PRESETS["paper"])
     q_cmd = _commands(1)[0]
     q_cmd[index] = np.nan
     pattern = rf"q_cmd\[{index}\] \({kin.JOINT_NAMES[index]}\) is nan"
@@ -220,4 +243,4 @@ def test_nan_command_raises_naming_the_element(index: int) -> None:
 
 def test_wrong_shaped_command_raises() -> None:
     with pytest.raises(ValueError, match=r"shape \(6,\)"):
-        bias.CableModel(bias.BIAS_PRESETS["paper"]).true_joints(np.zeros(5))
+        CableModel(BIAS_PRESETS["paper"]).true_joints(np.zeros(5))

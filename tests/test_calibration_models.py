@@ -5,8 +5,8 @@ from __future__ import annotations
 import json
 import shutil
 import zipfile
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 import pytest
@@ -29,11 +29,14 @@ ROLL_WRAP_TOL_M = 2e-4  # 0.2 mm; a raw-angle encoding would see a 359.8 deg jum
 
 def _inputs(rng: np.random.Generator, rows: int) -> np.ndarray:
     """Calibration inputs over the paper's ranges (metres, radians)."""
-    position = np.column_stack([rng.uniform(-0.04, 0.03, rows), rng.uniform(-0.05, 0.02, rows),
-                                rng.uniform(0.165, 0.22, rows)])
-    angles = np.column_stack([rng.uniform(-np.pi / 2, np.pi / 2, rows),
-                              rng.uniform(np.radians(-15), np.radians(25), rows),
-                              rng.uniform(np.radians(-180), np.radians(-150), rows)])
+    position = np.column_stack([rng.uniform(-0.04, 0.03, rows), rng.uniform(-0.05, 0.02, rows), rng.uniform(0.165, 0.22, rows)])
+    angles = np.column_stack(
+        [
+            rng.uniform(-np.pi / 2, np.pi / 2, rows),
+            rng.uniform(np.radians(-15), np.radians(25), rows),
+            rng.uniform(np.radians(-180), np.radians(-150), rows),
+        ]
+    )
     angles[:, 2] = np.angle(np.exp(1j * (angles[:, 2] + rng.choice([0.0, 0.3], rows))))
     return np.column_stack([position, angles])
 
@@ -61,8 +64,7 @@ def data() -> tuple[np.ndarray, np.ndarray]:
 
 
 def _small_dnn(seed: int = 0, epochs: int = 40) -> DNNCalibrator:
-    return DNNCalibrator(hidden_layers=2, units=32, epochs=epochs, batch_size=64,
-                         learning_rate=3e-3, seed=seed, progress=False)
+    return DNNCalibrator(hidden_layers=2, units=32, epochs=epochs, batch_size=64, learning_rate=3e-3, seed=seed, progress=False)
 
 
 @pytest.fixture(scope="module")
@@ -75,19 +77,20 @@ def two_phase(data: tuple[np.ndarray, np.ndarray]) -> TwoPhaseCalibrator:
 
 # --- features ------------------------------------------------------------------------
 
+
 def test_nearest_yaw_index_uses_wrapped_distance() -> None:
     yaws_deg = np.array([-90.0, -67.4, -67.6, 22.4, 22.6, 90.0, 100.0, 179.0, -179.0, 270.0])
     assert nearest_yaw_index(np.radians(yaws_deg)).tolist() == [0, 1, 0, 2, 3, 4, 4, 4, 0, 0]
 
 
 def test_euler_encoding_is_continuous_across_the_roll_wrap() -> None:
-    X = np.array([[0.0, 0.0, 0.2, 0.1, 0.05, np.radians(179.9)],
-                  [0.0, 0.0, 0.2, 0.1, 0.05, np.radians(-179.9)]])
+    X = np.array([[0.0, 0.0, 0.2, 0.1, 0.05, np.radians(179.9)], [0.0, 0.0, 0.2, 0.1, 0.05, np.radians(-179.9)]])
     features = encode_euler(X)
     assert np.abs(features[0] - features[1]).max() < 4e-3
 
 
 # --- fits ----------------------------------------------------------------------------
+
 
 def test_rigid_fit_recovers_known_per_yaw_transforms() -> None:
     rng = np.random.default_rng(1)
@@ -117,8 +120,7 @@ def test_rigid_group_with_fewer_than_three_rows_uses_all_data_fit(data) -> None:
 
 def test_dnn_fits_smooth_map_well_under_its_variance(data) -> None:
     X, y = data
-    model = DNNCalibrator(hidden_layers=2, units=32, epochs=100, batch_size=100,
-                          learning_rate=1e-2, progress=False).fit(X[:300], y[:300])
+    model = DNNCalibrator(hidden_layers=2, units=32, epochs=100, batch_size=100, learning_rate=1e-2, progress=False).fit(X[:300], y[:300])
     error = np.mean(np.sum((model.predict(X[300:]) - y[300:]) ** 2, axis=1))
     variance = np.mean(np.sum((y[300:] - y[300:].mean(axis=0)) ** 2, axis=1))
     assert error < 0.01 * variance
@@ -136,8 +138,7 @@ def test_residual_forests_reduce_a_known_residual() -> None:
     rng = np.random.default_rng(4)
     base = rng.uniform([0.005, 0.011, -0.17], [0.07, 0.074, -0.158], (600, 3))
     yaw = PAPER_YAWS_RAD[rng.integers(0, 4, 600)]  # no rows at +90 deg
-    residual = 0.002 * np.column_stack([np.sin(80 * base[:, 0]), np.cos(60 * base[:, 1]),
-                                        np.sin(yaw)])
+    residual = 0.002 * np.column_stack([np.sin(80 * base[:, 0]), np.cos(60 * base[:, 1]), np.sin(yaw)])
     forests = ResidualForests(trees=30, seed=0).fit(base[:500], yaw[:500], residual[:500])
     error = np.mean(np.sum((forests.predict(base[500:], yaw[500:]) - residual[500:]) ** 2, 1))
     assert error < 0.1 * np.mean(np.sum(residual[500:] ** 2, axis=1))
@@ -177,21 +178,25 @@ def test_phase2_learns_the_correction_at_the_phase2_targets(data) -> None:
     assert after < 0.5 * before
 
 
-@pytest.mark.parametrize("make", [
-    lambda: _small_dnn(),
-    lambda: LinearCalibrator("euler"),
-    lambda: LinearCalibrator("quaternion"),
-], ids=["dnn", "linear_euler", "linear_quaternion"])
+@pytest.mark.parametrize(
+    "make",
+    [
+        lambda: _small_dnn(),
+        lambda: LinearCalibrator("euler"),
+        lambda: LinearCalibrator("quaternion"),
+    ],
+    ids=["dnn", "linear_euler", "linear_quaternion"],
+)
 def test_roll_wrap_gives_nearly_the_same_prediction(make, data) -> None:
     X, y = data
     model = make().fit(X, y)
-    pair = np.array([[0.0, -0.01, 0.19, 0.2, 0.1, np.radians(179.9)],
-                     [0.0, -0.01, 0.19, 0.2, 0.1, np.radians(-179.9)]])
+    pair = np.array([[0.0, -0.01, 0.19, 0.2, 0.1, np.radians(179.9)], [0.0, -0.01, 0.19, 0.2, 0.1, np.radians(-179.9)]])
     prediction = model.predict(pair)
     assert np.abs(prediction[0] - prediction[1]).max() < ROLL_WRAP_TOL_M
 
 
 # --- files ---------------------------------------------------------------------------
+
 
 def _fitted_models(data) -> dict[str, Callable[[], object]]:
     X, y = data
@@ -202,14 +207,13 @@ def _fitted_models(data) -> dict[str, Callable[[], object]]:
         "forest": lambda: ForestCalibrator(trees=5, max_depth=6, seed=1).fit(X, y),
         "dnn": lambda: _small_dnn(epochs=3).fit(X, y),
         "two_phase_phase1": lambda: TwoPhaseCalibrator(dnn=_small_dnn(epochs=3)).fit_phase1(X, y),
-        "two_phase": lambda: TwoPhaseCalibrator(
-            dnn=_small_dnn(epochs=3), forests=ResidualForests(trees=5)).fit_phase1(X, y)
-        .fit_phase2(X[:80], y[:80]),
+        "two_phase": lambda: (
+            TwoPhaseCalibrator(dnn=_small_dnn(epochs=3), forests=ResidualForests(trees=5)).fit_phase1(X, y).fit_phase2(X[:80], y[:80])
+        ),
     }
 
 
-MODEL_NAMES = ["rigid", "linear_euler", "linear_quaternion", "forest", "dnn",
-               "two_phase_phase1", "two_phase"]
+MODEL_NAMES = ["rigid", "linear_euler", "linear_quaternion", "forest", "dnn", "two_phase_phase1", "two_phase"]
 
 
 @pytest.mark.parametrize("name", MODEL_NAMES)
@@ -301,18 +305,21 @@ def _nan_weight_resigned(path: Path) -> None:
     def edit(params: dict, arrays: dict) -> None:
         arrays["layer1_weight"] = arrays["layer1_weight"].copy()
         arrays["layer1_weight"][0, 0] = np.nan
+
     _resign(path, edit)
 
 
 def _wrong_shape_resigned(path: Path) -> None:
     def edit(params: dict, arrays: dict) -> None:
         arrays["layer1_weight"] = arrays["layer1_weight"][:, :-1].copy()
+
     _resign(path, edit)
 
 
 def _wrong_dtype_resigned(path: Path) -> None:
     def edit(params: dict, arrays: dict) -> None:
         arrays["layer0_weight"] = arrays["layer0_weight"].astype(np.float64)
+
     _resign(path, edit)
 
 
@@ -383,6 +390,7 @@ def test_forest_with_tree_index_out_of_range_is_refused(child: int, saved) -> No
         left = arrays["children_left"].copy()
         left[0] = child  # the root's child: negative, a loop to itself, or outside the tree
         arrays["children_left"] = left
+
     _resign(saved["forest"], edit)
     with pytest.raises(ModelFileError, match="children"):
         ForestCalibrator.load(saved["forest"])
@@ -393,6 +401,7 @@ def test_forest_with_split_feature_out_of_range_is_refused(saved) -> None:
         feature = arrays["feature"].copy()
         feature[0] = 9
         arrays["feature"] = feature
+
     _resign(saved["forest"], edit)
     with pytest.raises(ModelFileError, match="feature"):
         ForestCalibrator.load(saved["forest"])
@@ -410,6 +419,7 @@ def test_missing_file_is_refused(tmp_path: Path) -> None:
 
 
 # --- seeds ---------------------------------------------------------------------------
+
 
 def test_dnn_same_seed_gives_identical_predictions_and_other_seed_differs(data) -> None:
     X, y = data
@@ -436,10 +446,18 @@ def test_dnn_training_leaves_torch_global_rng_untouched(data) -> None:
 
 # --- bad inputs ----------------------------------------------------------------------
 
-@pytest.mark.parametrize("make", [
-    RigidBodyCalibrator, LinearCalibrator, lambda: ForestCalibrator(trees=2),
-    lambda: _small_dnn(epochs=1), lambda: TwoPhaseCalibrator(dnn=_small_dnn(epochs=1)),
-], ids=["rigid", "linear", "forest", "dnn", "two_phase"])
+
+@pytest.mark.parametrize(
+    "make",
+    [
+        RigidBodyCalibrator,
+        LinearCalibrator,
+        lambda: ForestCalibrator(trees=2),
+        lambda: _small_dnn(epochs=1),
+        lambda: TwoPhaseCalibrator(dnn=_small_dnn(epochs=1)),
+    ],
+    ids=["rigid", "linear", "forest", "dnn", "two_phase"],
+)
 def test_bad_inputs_raise_value_error(make, data) -> None:
     X, y = data
     with pytest.raises(ValueError, match="before fit"):
@@ -459,10 +477,17 @@ def test_bad_inputs_raise_value_error(make, data) -> None:
         model.predict(X[0])
 
 
-@pytest.mark.parametrize("kwargs", [
-    {"hidden_layers": 0}, {"units": 2.5}, {"activation": "gelu"}, {"epochs": -1},
-    {"batch_size": 0}, {"learning_rate": float("nan")},
-])
+@pytest.mark.parametrize(
+    "kwargs",
+    [
+        {"hidden_layers": 0},
+        {"units": 2.5},
+        {"activation": "gelu"},
+        {"epochs": -1},
+        {"batch_size": 0},
+        {"learning_rate": float("nan")},
+    ],
+)
 def test_bad_dnn_hyper_parameters_raise_value_error(kwargs) -> None:
     with pytest.raises(ValueError, match=next(iter(kwargs))):
         DNNCalibrator(**kwargs)

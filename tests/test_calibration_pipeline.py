@@ -127,7 +127,12 @@ def test_policies_of_every_kind_are_accepted_and_bad_specs_are_clear_errors():
     assert as_policy(lambda obs: 5)(None) == 5
     with pytest.raises(TypeError):
         as_policy(3)
-    for spec, message in (("no_colon", "module:factory"), ("no_such_module_xyz:f", "cannot import"), ("policies_for_tests:missing", "no attribute"), ("policies_for_tests:NOT_CALLABLE", "not callable")):
+    for spec, message in (
+        ("no_colon", "module:factory"),
+        ("no_such_module_xyz:f", "cannot import"),
+        ("policies_for_tests:missing", "no attribute"),
+        ("policies_for_tests:NOT_CALLABLE", "not callable"),
+    ):
         with pytest.raises(ValueError, match=message):
             load_policy_factory(spec)
 
@@ -151,7 +156,20 @@ def test_pipeline_runs_end_to_end_resumes_and_refuses_other_settings(tmp_path):
 
 
 def test_cli_evaluates_any_policy_from_a_factory(tmp_path, capsys):
-    code = main(["evaluate", "--policy", "policies_for_tests:middle_of_the_grid", "--episodes", "2", "--resolution", "640", "360", "--out", str(tmp_path)])
+    code = main(
+        [
+            "evaluate",
+            "--policy",
+            "policies_for_tests:middle_of_the_grid",
+            "--episodes",
+            "2",
+            "--resolution",
+            "640",
+            "360",
+            "--out",
+            str(tmp_path),
+        ]
+    )
     assert code == 0
     out = capsys.readouterr().out
     assert "mm_error" in out and "pixel_error" in out

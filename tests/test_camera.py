@@ -1,4 +1,4 @@
-"""Tests for dvrk_gym.sim.endoscope.camera (geometry, GL matrices and TinyRenderer agreement)."""
+"""Tests for dvrk_gym.sim.endoscope.camera (geometry, GL matrices and TinyRenderer agreement) and .noise (pixel noise)."""
 
 from __future__ import annotations
 
@@ -18,6 +18,7 @@ from dvrk_gym.sim.endoscope.camera import (
     StereoCamera,
     default_camera_pose,
 )
+from dvrk_gym.sim.endoscope.noise import PixelNoise
 
 SPHERE_RADIUS_M = 0.0015
 CENTROID_TOL_PX = 0.3  # per point, any resolution; measured max 0.16 px (1920) / 0.23 px (640), silhouette digitisation
@@ -31,8 +32,15 @@ WINDOW_SHADING_TOL_LEVELS = 1
 WINDOW_ANY_DIFF_FRACTION_TOL = 1e-4
 WINDOW_EDGE_FLIP_FRACTION_TOL = 1e-5
 CENTRE = np.asarray(WORKSPACE_CENTER_M)
-SPHERE_OFFSETS_M = [(0.0, 0.0, 0.003), (-0.035, -0.035, 0.002), (0.035, 0.035, 0.01), (-0.035, 0.035, 0.02),
-                    (0.035, -0.035, 0.005), (0.01, -0.02, 0.015), (-0.02, 0.025, 0.004)]
+SPHERE_OFFSETS_M = [
+    (0.0, 0.0, 0.003),
+    (-0.035, -0.035, 0.002),
+    (0.035, 0.035, 0.01),
+    (-0.035, 0.035, 0.02),
+    (0.035, -0.035, 0.005),
+    (0.01, -0.02, 0.015),
+    (-0.02, 0.025, 0.004),
+]
 
 
 def red_centroid(image: np.ndarray) -> np.ndarray:
@@ -53,8 +61,12 @@ def scene():
     for dx, dy in [(-0.026, -0.03), (0.0, -0.03), (0.026, 0.0), (-0.013, 0.02), (0.013, 0.03)]:
         client.createMultiBody(0, baseVisualShapeIndex=disc, basePosition=(CENTRE + [dx, dy, 0.0001]).tolist())
     shaft = client.createVisualShape(pybullet.GEOM_CYLINDER, radius=0.004, length=0.06, rgbaColor=[0.6, 0.6, 0.65, 1])
-    client.createMultiBody(0, baseVisualShapeIndex=shaft, basePosition=(CENTRE + [0.065, 0.0, 0.02]).tolist(),
-                           baseOrientation=pybullet.getQuaternionFromEuler([0.0, 0.6, 0.3]))
+    client.createMultiBody(
+        0,
+        baseVisualShapeIndex=shaft,
+        basePosition=(CENTRE + [0.065, 0.0, 0.02]).tolist(),
+        baseOrientation=pybullet.getQuaternionFromEuler([0.0, 0.6, 0.3]),
+    )
     red = client.createVisualShape(pybullet.GEOM_SPHERE, radius=SPHERE_RADIUS_M, rgbaColor=[1, 0, 0, 1])
     sphere = client.createMultiBody(0, baseVisualShapeIndex=red, basePosition=(CENTRE + [0, 0, 0.003]).tolist())
     yield client, sphere
@@ -146,17 +158,21 @@ def test_window_render_equals_full_frame_crop(scene, full_frames) -> None:
     client, _ = scene
     camera = StereoCamera()
     rng = np.random.default_rng(2)
-    windows = [PixelWindow(0, 0, 64, 64), PixelWindow(1920 - 65, 1080 - 47, 65, 47), PixelWindow(959, 539, 1, 1),
-               PixelWindow(0, 500, 1920, 3), camera.window_around(camera.project(CENTRE)[0][0], 40)]
+    windows = [
+        PixelWindow(0, 0, 64, 64),
+        PixelWindow(1920 - 65, 1080 - 47, 65, 47),
+        PixelWindow(959, 539, 1, 1),
+        PixelWindow(0, 500, 1920, 3),
+        camera.window_around(camera.project(CENTRE)[0][0], 40),
+    ]
     for size in (48, 64, 96, 128, 37):
-        windows += [PixelWindow(int(rng.integers(0, 1920 - size)), int(rng.integers(0, 1080 - size)), size, size)
-                    for _ in range(4)]
+        windows += [PixelWindow(int(rng.integers(0, 1920 - size)), int(rng.integers(0, 1080 - size)), size, size) for _ in range(4)]
     n_diff = n_flipped = n_total = 0
     for side in ("left", "right"):
         for window in windows:
             image = camera.render(client, side, window)
             assert image.shape == (window.height, window.width, 3) and image.dtype == np.uint8
-            crop = full_frames[side][window.v0:window.v0 + window.height, window.u0:window.u0 + window.width]
+            crop = full_frames[side][window.v0 : window.v0 + window.height, window.u0 : window.u0 + window.width]
             diff = np.abs(image.astype(int) - crop.astype(int)).max(axis=2)
             n_diff += int(np.count_nonzero(diff))
             n_flipped += int(np.count_nonzero(diff > WINDOW_SHADING_TOL_LEVELS))
@@ -230,3 +246,39 @@ def test_bad_inputs_raise_value_error(scene) -> None:
         StereoCamera(baseline_m=0.0)
     with pytest.raises(ValueError, match="rigid"):
         StereoCamera(pose=np.diag([2.0, 1.0, 1.0, 1.0]))
+
+
+# --- pixel noise ------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("width_px, expected_sigma_px", [(1920, 1.5), (960, 0.75), (480, 0.375), (3840, 3.0)])
+def test_pixel_noise_scales_with_the_image_width(width_px: int, expected_sigma_px: float) -> None:
+    # The setting is in pixels of the paper's 1920-wide images: half the width, half the pixels.
+    assert PixelNoise(1.5, width_px).sigma_px == expected_sigma_px
+    assert PixelNoise(1.5, 960).sigma_px == 0.5 * PixelNoise(1.5, 1920).sigma_px
+
+
+@pytest.mark.parametrize("uv_shape", [(2,), (1, 2)])
+def test_pixel_noise_draws_two_normals_per_detection_in_call_order(uv_shape: tuple[int, ...]) -> None:
+    noise = PixelNoise(2.0, 960)
+    left, right = np.full(uv_shape, 100.0), np.full(uv_shape, 40.0)
+    rng, explicit = np.random.default_rng(7), np.random.default_rng(7)
+    noisy_left, noisy_right = noise.apply(left, rng), noise.apply(right, rng)
+    np.testing.assert_array_equal(noisy_left, left + explicit.normal(0.0, 1.0, size=2))
+    np.testing.assert_array_equal(noisy_right, right + explicit.normal(0.0, 1.0, size=2))
+    assert noisy_left.shape == uv_shape
+    assert rng.random() == explicit.random()  # nothing more was drawn
+
+
+@pytest.mark.parametrize("noise, rng", [(PixelNoise(0.0, 640), np.random.default_rng(3)), (PixelNoise(1.0, 640), None)])
+def test_no_pixel_noise_draws_nothing_and_returns_the_detection(noise: PixelNoise, rng: np.random.Generator | None) -> None:
+    uv = np.array([12.5, 7.25])
+    assert noise.apply(uv, rng) is uv
+    if rng is not None:
+        assert rng.random() == np.random.default_rng(3).random()
+
+
+@pytest.mark.parametrize("sigma, width", [(-0.5, 1920), (float("nan"), 1920), (1.0, 0)])
+def test_pixel_noise_rejects_a_negative_or_nan_sigma_and_an_empty_width(sigma: float, width: int) -> None:
+    with pytest.raises(ValueError, match="sigma_px_at_1080p|width_px"):
+        PixelNoise(sigma, width)

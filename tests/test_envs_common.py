@@ -1,16 +1,18 @@
 """Behaviour every environment shares: API conformance, seeding, strict inputs, vector envs."""
 
+import dataclasses
+import importlib
+import inspect
 import json
 import warnings
 
 import gymnasium as gym
 import numpy as np
 import pytest
+from conftest import ENV_IDS, SMALL, json_from_fresh_process
 from gymnasium.error import ResetNeeded
 from gymnasium.utils.env_checker import check_env
 from stable_baselines3.common.env_checker import check_env as sb3_check_env
-
-from conftest import ENV_IDS, SMALL, json_from_fresh_process
 
 
 def _rollout(env, seed: int, n: int, action_seed: int = 123):
@@ -118,7 +120,7 @@ def test_unknown_reset_option_lists_the_valid_ones(make_env, env_id):
 
 @pytest.mark.parametrize("env_id", ENV_IDS)
 def test_unknown_constructor_argument_and_bias_preset_are_clear_errors(env_id):
-    with pytest.raises(ValueError, match="unknown argument"):
+    with pytest.raises(TypeError, match="unexpected keyword argument 'biass'"):
         gym.make(env_id, camera_resolution=SMALL, biass="paper")
     with pytest.raises(ValueError, match="paper"):
         gym.make(env_id, camera_resolution=SMALL, bias="no-such-preset")
@@ -195,3 +197,19 @@ def test_two_envs_in_one_process_are_independent(make_env, env_id):
     b.reset(seed=1)  # b survives a's close
     obs, *_ = b.step(b.action_space.sample())
     assert b.observation_space.contains(obs)
+
+
+@pytest.mark.parametrize("env_id", ENV_IDS)
+def test_constructor_keywords_are_the_config_fields_with_the_same_defaults_and_docs(env_id):
+    env_class = gym.spec(env_id).entry_point
+    module, _, name = env_class.partition(":")
+    env_class = getattr(importlib.import_module(module), name)
+    parameters = inspect.signature(env_class).parameters
+    config_fields = {field.name: field for field in dataclasses.fields(env_class.config_class)}
+    keywords = {n: p for n, p in parameters.items() if p.kind is inspect.Parameter.KEYWORD_ONLY}
+    assert sorted(keywords) == sorted(config_fields)
+    defaults = env_class.config_class()
+    for field_name, parameter in keywords.items():
+        assert parameter.annotation != inspect.Parameter.empty, field_name
+        assert parameter.default == getattr(defaults, field_name), field_name
+        assert f"{field_name}:" in env_class.__init__.__doc__, f"{field_name} is not documented in help()"

@@ -1,4 +1,5 @@
-"""Fragments on the paper, and what the jaws do to them (grasp.py) with the real PSMBody."""
+"""Fragments on the paper, what the jaws do to them (grasp.py) with the real PSMBody, and the table
+that owns both beside a world (table.py)."""
 
 import math
 
@@ -6,21 +7,17 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
-from dvrk_gym.sim.robot import kinematics as kin
 from dvrk_gym.sim.endoscope import detection as perception
-from dvrk_gym.sim.table.fragments import (
-    FRAGMENT_TYPES,
-    MIN_GAP_M,
-    ellipse_outline,
-    phantom_region,
-    sample_fragment_sizes,
-    sample_layout,
-    spawn_fragments,
-)
-from dvrk_gym.sim.table.grasp import GRASP_TIP_CLEARANCE_M, JAW_LINKS, Gripper
 from dvrk_gym.sim.physics.client import Physics
-from dvrk_gym.sim.robot.body import PSMBody
 from dvrk_gym.sim.physics.scene import WORKSPACE_CENTER_M, build_scene
+from dvrk_gym.sim.robot import ik
+from dvrk_gym.sim.robot import kinematics as kin
+from dvrk_gym.sim.robot.body import PSMBody
+from dvrk_gym.sim.table.fragments import FRAGMENT_TYPES, sample_fragment_sizes, spawn_fragments
+from dvrk_gym.sim.table.grasp import GRASP_TIP_CLEARANCE_M, JAW_LINKS, Gripper
+from dvrk_gym.sim.table.layout import MIN_GAP_M, ellipse_outline, phantom_region, sample_layout
+from dvrk_gym.sim.table.table import DebridementTable
+from dvrk_gym.sim.world import DvrkWorld, WorldConfig
 
 PAPER_TABLE_MM = {  # (length, width, thickness): mean, sd
     "pumpkin_seed": ((12.4, 6.8, 2.4), (0.8, 0.3, 0.3)),
@@ -41,7 +38,7 @@ def _tool_pose(tip_xy, tip_z, yaw):
     """Tool pose (paper orientation for ``yaw``) that puts the closed jaw tip at (xy, z)."""
     pitch, roll = kin.paper_pitch_roll(yaw)
     pose = kin.pose_from_euler(WORKSPACE_CENTER_M + [0.0, 0.0, 0.01], yaw, pitch, roll)
-    q = kin.inverse_kinematics(pose)
+    q = ik.inverse_kinematics(pose)
     offset = kin.jaw_tip_positions(q, 0.0)[0] - pose[:3, 3]
     pose[:3, 3] = np.array([tip_xy[0], tip_xy[1], tip_z]) - offset
     return pose
@@ -49,7 +46,7 @@ def _tool_pose(tip_xy, tip_z, yaw):
 
 def _closing_direction(yaw):
     """Unit (x, y) direction the jaws close along for tool yaw ``yaw``."""
-    q = kin.inverse_kinematics(_tool_pose(WORKSPACE_CENTER_M[:2], WORKSPACE_CENTER_M[2], yaw))
+    q = ik.inverse_kinematics(_tool_pose(WORKSPACE_CENTER_M[:2], WORKSPACE_CENTER_M[2], yaw))
     axis = kin.link_frames(q)[5][:3, 0]
     return axis[:2] / np.linalg.norm(axis[:2])
 
@@ -69,7 +66,7 @@ def _fragment_across_jaws(physics, kind, offset_across=0.0, offset_along=0.0, to
 def _lower_and_close(gripper, fragment, tip_xy, tool_yaw=0.0):
     top = WORKSPACE_CENTER_M[2]
     above = _tool_pose(tip_xy, top + fragment.size_m[2] + 0.004, tool_yaw)
-    gripper.place(kin.inverse_kinematics(above), kin.JAW_FULLY_OPEN_RAD)
+    gripper.place(ik.inverse_kinematics(above), kin.JAW_FULLY_OPEN_RAD)
     gripper.move_tool(_tool_pose(tip_xy, top + GRASP_TIP_CLEARANCE_M, tool_yaw), 0.02)
     gripper.command_jaw(-0.2)
     gripper.settle_jaws(240)
@@ -281,7 +278,7 @@ def test_a_held_fragment_is_carried_by_a_free_space_move(world):
     _lower_and_close(gripper, fragment, tip)
     _raise(gripper, tip, 0.010)
     before = fragment.position() - kin.forward_kinematics(gripper.q)[:3, 3]
-    gripper.place(kin.inverse_kinematics(_tool_pose(tip - 0.02, WORKSPACE_CENTER_M[2] + 0.015, 0.0)))
+    gripper.place(ik.inverse_kinematics(_tool_pose(tip - 0.02, WORKSPACE_CENTER_M[2] + 0.015, 0.0)))
     after = fragment.position() - kin.forward_kinematics(gripper.q)[:3, 3]
     np.testing.assert_allclose(after, before, atol=1e-6)
     gripper.step()
@@ -316,3 +313,24 @@ def test_same_seed_gives_bit_identical_fragment_positions():
     a, b = _trial_positions(11), _trial_positions(11)
     for x, y in zip(a, b):
         assert np.array_equal(np.asarray(x, float), np.asarray(y, float))
+
+
+def test_table_drives_the_worlds_jaws_until_the_world_is_rebuilt():
+    world = DvrkWorld(WorldConfig(bias="none", camera_resolution=(320, 180)))
+    try:
+        table = DebridementTable(world)
+        assert world.jaw_driver is None and table.held() == {} and table.true_fragment_positions().shape == (0, 3)
+        with pytest.raises(RuntimeError, match="add_fragments"):
+            table.actuate_jaws(0.5)
+        rng = np.random.default_rng(0)
+        table.add_fragments("raisin", rng, n=2)
+        assert world.jaw_driver is table and len(table.fragments) == 2 and table.true_fragment_positions().shape == (2, 3)
+        with pytest.raises(RuntimeError, match="rebuild"):
+            DebridementTable(world).add_fragments("raisin", rng, n=2)
+        world.move_joints(world.q_cmd, jaw_angle_rad=0.4)  # a free-space move goes through the gripper
+        assert world.jaw_angle == pytest.approx(table.gripper.jaw_angle) == pytest.approx(0.4)
+        world.rebuild()
+        assert world.jaw_driver is None and table.fragments == [] and table.gripper is None
+        assert len(table.add_fragments("pumpkin_seed", rng, n=3)) == 3
+    finally:
+        world.close()

@@ -1,4 +1,4 @@
-"""Tests for dvrk_gym.sim.robot.kinematics (PSM forward/inverse kinematics and helpers)."""
+"""Tests for dvrk_gym.sim.robot.kinematics and .ik (PSM forward/inverse kinematics and helpers)."""
 
 from __future__ import annotations
 
@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from dvrk_gym.sim.robot import ik
 from dvrk_gym.sim.robot import kinematics as kin
 
 ZERO_Q = np.array([0.0, 0.0, 0.18, 0.0, 0.0, 0.0])
@@ -97,15 +98,13 @@ def test_roll_spins_tool_about_shaft_without_moving_tip() -> None:
 
 
 def test_dh_transform_is_craig_product() -> None:
-    row = kin.DHRow(
-        alpha_rad=0.3, a_m=0.02, theta_offset_rad=-0.4, d_offset_m=0.05, prismatic=False)
+    row = kin.DHRow(alpha_rad=0.3, a_m=0.02, theta_offset_rad=-0.4, d_offset_m=0.05, prismatic=False)
     expected = np.eye(4)
     expected[:3, :3] = _rot_x(0.3) @ _rot_z(-0.4 + 0.2)
     expected[:3, 3] = _rot_x(0.3) @ (np.array([0.02, 0.0, 0.0]) + _rot_z(-0.2) @ [0.0, 0.0, 0.05])
     np.testing.assert_allclose(kin.dh_transform(row, 0.2), expected, atol=1e-15)
     prismatic = dataclasses.replace(row, prismatic=True)
-    np.testing.assert_allclose(
-        kin.dh_transform(prismatic, 0.01)[:3, 3], _rot_x(0.3) @ [0.02, 0.0, 0.06], atol=1e-15)
+    np.testing.assert_allclose(kin.dh_transform(prismatic, 0.01)[:3, 3], _rot_x(0.3) @ [0.02, 0.0, 0.06], atol=1e-15)
 
 
 def test_link_frames_end_in_fk_pose_without_tool_tip_rotation() -> None:
@@ -135,8 +134,8 @@ def test_ik_round_trip_recovers_joints_and_pose_for_1000_random_configurations()
     rng = np.random.default_rng(1234)
     for q in _random_q(rng, 1000, (0.05, 0.24)):
         pose = kin.forward_kinematics(q)
-        q_free = kin.inverse_kinematics(pose)
-        q_ref = kin.inverse_kinematics(pose, q_ref=q)
+        q_free = ik.inverse_kinematics(pose)
+        q_ref = ik.inverse_kinematics(pose, q_ref=q)
         np.testing.assert_allclose(q_ref, q, atol=1e-9, rtol=0)
         np.testing.assert_allclose(np.delete(q_free, 3), np.delete(q, 3), atol=1e-9, rtol=0)
         assert abs(_wrapped(q_free[3] - q[3])) < 1e-9
@@ -149,7 +148,7 @@ def test_ik_round_trip_with_shallow_insertion_below_wrist_offset() -> None:
     rng = np.random.default_rng(99)
     for q in _random_q(rng, 300, (0.0, 0.05)):
         pose = kin.forward_kinematics(q)
-        q_ik = kin.inverse_kinematics(pose, q_ref=q)
+        q_ik = ik.inverse_kinematics(pose, q_ref=q)
         np.testing.assert_allclose(kin.forward_kinematics(q_ik), pose, atol=1e-9, rtol=0)
         np.testing.assert_allclose(q_ik, q, atol=1e-9, rtol=0)
 
@@ -157,17 +156,17 @@ def test_ik_round_trip_with_shallow_insertion_below_wrist_offset() -> None:
 def test_ik_picks_roll_branch_nearest_reference() -> None:
     q = np.array([0.1, -0.2, 0.15, np.deg2rad(250.0), 0.3, -0.2])
     pose = kin.forward_kinematics(q)
-    assert kin.inverse_kinematics(pose)[3] == pytest.approx(np.deg2rad(-110.0), abs=1e-9)
-    near = kin.inverse_kinematics(pose, q_ref=np.r_[0, 0, 0.1, 4.0, 0, 0])
+    assert ik.inverse_kinematics(pose)[3] == pytest.approx(np.deg2rad(-110.0), abs=1e-9)
+    near = ik.inverse_kinematics(pose, q_ref=np.r_[0, 0, 0.1, 4.0, 0, 0])
     assert near[3] == pytest.approx(q[3], abs=1e-9)
     # A reference beyond the limit still yields a roll within +-260 deg.
-    far = kin.inverse_kinematics(pose, q_ref=np.r_[0, 0, 0.1, 20.0, 0, 0])
+    far = ik.inverse_kinematics(pose, q_ref=np.r_[0, 0, 0.1, 20.0, 0, 0])
     assert far[3] == pytest.approx(q[3], abs=1e-9)
 
 
 def test_ik_reaches_paper_typical_orientation() -> None:
     pose = kin.pose_from_euler([0.04, 0.04, -0.164], 0.0, np.deg2rad(5.0), np.deg2rad(-167.0))
-    q = kin.inverse_kinematics(pose)
+    q = ik.inverse_kinematics(pose)
     assert kin.within_joint_limits(q)
     np.testing.assert_allclose(kin.forward_kinematics(q), pose, atol=1e-12)
 
@@ -175,28 +174,36 @@ def test_ik_reaches_paper_typical_orientation() -> None:
 def test_ik_raises_with_joint_name_and_degrees_for_target_above_rcm() -> None:
     pose = kin.pose_from_euler([0.0, 0.0, 0.05], 0.0, 0.0, np.pi)
     message = r"outer_yaw = 180\.000 deg is outside \[-91\.000, 91\.000\] deg"
-    with pytest.raises(kin.UnreachablePoseError, match=message):
-        kin.inverse_kinematics(pose)
+    with pytest.raises(ik.UnreachablePoseError, match=message):
+        ik.inverse_kinematics(pose)
 
 
 def test_ik_raises_with_millimetres_for_too_deep_target() -> None:
     pose = kin.forward_kinematics(ZERO_Q)
     pose[2, 3] = -0.30
     message = r"insertion = 306\.500 mm is outside \[0\.000, 240\.000\] mm"
-    with pytest.raises(kin.UnreachablePoseError, match=message):
-        kin.inverse_kinematics(pose)
+    with pytest.raises(ik.UnreachablePoseError, match=message):
+        ik.inverse_kinematics(pose)
 
 
 def test_ik_raises_for_outer_pitch_beyond_limit() -> None:
     q = np.array([0.0, np.deg2rad(60.0), 0.15, 0.0, 0.0, 0.0])
-    with pytest.raises(kin.UnreachablePoseError, match="outer_pitch = 60.000 deg"):
-        kin.inverse_kinematics(kin.forward_kinematics(q))
+    with pytest.raises(ik.UnreachablePoseError, match="outer_pitch = 60.000 deg"):
+        ik.inverse_kinematics(kin.forward_kinematics(q))
 
 
 def test_ik_raises_geometric_error_for_target_at_rcm() -> None:
     pose = kin.pose_from_euler([0.0, 0.0, 0.0], 0.0, 0.0, np.pi)
-    with pytest.raises(kin.UnreachablePoseError, match="too close to the RCM"):
-        kin.inverse_kinematics(pose)
+    with pytest.raises(ik.UnreachablePoseError, match="too close to the RCM"):
+        ik.inverse_kinematics(pose)
+
+
+def test_ik_raises_geometric_error_for_wrist_pitch_point_at_rcm() -> None:
+    # Tool pitched 90 deg so the wrist-yaw axis is base z, the pivot one wrist offset
+    # along base x: the wrist-pitch point falls on the RCM.
+    pose = kin.pose_from_euler([kin.PSM_DH[5].a_m, 0.0, 0.0], 0.0, np.pi / 2, 0.0)
+    with pytest.raises(ik.UnreachablePoseError, match="wrist-pitch point is 0.0000 mm from the RCM"):
+        ik.inverse_kinematics(pose)
 
 
 @pytest.mark.parametrize(
@@ -211,8 +218,8 @@ def test_ik_raises_geometric_error_for_target_at_rcm() -> None:
 )
 def test_ik_rejects_malformed_pose_with_plain_value_error(pose: np.ndarray) -> None:
     with pytest.raises(ValueError) as info:
-        kin.inverse_kinematics(pose)
-    assert not isinstance(info.value, kin.UnreachablePoseError)
+        ik.inverse_kinematics(pose)
+    assert not isinstance(info.value, ik.UnreachablePoseError)
 
 
 def test_fk_rejects_nan_and_wrong_length() -> None:
@@ -337,14 +344,12 @@ def test_nearest_paper_yaw_scalar_and_vectorised() -> None:
 
 
 def test_clamped_inverse_kinematics_equals_exact_ik_when_reachable_and_clamps_otherwise():
-    from dvrk_gym.sim.robot.kinematics import inverse_kinematics_clamped
-
     pose = kin.pose_from_euler([0.04, 0.04, -0.154], 0.0, np.radians(5), np.radians(-167))
-    q, mask = inverse_kinematics_clamped(pose)
-    np.testing.assert_array_equal(q, kin.inverse_kinematics(pose))
+    q, mask = ik.inverse_kinematics_clamped(pose)
+    np.testing.assert_array_equal(q, ik.inverse_kinematics(pose))
     assert not mask.any()
     far = kin.pose_from_euler([0.04, 0.04, -0.154], 0.0, np.radians(5), np.radians(-60))
-    with pytest.raises(kin.UnreachablePoseError):
-        kin.inverse_kinematics(far)
-    q, mask = inverse_kinematics_clamped(far)
+    with pytest.raises(ik.UnreachablePoseError):
+        ik.inverse_kinematics(far)
+    q, mask = ik.inverse_kinematics_clamped(far)
     assert mask.any() and kin.within_joint_limits(q, tolerance=0.0)

@@ -1,4 +1,4 @@
-"""The package as users get it: the wheel carries its data, the README and CI agree."""
+"""The package as users get it: the wheel carries its data and its typing marker, the README and CI agree."""
 
 import subprocess
 import sys
@@ -13,11 +13,12 @@ DATA_FILES = [
     "dvrk_gym/data/seita2018_phase1/y_train.npy",
     "dvrk_gym/data/seita2018_phase1/LICENSE",
     "dvrk_gym/data/seita2018_phase1/README.md",
+    "dvrk_gym/py.typed",  # PEP 561: type checkers read the package's own hints
 ]
 
 
 @pytest.mark.slow
-def test_built_wheel_contains_data_files_and_console_script(tmp_path):
+def test_built_wheel_contains_data_files_typing_marker_and_console_script(tmp_path):
     subprocess.run(
         [sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation", "-q", "-w", str(tmp_path), str(ROOT)],
         check=True,
@@ -26,7 +27,7 @@ def test_built_wheel_contains_data_files_and_console_script(tmp_path):
     (wheel,) = tmp_path.glob("dvrk_gym-*.whl")
     names = zipfile.ZipFile(wheel).namelist()
     for data_file in DATA_FILES:
-        assert data_file in names
+        assert data_file in names, f"{data_file} is missing from the wheel"
     entry_points = next(n for n in names if n.endswith("entry_points.txt"))
     assert "dvrk-gym = dvrk_gym.cli.main:main" in zipfile.ZipFile(wheel).read(entry_points).decode()
 

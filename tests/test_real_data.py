@@ -9,12 +9,17 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from dvrk_gym.calibration.datasets import PAPER_PHASE1_ROWS, load_paper_phase1
+from dvrk_gym.calibration.datasets import load_paper_phase1
 from dvrk_gym.calibration.models.dnn import DNNCalibrator
 from dvrk_gym.calibration.models.linear import LinearCalibrator
 from dvrk_gym.calibration.search import (
-    cross_validate, format_table, paper_models, plot_search, run_search,
+    cross_validate,
+    format_table,
+    paper_models,
+    plot_search,
+    run_search,
 )
+from dvrk_gym.paper import REAL_PHASE1_ROWS
 from dvrk_gym.utils.torch_threads import torch_threads
 
 CHOSEN_NET_MAX_MM2 = 2.2
@@ -37,11 +42,11 @@ def one_torch_thread():
 
 def test_paper_data_loads_in_si_units(paper_data) -> None:
     X, y = paper_data
-    assert X.shape == (PAPER_PHASE1_ROWS, 6) and y.shape == (PAPER_PHASE1_ROWS, 3)
+    assert X.shape == (REAL_PHASE1_ROWS, 6) and y.shape == (REAL_PHASE1_ROWS, 3)
     assert X.dtype == np.float64 and y.dtype == np.float64
     # Camera depth 165-221 mm, yaw within +-91 deg, roll wrapping at +-180 deg, workspace
     # bx 5-71 mm, by 10-74 mm, bz -171 to -158 mm (DESIGN.md).
-    assert 0.165 < X[:, 2].min() and X[:, 2].max() < 0.221
+    assert X[:, 2].min() > 0.165 and X[:, 2].max() < 0.221
     assert np.abs(X[:, 3]).max() < np.radians(91.0)
     assert np.abs(X[:, 5]).max() <= np.pi and X[:, 5].max() > np.radians(170.0)
     np.testing.assert_array_less([0.005, 0.010, -0.171], y.min(axis=0))
@@ -57,16 +62,14 @@ def test_linear_regression_cv_error_matches_the_authors(paper_data) -> None:
 def test_quaternion_linear_regression_is_no_worse_than_euler(paper_data) -> None:
     X, y = paper_data
     euler = np.mean(cross_validate(lambda seed: LinearCalibrator("euler"), X, y, folds=10))
-    quaternion = np.mean(cross_validate(lambda seed: LinearCalibrator("quaternion"), X, y,
-                                        folds=10))
+    quaternion = np.mean(cross_validate(lambda seed: LinearCalibrator("quaternion"), X, y, folds=10))
     assert quaternion <= euler
 
 
 @pytest.mark.slow
 def test_chosen_net_cv_error_is_within_the_paper_figure(paper_data) -> None:
     X, y = paper_data
-    errors = cross_validate(lambda seed: DNNCalibrator(epochs=TEST_EPOCHS, seed=seed,
-                                                       progress=False), X, y, folds=10)
+    errors = cross_validate(lambda seed: DNNCalibrator(epochs=TEST_EPOCHS, seed=seed, progress=False), X, y, folds=10)
     assert np.mean(errors) <= CHOSEN_NET_MAX_MM2
 
 

@@ -6,13 +6,24 @@ import math
 
 import pytest
 
+from dvrk_gym import paper
 from dvrk_gym.cli.main import main
 from dvrk_gym.reproduce import Profile, ReproduceConfig, build_tasks, run_reproduce
 from dvrk_gym.reproduce.scheduler import Task, TaskError, run_tasks
+from dvrk_gym.utils.run_folder import RunFolder, read_settings
 
 TINY = Profile(
-    name="tiny", n_trajectories=2, steps_per_trajectory=30, dnn_epochs=20, search="quick", debridement_trials=1,
-    debridement_picks=2, rl_agents=("sac",), rl_steps=60, rl_eval_points=1, camera_resolution=(480, 270),
+    name="tiny",
+    n_trajectories=2,
+    steps_per_trajectory=30,
+    dnn_epochs=20,
+    search="quick",
+    debridement_trials=1,
+    debridement_picks=2,
+    rl_agents=("sac",),
+    rl_steps=60,
+    rl_eval_points=1,
+    camera_resolution=(480, 270),
 )
 
 
@@ -143,3 +154,41 @@ def test_the_task_that_unlocks_most_work_starts_first(tmp_path):
     graph = [step("big", 50), step("root", 10), step("leaf1", 30, ("root",)), step("leaf2", 30, ("root",))]
     run_tasks(graph, tmp_path / "cache", workers=1, progress=False)
     assert log.read_text().split() == ["root", "big", "leaf1", "leaf2"]  # root carries 70 s of work, big 50
+
+
+# ---------------------------------------------------------------- the run folder
+def test_a_run_folder_makes_each_result_once_and_refuses_other_settings(tmp_path):
+    made = []
+
+    def make():
+        made.append(1)
+        return {"x": 1.5}
+
+    def cached(folder):
+        return folder.cached(
+            "result.json", make, lambda path: json.loads(path.read_text()), lambda value, path: path.write_text(json.dumps(value))
+        )
+
+    settings = {"seed": 0, "profile": {"name": "tiny", "camera_resolution": (480, 270)}}
+    first = RunFolder(tmp_path, settings, stamp="config.json")
+    assert cached(first) == {"x": 1.5} and set(first.made_s) == {"result"}
+    again = RunFolder(tmp_path, {**settings, "profile": {"name": "tiny", "camera_resolution": [480, 270]}}, stamp="config.json")
+    assert cached(again) == {"x": 1.5} and again.made_s == {} and len(made) == 1  # loaded, not made again
+    assert read_settings(tmp_path, "config.json") == {"seed": 0, "profile": {"name": "tiny", "camera_resolution": [480, 270]}}
+    with pytest.raises(ValueError, match=r"other settings \(profile.name: 'tiny' there, 'full' here; seed: 0 there, 1 here"):
+        RunFolder(tmp_path, {"seed": 1, "profile": {"name": "full", "camera_resolution": (480, 270)}}, stamp="config.json")
+    assert RunFolder(tmp_path).has("result.json")  # without settings: no check
+
+
+# ---------------------------------------------------------------- the paper's numbers
+def test_the_papers_numbers_agree_with_each_other():
+    for method, pixels in paper.CALIBRATION_PIXELS.items():
+        assert len(pixels) == len(paper.CALIBRATION_SETTINGS)
+        assert sum(pixels) / len(pixels) == pytest.approx(paper.CALIBRATION_MEAN_PX[method], abs=0.01)  # the table's mean column
+        assert paper.CALIBRATION_MEAN_PX[method] / paper.PX_PER_MM == pytest.approx(paper.CALIBRATION_MEAN_MM[method], abs=0.005)
+    for (method, fragment), cell in paper.DEBRIDEMENT_RESULTS.items():
+        assert method in paper.METHOD_LABELS and fragment in paper.FRAGMENT_LABELS
+        assert sum(cell.values()) <= paper.DEBRIDEMENT_PICKS_PER_CELL == 120
+    assert paper.PHASE1_POSES_PER_TRAJECTORY == 93 and paper.PHASE2_TOUCHES == 175
+    assert sum(paper.DEBRIDEMENT_PHASE_S.values()) == pytest.approx(paper.TRIAL_S / paper.FRAGMENTS_PER_TRIAL, rel=0.02)
+    assert paper.REAL_PHASE1_ROWS == paper.PHASE1_KEPT_SAMPLES

@@ -5,9 +5,19 @@ import dataclasses
 import numpy as np
 import pytest
 
-from dvrk_gym.sim.robot import kinematics as kin
 from dvrk_gym.sim.physics.client import Physics
-from dvrk_gym.sim.robot.body import JAW_A_INDEX, JAW_B_INDEX, MARKER, WRIST_YAW_INDEX, PSMBody, marker_corners, marker_face_samples, marker_frame, marker_position
+from dvrk_gym.sim.robot import kinematics as kin
+from dvrk_gym.sim.robot.body import (
+    JAW_A_INDEX,
+    JAW_B_INDEX,
+    MARKER,
+    WRIST_YAW_INDEX,
+    PSMBody,
+    marker_corners,
+    marker_face_samples,
+    marker_frame,
+    marker_position,
+)
 
 
 @pytest.fixture

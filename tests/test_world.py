@@ -3,11 +3,11 @@
 import numpy as np
 import pytest
 
-from dvrk_gym.sim.robot import kinematics as kin
-from dvrk_gym.sim.physics.scene import grid_circle_centers
 from dvrk_gym.envs.exploration import sample_paper_poses
+from dvrk_gym.sim.physics.scene import grid_circle_centers
+from dvrk_gym.sim.robot import ik
+from dvrk_gym.sim.robot import kinematics as kin
 from dvrk_gym.sim.world import DvrkWorld, WorldConfig
-
 
 MIN_FACE_AREA_PX = 100
 """About an eighth of the tape's area seen face-on at 1920 x 1080 (about 840 px)."""
@@ -38,7 +38,10 @@ def test_pixel_detection_agrees_with_geometric_visibility(full_hd_world):
         world.move_to(pose)
         detection = world.observe_marker()
         expected_left, expected_right = world.camera.project(world.true_marker_position())
-        sides = (("left", detection.left_uv, expected_left[0], detection.left_area_px), ("right", detection.right_uv, expected_right[0], detection.right_area_px))
+        sides = (
+            ("left", detection.left_uv, expected_left[0], detection.left_area_px),
+            ("right", detection.right_uv, expected_right[0], detection.right_area_px),
+        )
         for side, uv, expected, area in sides:
             fraction = world.marker_visible_fraction(side)
             if fraction == 1.0 and area >= MIN_FACE_AREA_PX:
@@ -103,7 +106,7 @@ def test_unreachable_pose_raises_or_is_clamped_on_request():
     world = DvrkWorld(WorldConfig(bias="none", camera_resolution=(320, 180)))
     try:
         far = kin.pose_from_euler([0.04, 0.04, -0.15], 0.0, 0.0, -1.0)
-        with pytest.raises(kin.UnreachablePoseError):
+        with pytest.raises(ik.UnreachablePoseError):
             world.move_to(far)
         result = world.move_to(far, clamp_to_limits=True)
         assert result.joints_clamped.any()

@@ -33,24 +33,27 @@ Example::
 
 from __future__ import annotations
 
-import importlib
-from typing import Any
+from dvrk_gym.utils.lazy_exports import lazy_exports
 
-_EXPORTS = {
-    "AGENTS": "agents", "AgentSpec": "agents", "build_model": "agents", "get_agent": "agents",
-    "BUDGETS": "budgets", "CALIBRATOR_MOVES": "budgets", "resolve_budget": "budgets",
-    "LoadedAgent": "checkpoints", "load_agent": "checkpoints", "save_agent": "checkpoints",
-    "CurvePoint": "training", "TrainConfig": "training", "TrainResult": "training", "train": "training",
-    "wrap_grid_touch": "wrappers", "wrap_debridement": "picking", "pick_policy": "transfer",
-}
-
-__all__ = sorted(_EXPORTS)
-
-
-def __getattr__(name: str) -> Any:
-    """Import the module that defines ``name`` on first use (Python caches the module)."""
-    try:
-        module = _EXPORTS[name]
-    except KeyError:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}") from None
-    return getattr(importlib.import_module(f".{module}", __name__), name)
+__all__, __getattr__, __dir__ = lazy_exports(  # PEP 562: each name imported from its module when first asked for
+    __name__,
+    {
+        "AGENTS": "agents",
+        "AgentSpec": "agents",
+        "build_model": "agents",
+        "get_agent": "agents",
+        "BUDGETS": "budgets",
+        "CALIBRATOR_MOVES": "budgets",
+        "resolve_budget": "budgets",
+        "LoadedAgent": "checkpoints",
+        "load_agent": "checkpoints",
+        "save_agent": "checkpoints",
+        "CurvePoint": "training",
+        "TrainConfig": "training",
+        "TrainResult": "training",
+        "train": "training",
+        "wrap_grid_touch": "wrappers",
+        "wrap_debridement": "picking",
+        "pick_policy": "transfer",
+    },
+)

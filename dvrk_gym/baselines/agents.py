@@ -11,8 +11,9 @@ per step); a budget counts env steps of either, i.e. robot moves.
 from __future__ import annotations
 
 import copy
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from typing import Any
 
 import gymnasium as gym
 from stable_baselines3 import PPO, SAC, TD3
@@ -71,7 +72,9 @@ _PICK_SAC = {
 }
 
 
-def _sac(name: str, her: bool, wrap: Callable[[gym.Env, str | None], gym.Env], env_kwargs: dict[str, Any], hyperparameters: dict[str, Any]) -> AgentSpec:
+def _sac(
+    name: str, her: bool, wrap: Callable[[gym.Env, str | None], gym.Env], env_kwargs: dict[str, Any], hyperparameters: dict[str, Any]
+) -> AgentSpec:
     """A SAC row; its env and description come from :mod:`dvrk_gym.baselines.budgets`."""
     return AgentSpec(name, AGENT_ENVS[name], "SAC", her, wrap, AGENT_DESCRIPTIONS[name], env_kwargs, hyperparameters)
 

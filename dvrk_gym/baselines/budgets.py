@@ -9,6 +9,8 @@ agent's env step is one commanded touch, so a budget is a number of env steps.
 
 from __future__ import annotations
 
+from dvrk_gym import paper
+
 GRID_TOUCH_ID = "dvrk_gym/GridTouch-v0"
 DEBRIDEMENT_ID = "dvrk_gym/Debridement-v0"
 
@@ -21,9 +23,9 @@ AGENT_DESCRIPTIONS: dict[str, str] = {
 }
 """One line per agent, for help texts and tables."""
 
-PHASE1_MOVES = 57 * 93
+PHASE1_MOVES = paper.PHASE1_TRAJECTORIES * paper.PHASE1_POSES_PER_TRAJECTORY
 """Commanded poses of the paper's Phase I: 57 trajectories x 93 (5,301)."""
-PHASE2_TOUCHES = 35 * 5
+PHASE2_TOUCHES = paper.PHASE2_TOUCHES
 """Touches of the paper's Phase II: 35 circles x 5 yaws (175)."""
 CALIBRATOR_MOVES = PHASE1_MOVES + PHASE2_TOUCHES
 """Robot moves the two-phase calibrator uses (5,476)."""

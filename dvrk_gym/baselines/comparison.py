@@ -8,8 +8,9 @@ comparable. The calibrators' rows come from a calibration run folder
 
 Debridement (any agent, through :func:`~dvrk_gym.baselines.transfer.pick_policy`): the
 paper's trials of eight picks on Debridement-v0, run by
-:func:`~dvrk_gym.cli.debridement.run_trials` with the same seeds for the agents and for
-the calibrators (loaded from the calibration run folder and aimed by
+:func:`~dvrk_gym.evaluation.trials.run_debridement` with the same seeds for the agents and
+for the calibrators (loaded from the calibration run folder by
+:func:`~dvrk_gym.calibration.loading.load_calibrator` and aimed by
 ``CalibratedPolicy(calibrator, target=fragment_target)``, as ``dvrk-gym debride`` does):
 success, outcomes A/B/C and time per fragment.
 """
@@ -18,30 +19,31 @@ from __future__ import annotations
 
 import json
 import logging
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Sequence
 
 import numpy as np
 
+from dvrk_gym import paper
+from dvrk_gym.baselines.budgets import GRID_TOUCH_ID, PHASE2_TOUCHES
 from dvrk_gym.baselines.checkpoints import LoadedAgent
-from dvrk_gym.baselines.budgets import DEBRIDEMENT_ID, GRID_TOUCH_ID
 from dvrk_gym.baselines.training import make_agent_env
 from dvrk_gym.baselines.transfer import pick_policy
 from dvrk_gym.calibration.benchmark import YAW_SETTINGS, CircleErrors, touch_grid
-from dvrk_gym.calibration.pipeline import PipelineConfig
-from dvrk_gym.envs.grid_touch import N_CIRCLES
-from dvrk_gym.sim.robot.kinematics import PAPER_YAWS_RAD
+from dvrk_gym.calibration.loading import load_calibrator
+from dvrk_gym.calibration.pipeline import BENCHMARK_SEED_OFFSET, CALIBRATOR_FILES, PipelineConfig, read_pipeline_settings
+from dvrk_gym.calibration.policy import CalibratedPolicy
+from dvrk_gym.envs.debridement import fragment_target
+from dvrk_gym.evaluation.trials import Trial, run_debridement, totals
 
 logger = logging.getLogger(__name__)
 
-BENCHMARK_SEED = 1000
+BENCHMARK_SEED = BENCHMARK_SEED_OFFSET
 """The seed the calibration pipeline's benchmark uses (its config seed 0 + 1000)."""
-PHASE2_TOUCHES_PER_RUN = N_CIRCLES * len(PAPER_YAWS_RAD)
-"""Phase II touches of a calibration run: the 35 circles at the five paper yaws."""
-CALIBRATORS = ("rbt", "dnn", "dnn+rf")
+CALIBRATORS = tuple(paper.METHOD_LABELS)
 """The calibrators of a calibration run folder, as ``dvrk-gym debride --calibrator`` names them."""
-DEBRIDEMENT_TRIALS = 15
+DEBRIDEMENT_TRIALS = paper.DEBRIDEMENT_TRIALS
 """Trials of eight picks per method (the paper's)."""
 
 
@@ -113,17 +115,15 @@ def calibration_rows(folder: Path) -> tuple[list[ComparisonRow], PipelineConfig]
 def calibrator_moves(config: PipelineConfig) -> dict[str, int]:
     """Robot moves each calibrator of a run used: Phase I poses; DNN+RF adds the Phase II touches."""
     phase1 = config.n_trajectories * config.steps_per_trajectory
-    return {"RBT": phase1, "DNN": phase1, "DNN+RF": phase1 + PHASE2_TOUCHES_PER_RUN}
+    return {"RBT": phase1, "DNN": phase1, "DNN+RF": phase1 + PHASE2_TOUCHES}
 
 
 def _pipeline_config(folder: Path) -> PipelineConfig:
-    stamp = folder / "pipeline_config.json"
-    if not stamp.exists():
-        logger.warning("%s not found: assuming the paper's budgets and default settings", stamp)
+    settings = read_pipeline_settings(folder)
+    if settings is None:
+        logger.warning("%s has no settings: assuming the paper's budgets and default settings", folder)
         return PipelineConfig()
-    values: dict[str, Any] = json.loads(stamp.read_text())
-    values["camera_resolution"] = tuple(values.get("camera_resolution", (1920, 1080)))
-    return PipelineConfig(**values)
+    return PipelineConfig.from_settings(settings)
 
 
 def setting_mismatches(agent: LoadedAgent, calibration: PipelineConfig) -> list[str]:
@@ -185,31 +185,21 @@ class DebridementRow:
         return self.success / self.picks if self.picks else float("nan")
 
 
-def debridement_row(method: str, robot_moves: int, trials: Sequence[Any], source: str) -> DebridementRow:
-    """The row of a list of :class:`~dvrk_gym.cli.debridement.Trial`."""
-    from dvrk_gym.cli.debridement import totals
-
+def debridement_row(method: str, robot_moves: int, trials: Sequence[Trial], source: str) -> DebridementRow:
+    """The row of a list of :class:`~dvrk_gym.evaluation.trials.Trial`."""
     total = totals(list(trials))
-    return DebridementRow(method, robot_moves, total["picks"], total["success"], total["A"], total["B"], total["C"], total["time_per_fragment_s"], source)
+    return DebridementRow(
+        method, robot_moves, total["picks"], total["success"], total["A"], total["B"], total["C"], total["time_per_fragment_s"], source
+    )
 
 
-def run_debridement(policy: Any, n_trials: int, seed: int, bias: str, bias_seed: int, camera_resolution: tuple[int, int], fragment: str = "pumpkin_seed", progress: bool = False) -> list[Any]:
-    """``n_trials`` debridement trials of ``policy`` on a fresh Debridement-v0 (primitive mode)."""
-    import gymnasium as gym
-
-    from dvrk_gym.cli.debridement import run_trials
-
-    env = gym.make(DEBRIDEMENT_ID, fragment=fragment, bias=bias, bias_seed=bias_seed, camera_resolution=tuple(camera_resolution))
-    try:
-        return run_trials(env, policy, n_trials, seed=seed, progress=progress)
-    finally:
-        env.close()
-
-
-def benchmark_debridement(agent: LoadedAgent, n_trials: int = DEBRIDEMENT_TRIALS, seed: int = 0, fragment: str = "pumpkin_seed", progress: bool = False) -> list[Any]:
+def benchmark_debridement(
+    agent: LoadedAgent, n_trials: int = DEBRIDEMENT_TRIALS, seed: int = 0, fragment: str = "pumpkin_seed", progress: bool = False
+) -> list[Trial]:
     """The agent's debridement trials (GridTouch agents transferred by :func:`pick_policy`), in its world."""
     config = agent.config
-    return run_debridement(pick_policy(agent), n_trials, seed, config.bias, config.bias_seed, config.camera_resolution, fragment, progress)
+    world = {"bias": config.bias, "bias_seed": config.bias_seed, "camera_resolution": config.camera_resolution}
+    return run_debridement(pick_policy(agent), n_trials, seed, fragment, **world, progress=progress)
 
 
 def calibration_debridement_rows(
@@ -233,10 +223,6 @@ def calibration_debridement_rows(
         ValueError: an unknown calibrator name.
         FileNotFoundError: the folder lacks a calibrator's model file.
     """
-    from dvrk_gym.calibration.policy import CalibratedPolicy
-    from dvrk_gym.cli.debridement import CALIBRATOR_FILES, CALIBRATOR_LABELS, load_calibrator
-    from dvrk_gym.envs.debridement import fragment_target
-
     folder = Path(folder)
     unknown = sorted(set(calibrators) - set(CALIBRATORS))
     if unknown:
@@ -251,8 +237,8 @@ def calibration_debridement_rows(
             raise FileNotFoundError(f"{path} not found: run 'dvrk-gym calibrate --out {folder}' first")
         calibrator, _ = load_calibrator(folder, name)
         policy = CalibratedPolicy(calibrator, target=fragment_target)
-        trials = run_debridement(policy, n_trials, seed, config.bias, config.bias_seed, resolution, fragment, progress)
-        label = CALIBRATOR_LABELS[name]
+        trials = run_debridement(policy, n_trials, seed, fragment, config.bias, config.bias_seed, resolution, progress=progress)
+        label = paper.METHOD_LABELS[name]
         rows.append(debridement_row(label, moves[label], trials, str(path)))
     return rows, config
 
@@ -262,7 +248,9 @@ def format_debridement_comparison(rows: Sequence[DebridementRow], notes: Sequenc
     lines = []
     for row in rows:
         success = f"{row.success}/{row.picks} {100 * row.success_rate:.0f}%" if row.picks else "0/0"
-        lines.append(f"{row.method:<48}{_moves(row.robot_moves):>12}{success:>15}{row.missed:>5}{row.slipped:>5}{row.pierced:>5}{row.time_per_fragment_s:>12.2f}")
+        lines.append(
+            f"{row.method:<48}{_moves(row.robot_moves):>12}{success:>15}{row.missed:>5}{row.slipped:>5}{row.pierced:>5}{row.time_per_fragment_s:>12.2f}"
+        )
     return _text_table(
         "Debridement (trials of 8 picks): success and time per fragment, for the robot moves each method used",
         f"{'method':<48}{'robot moves':>12}{'success':>15}{'A':>5}{'B':>5}{'C':>5}{'s/fragment':>12}",

@@ -10,16 +10,17 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
+from dvrk_gym import paper
 from dvrk_gym.baselines.budgets import CALIBRATOR_MOVES
 from dvrk_gym.baselines.training import CurvePoint
-from dvrk_gym.calibration.benchmark import PAPER_MEAN_MM
 
 CURVE_METRICS = ("mm_error", "success_rate")
 """What :func:`plot_curves` can draw: touch error or grip offset (mm), or success rate."""
-PAPER_DNN_RF_PICK_SUCCESS = 110 / 120
+PAPER_DNN_RF_PICK_SUCCESS = paper.DEBRIDEMENT_RESULTS[("dnn+rf", "pumpkin_seed")]["success"] / paper.DEBRIDEMENT_PICKS_PER_CELL
 """The paper's DNN+RF debridement success on pumpkin seeds (110 of 120 picks)."""
 
 
@@ -66,12 +67,24 @@ def plot_curves(curves: dict[str, Sequence[CurvePoint]], path: Path, title: str 
     for label, points in curves.items():
         ax.plot([p.env_steps for p in points], [getattr(p, metric) for p in points], marker="o", markersize=3, label=label)
     if metric == "mm_error":
-        reference, ylabel, default_title = PAPER_MEAN_MM["DNN+RF"], "mean touch error over 35 circles (mm)", "Learning curve on GridTouch-v0"
+        reference, ylabel, default_title = (
+            paper.CALIBRATION_MEAN_MM["DNN+RF"],
+            "mean touch error over 35 circles (mm)",
+            "Learning curve on GridTouch-v0",
+        )
         ax.set_yscale("log")
     else:
         reference, ylabel, default_title = PAPER_DNN_RF_PICK_SUCCESS, "debridement success rate", "Learning curve on Debridement-v0"
         ax.set_ylim(-0.02, 1.02)
-    ax.plot([CALIBRATOR_MOVES], [reference], marker="*", markersize=12, linestyle="none", color="k", label="paper DNN+RF (5,476 moves)")
+    ax.plot(
+        [CALIBRATOR_MOVES],
+        [reference],
+        marker="*",
+        markersize=12,
+        linestyle="none",
+        color="k",
+        label=f"paper DNN+RF ({CALIBRATOR_MOVES:,} moves)",
+    )
     ax.axvline(CALIBRATOR_MOVES, color="0.7", linestyle=":", linewidth=1)
     ax.set_xlabel("training env steps (robot moves)")
     ax.set_ylabel(ylabel)

@@ -13,8 +13,9 @@ from __future__ import annotations
 import dataclasses
 import logging
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -23,14 +24,15 @@ from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecEnv
 from tqdm.auto import tqdm
 
-import dvrk_gym  # noqa: F401  (registers the environments)
+from dvrk_gym import paper
 from dvrk_gym.baselines.agents import AgentSpec, build_model, get_agent
-from dvrk_gym.baselines.budgets import DEBRIDEMENT_ID
+from dvrk_gym.baselines.budgets import CALIBRATOR_MOVES, DEBRIDEMENT_ID
 from dvrk_gym.baselines.picking import GripOffsetLog
 from dvrk_gym.baselines.wrappers import TRAINING_YAWS
 from dvrk_gym.calibration.benchmark import YAW_SETTINGS
 from dvrk_gym.envs.grid_touch import N_CIRCLES
 from dvrk_gym.evaluation.episodes import run_episodes
+from dvrk_gym.evaluation.trials import run_trials, totals
 from dvrk_gym.utils.torch_threads import torch_threads
 
 logger = logging.getLogger(__name__)
@@ -68,11 +70,11 @@ class TrainConfig:
     """
 
     agent: str = "sac_her"
-    steps: int = 5476
+    steps: int = CALIBRATOR_MOVES
     seed: int = 0
     bias: str = "paper"
     bias_seed: int = 0
-    camera_resolution: tuple[int, int] = (1920, 1080)
+    camera_resolution: tuple[int, int] = paper.ENDOSCOPE_RESOLUTION_PX
     training_yaws: str = "paper"
     n_envs: int = 1
     vec_env: str = "dummy"
@@ -186,8 +188,6 @@ def evaluate_curve_point(model: BaseAlgorithm, env: gym.Env, env_steps: int, see
 
 def evaluate_pick_curve_point(model: BaseAlgorithm, env: gym.Env, env_steps: int, seed: int, n_trials: int = CURVE_TRIALS) -> CurvePoint:
     """Run ``n_trials`` debridement trials with the deterministic policy; success, grip offset, time."""
-    from dvrk_gym.cli.debridement import run_trials, totals
-
     log = GripOffsetLog(env)
     total = totals(run_trials(log, model, n_trials, seed=seed, progress=False))
     offsets = [mm for mm in log.offsets_mm if mm is not None]
@@ -217,7 +217,9 @@ class LearningCurve(BaseCallback):
         evaluate: the measurement (default: GridTouch's touch error over the 35 circles).
     """
 
-    def __init__(self, env: gym.Env, total_steps: int, n_points: int, seed: int, progress: bool, evaluate: CurveEvaluator = evaluate_curve_point) -> None:
+    def __init__(
+        self, env: gym.Env, total_steps: int, n_points: int, seed: int, progress: bool, evaluate: CurveEvaluator = evaluate_curve_point
+    ) -> None:
         super().__init__()
         self.eval_env = env
         self.measure = evaluate
@@ -262,7 +264,9 @@ def _train(config: TrainConfig, progress: bool) -> TrainResult:
     eval_env = make_agent_env(config, training=False)
     try:
         model = build_model(config.spec, train_env, config.seed, config.overrides)
-        curve = LearningCurve(eval_env, config.steps, config.eval_points, seed=config.seed + 10_000, progress=progress, evaluate=curve_evaluator(config))
+        curve = LearningCurve(
+            eval_env, config.steps, config.eval_points, seed=config.seed + 10_000, progress=progress, evaluate=curve_evaluator(config)
+        )
         start = time.perf_counter()
         model.learn(total_timesteps=config.steps, callback=curve)
         wall = time.perf_counter() - start

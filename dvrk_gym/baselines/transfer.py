@@ -25,8 +25,8 @@ from typing import Any
 
 import numpy as np
 
-from dvrk_gym.baselines.checkpoints import LoadedAgent
 from dvrk_gym.baselines.budgets import DEBRIDEMENT_ID, GRID_TOUCH_ID
+from dvrk_gym.baselines.checkpoints import LoadedAgent
 from dvrk_gym.baselines.picking import pick_action, pick_observation, pick_yaw
 from dvrk_gym.baselines.training import make_agent_env
 from dvrk_gym.baselines.wrappers import scale_goal
@@ -86,7 +86,7 @@ def pick_policy(agent: LoadedAgent) -> Any:
 
     GridTouch-v0 agents are transferred (:class:`GridTouchPickPolicy`); pick agents act as
     trained (:class:`PickAgentPolicy`). Works with :func:`dvrk_gym.evaluation.episodes.run_episodes`
-    and :func:`dvrk_gym.cli.debridement.run_trials`.
+    and :func:`dvrk_gym.evaluation.trials.run_trials`.
 
     Raises:
         ValueError: the agent learnt an env that is neither.

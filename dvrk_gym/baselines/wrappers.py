@@ -88,7 +88,11 @@ class GoalScaling(gym.ObservationWrapper):
         return np.asarray(goal, dtype=np.float64) * self.half_range_m + self.center_m
 
     def observation(self, observation: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-        return {**observation, "achieved_goal": self._scale(observation["achieved_goal"]), "desired_goal": self._scale(observation["desired_goal"])}
+        return {
+            **observation,
+            "achieved_goal": self._scale(observation["achieved_goal"]),
+            "desired_goal": self._scale(observation["desired_goal"]),
+        }
 
     def step(self, action: Any) -> tuple[dict[str, np.ndarray], float, bool, bool, dict[str, Any]]:
         """Step; the reward is :meth:`compute_reward` of the scaled goals returned.

@@ -16,6 +16,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from dvrk_gym import paper
 from dvrk_gym.calibration.policy import CalibratedPolicy, Calibrator
 from dvrk_gym.envs.grid_touch import N_CIRCLES
 from dvrk_gym.evaluation.episodes import run_episodes, summarize
@@ -31,16 +32,9 @@ YAW_SETTINGS: tuple[tuple[str, float | str], ...] = (
     ("yaw 90", np.pi / 2),
     ("random", "random"),
 )
-"""The paper's six settings: (label, GridTouch ``yaw`` option)."""
+"""The paper's six settings: (label, GridTouch ``yaw`` option).
 
-PAPER_PIXELS = {
-    "RBT": (39.9, 53.6, 52.0, 72.0, 44.1, 47.1),
-    "DNN": (26.7, 28.3, 22.7, 21.5, 22.5, 23.1),
-    "DNN+RF": (10.5, 14.2, 12.8, 12.1, 8.9, 14.7),
-}
-"""The paper's per-setting mean errors in pixels (1920 x 1080; 1 mm is about 11.3 px)."""
-PAPER_MEAN_MM = {"RBT": 4.55, "DNN": 2.14, "DNN+RF": 1.08}
-PAPER_PX_PER_MM = 11.3
+The labels are the columns of the paper's table (:data:`dvrk_gym.paper.CALIBRATION_SETTINGS`)."""
 
 
 @dataclass(frozen=True)
@@ -67,7 +61,9 @@ def touch_grid(env: gym.Env, policy: Any, yaw: float | str, seed: int = 0, progr
     return CircleErrors(pixel=pick("pixel_error"), mm=pick("mm_error"), yaw=pick("target_yaw"))
 
 
-def calibration_table(env: gym.Env, calibrators: dict[str, Calibrator], seed: int = 0, progress: bool = True) -> dict[str, dict[str, CircleErrors]]:
+def calibration_table(
+    env: gym.Env, calibrators: dict[str, Calibrator], seed: int = 0, progress: bool = True
+) -> dict[str, dict[str, CircleErrors]]:
     """Every method in every setting: ``table[method][setting]``."""
     table: dict[str, dict[str, CircleErrors]] = {}
     for method, calibrator in calibrators.items():
@@ -92,6 +88,11 @@ def table_summary(table: dict[str, dict[str, CircleErrors]]) -> dict[str, Any]:
     return summary
 
 
+def _cell(stats: dict[str, float]) -> str:
+    """One setting's statistics: ``mean +- s.e. median/min/max``."""
+    return f"{stats['mean']:>9.2f} +- {stats['sem']:<4.2f} {stats['median']:>4.1f}/{stats['min']:.1f}/{stats['max']:.1f}"
+
+
 def format_table(table: dict[str, dict[str, CircleErrors]]) -> str:
     """The paper's table in text: mean +- s.e., median, min, max per setting; paper beside."""
     summary = table_summary(table)
@@ -101,20 +102,17 @@ def format_table(table: dict[str, dict[str, CircleErrors]]) -> str:
         header = f"{'method':<8}" + "".join(f"{label:>26}" for label, _ in YAW_SETTINGS)
         lines.append(header)
         for method, rows in summary.items():
-            cells = "".join(
-                f"{rows[label][key]['mean']:>9.2f} +- {rows[label][key]['sem']:<4.2f} {rows[label][key]['median']:>4.1f}/{rows[label][key]['min']:.1f}/{rows[label][key]['max']:.1f}".rjust(26)
-                for label, _ in YAW_SETTINGS
-            )
+            cells = "".join(_cell(rows[label][key]).rjust(26) for label, _ in YAW_SETTINGS)
             lines.append(f"{method:<8}{cells}")
-            if key == "pixel" and method in PAPER_PIXELS:
-                lines.append(f"{'  paper':<8}" + "".join(f"{v:>26.1f}" for v in PAPER_PIXELS[method]))
+            if key == "pixel" and method in paper.CALIBRATION_PIXELS:
+                lines.append(f"{'  paper':<8}" + "".join(f"{v:>26.1f}" for v in paper.CALIBRATION_PIXELS[method]))
         lines.append("")
     lines.append(f"{'method':<8}{'sim mean mm':>14}{'paper mm':>10}{'difference':>12}")
     for method, rows in summary.items():
         sim = rows["all settings"]["mm"]["mean"]
-        paper = PAPER_MEAN_MM.get(method)
-        diff = f"{100 * (sim - paper) / paper:+.0f}%" if paper else "-"
-        lines.append(f"{method:<8}{sim:>14.2f}{(paper if paper else float('nan')):>10.2f}{diff:>12}")
+        reference = paper.CALIBRATION_MEAN_MM.get(method)
+        diff = f"{100 * (sim - reference) / reference:+.0f}%" if reference else "-"
+        lines.append(f"{method:<8}{sim:>14.2f}{(reference if reference else float('nan')):>10.2f}{diff:>12}")
     return "\n".join(lines)
 
 
@@ -152,7 +150,7 @@ def save_table(table: dict[str, dict[str, CircleErrors]], path: Path) -> Path:
             method: {label: {"pixel": e.pixel.tolist(), "mm": e.mm.tolist(), "yaw": e.yaw.tolist()} for label, e in settings.items()}
             for method, settings in table.items()
         },
-        "paper": {"mean_mm": PAPER_MEAN_MM, "pixels": PAPER_PIXELS},
+        "paper": {"mean_mm": paper.CALIBRATION_MEAN_MM, "pixels": paper.CALIBRATION_PIXELS},
     }
     path = Path(path)
     path.write_text(json.dumps(data, indent=1))

@@ -1,8 +1,8 @@
 """The authors' Phase I calibration data (Seita et al., ICRA 2018), in SI units.
 
 The package ships the cleaned data set of the paper's code release (1939 rows, MIT licence,
-see ``dvrk_gym/data/seita2018_phase1/README.md``). On disk it is in millimetres and degrees;
-every function here returns metres and radians.
+see ``dvrk_gym/data/seita2018_phase1/README.md``; its provenance is in :mod:`dvrk_gym.paper`).
+On disk it is in millimetres and degrees; every function here returns metres and radians.
 """
 
 from __future__ import annotations
@@ -12,17 +12,17 @@ from importlib import resources
 
 import numpy as np
 
-__all__ = ["PAPER_PHASE1_ROWS", "load_paper_phase1"]
+from dvrk_gym import paper
 
-PAPER_PHASE1_ROWS = 1939
+__all__ = ["load_paper_phase1"]
+
 _DATA_PACKAGE = "dvrk_gym"
-_DATA_DIR = ("data", "seita2018_phase1")
 _MM_TO_M = 1e-3
 
 
 def _load_array(name: str) -> np.ndarray:
     resource = resources.files(_DATA_PACKAGE)
-    for part in (*_DATA_DIR, name):
+    for part in (*paper.REAL_PHASE1_PACKAGE_DIR, name):
         resource = resource.joinpath(part)
     with resource.open("rb") as stream:
         return np.load(io.BytesIO(stream.read()), allow_pickle=False)
@@ -43,10 +43,10 @@ def load_paper_phase1() -> tuple[np.ndarray, np.ndarray]:
     """
     X_raw = _load_array("X_train.npy")
     y_raw = _load_array("y_train.npy")
-    if X_raw.shape != (PAPER_PHASE1_ROWS, 6) or y_raw.shape != (PAPER_PHASE1_ROWS, 3):
+    if X_raw.shape != (paper.REAL_PHASE1_ROWS, 6) or y_raw.shape != (paper.REAL_PHASE1_ROWS, 3):
         raise ValueError(
             f"packaged Phase I data has shapes X {X_raw.shape}, y {y_raw.shape}; "
-            f"expected ({PAPER_PHASE1_ROWS}, 6) and ({PAPER_PHASE1_ROWS}, 3)"
+            f"expected ({paper.REAL_PHASE1_ROWS}, 6) and ({paper.REAL_PHASE1_ROWS}, 3)"
         )
     X = np.empty_like(X_raw, dtype=np.float64)
     X[:, :3] = X_raw[:, :3] * _MM_TO_M

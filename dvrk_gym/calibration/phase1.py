@@ -14,6 +14,7 @@ import gymnasium as gym
 import numpy as np
 from tqdm.auto import tqdm
 
+from dvrk_gym import paper
 from dvrk_gym.calibration.records import ArrayRecord
 from dvrk_gym.envs.exploration import PITCH_RANGE_RAD, ROLL_RANGE_RAD, SAFE_X_M, SAFE_Y_M, SAFE_Z_M, YAW_RANGE_RAD
 
@@ -40,7 +41,9 @@ class PaperExplorationPolicy:
         rotations_per_pause: random orientations commanded at each pause (the paper: 3).
     """
 
-    def __init__(self, seed: int | None = None, step_m: float = 0.001, rotations_per_pause: int = 3) -> None:
+    def __init__(
+        self, seed: int | None = None, step_m: float = paper.PHASE1_STEP_M, rotations_per_pause: int = paper.PHASE1_ROTATIONS_PER_PAUSE
+    ) -> None:
         if not step_m > 0:
             raise ValueError(f"step_m must be > 0, got {step_m}")
         if rotations_per_pause < 1:
@@ -117,7 +120,7 @@ class Phase1Data(ArrayRecord):
     def n_kept(self) -> int:
         return int(self.kept.sum())
 
-    def cleaned(self) -> "Phase1Data":
+    def cleaned(self) -> Phase1Data:
         """Only the kept rows."""
         return Phase1Data(**{f.name: getattr(self, f.name)[self.kept] for f in fields(self)})
 
@@ -132,7 +135,9 @@ class Phase1Data(ArrayRecord):
         return self.reported_position
 
 
-def clean_mask(left_px: np.ndarray, right_px: np.ndarray, camera_position: np.ndarray, areas_px: np.ndarray, image_width: int) -> np.ndarray:
+def clean_mask(
+    left_px: np.ndarray, right_px: np.ndarray, camera_position: np.ndarray, areas_px: np.ndarray, image_width: int
+) -> np.ndarray:
     """The paper's cleaning rule: both cameras saw the marker, at the same place.
 
     A row is kept when both detections exist, their rows agree within
@@ -169,7 +174,9 @@ def collect_phase1(env: gym.Env, policy: PaperExplorationPolicy, n_trajectories:
     """
     if n_trajectories < 1:
         raise ValueError(f"n_trajectories must be >= 1, got {n_trajectories}")
-    rows: dict[str, list] = {name: [] for name in ("reported_position", "orientation", "left_px", "right_px", "areas_px", "camera_position", "trajectory")}
+    rows: dict[str, list] = {
+        name: [] for name in ("reported_position", "orientation", "left_px", "right_px", "areas_px", "camera_position", "trajectory")
+    }
     for k in tqdm(range(n_trajectories), desc="Phase I trajectories", disable=not progress):
         observation, _ = env.reset(seed=seed + k)
         policy.reset(observation)
@@ -189,3 +196,31 @@ def collect_phase1(env: gym.Env, policy: PaperExplorationPolicy, n_trajectories:
     width = env.unwrapped.config.camera_resolution[0]
     kept = clean_mask(arrays["left_px"], arrays["right_px"], arrays["camera_position"], arrays["areas_px"], width)
     return Phase1Data(**arrays, kept=kept)
+
+
+def run_paper_phase1(
+    n_trajectories: int = paper.PHASE1_TRAJECTORIES,
+    seed: int = 0,
+    steps_per_trajectory: int = paper.PHASE1_POSES_PER_TRAJECTORY,
+    bias: str = "paper",
+    bias_seed: int = 0,
+    camera_resolution: tuple[int, int] = paper.ENDOSCOPE_RESOLUTION_PX,
+    progress: bool = True,
+) -> Phase1Data:
+    """The paper's Phase I on a fresh CalibrationExploration-v0 (closed after).
+
+    Args:
+        n_trajectories: trajectories (episodes) to run (the paper: 57).
+        seed: seeds the exploration policy and the episodes (:func:`collect_phase1`).
+        steps_per_trajectory: commanded poses per trajectory.
+        bias: the cable bias preset.
+        bias_seed: which instrument.
+        camera_resolution: the endoscope's image size (width, height), pixels.
+        progress: show a progress bar.
+    """
+    world = {"bias": bias, "bias_seed": bias_seed, "camera_resolution": tuple(camera_resolution)}
+    env = gym.make("dvrk_gym/CalibrationExploration-v0", max_steps=steps_per_trajectory, **world)
+    try:
+        return collect_phase1(env, PaperExplorationPolicy(seed=seed), n_trajectories, seed=seed, progress=progress)
+    finally:
+        env.close()

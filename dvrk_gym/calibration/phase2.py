@@ -14,8 +14,8 @@ import gymnasium as gym
 import numpy as np
 from tqdm.auto import tqdm
 
-from dvrk_gym.calibration.records import ArrayRecord
 from dvrk_gym.calibration.policy import CalibratedPolicy, Calibrator, calibrator_input
+from dvrk_gym.calibration.records import ArrayRecord
 from dvrk_gym.envs.grid_touch import N_CIRCLES
 from dvrk_gym.sim.robot.kinematics import PAPER_YAWS_RAD
 
@@ -44,7 +44,9 @@ class Phase2Data(ArrayRecord):
         return np.hstack([self.camera_position, self.orientation])
 
 
-def collect_phase2(env: gym.Env, calibrator: Calibrator, yaws: np.ndarray = PAPER_YAWS_RAD, seed: int = 0, progress: bool = True) -> Phase2Data:
+def collect_phase2(
+    env: gym.Env, calibrator: Calibrator, yaws: np.ndarray = PAPER_YAWS_RAD, seed: int = 0, progress: bool = True
+) -> Phase2Data:
     """Run the paper's Phase II on GridTouch-v0: every yaw, every circle, one correction each.
 
     Args:

@@ -9,23 +9,32 @@ resume from a folder made with different settings.
 from __future__ import annotations
 
 import dataclasses
-import json
 import logging
+import os
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import gymnasium as gym
 
+from dvrk_gym import paper
 from dvrk_gym.calibration.benchmark import calibration_table, format_table, plot_error_maps, save_table, table_summary
 from dvrk_gym.calibration.models.dnn import DNNCalibrator
-from dvrk_gym.calibration.phase1 import PaperExplorationPolicy, Phase1Data, collect_phase1
-from dvrk_gym.calibration.phase2 import Phase2Data, collect_phase2
 from dvrk_gym.calibration.models.rigid import RigidBodyCalibrator
 from dvrk_gym.calibration.models.two_phase import TwoPhaseCalibrator
+from dvrk_gym.calibration.phase1 import Phase1Data, run_paper_phase1
+from dvrk_gym.calibration.phase2 import Phase2Data, collect_phase2
+from dvrk_gym.utils.run_folder import RunFolder, read_settings
 
 logger = logging.getLogger(__name__)
+
+SETTINGS_STAMP = "pipeline_config.json"
+"""The file of a calibration run folder that holds its settings (:class:`PipelineConfig`)."""
+CALIBRATOR_FILES = {"rbt": "rbt.npz", "dnn": "dnn.npz", "dnn+rf": "two_phase.npz"}
+"""The model file of each calibrator in a calibration run folder, by the calibrator's name."""
+BENCHMARK_SEED_OFFSET = 1000
+"""The benchmark's seed is the run's seed plus this."""
 
 
 @dataclass(frozen=True)
@@ -42,36 +51,34 @@ class PipelineConfig:
         seed: seeds collection, training and evaluation.
     """
 
-    n_trajectories: int = 57
-    steps_per_trajectory: int = 93
-    dnn_epochs: int = 1000
+    n_trajectories: int = paper.PHASE1_TRAJECTORIES
+    steps_per_trajectory: int = paper.PHASE1_POSES_PER_TRAJECTORY
+    dnn_epochs: int = paper.DNN_EPOCHS
     bias: str = "paper"
     bias_seed: int = 0
-    camera_resolution: tuple[int, int] = (1920, 1080)
+    camera_resolution: tuple[int, int] = paper.ENDOSCOPE_RESOLUTION_PX
     seed: int = 0
 
     def env_kwargs(self) -> dict[str, Any]:
         return {"bias": self.bias, "bias_seed": self.bias_seed, "camera_resolution": tuple(self.camera_resolution)}
 
-
-def _cached(path: Path, load: Callable[[Path], Any], make: Callable[[], Any], save: Callable[[Any, Path], None], timings: dict, stage: str) -> Any:
-    if path.exists():
-        logger.info("%s: loading %s", stage, path)
-        return load(path)
-    start = time.perf_counter()
-    value = make()
-    timings[stage] = time.perf_counter() - start
-    save(value, path)
-    return value
+    @classmethod
+    def from_settings(cls, settings: dict[str, Any]) -> PipelineConfig:
+        """The config of a run folder's stamp (JSON: the resolution comes back as a list)."""
+        return cls(**{key: (tuple(value) if key == "camera_resolution" else value) for key, value in settings.items()})
 
 
-def _check_folder(out: Path, config: PipelineConfig) -> None:
-    out.mkdir(parents=True, exist_ok=True)
-    stamp = out / "pipeline_config.json"
-    wanted = json.dumps(dataclasses.asdict(config), sort_keys=True, default=list)
-    if stamp.exists() and json.loads(stamp.read_text()) != json.loads(wanted):
-        raise ValueError(f"{out} holds a run with other settings ({stamp.read_text().strip()}); use another --out or delete it")
-    stamp.write_text(wanted)
+def read_pipeline_settings(folder: str | os.PathLike) -> dict[str, Any] | None:
+    """The settings a calibration run folder was made with, or None if it has none."""
+    return read_settings(folder, SETTINGS_STAMP)
+
+
+def _save(value: Any, path: Path) -> None:
+    value.save(path)
+
+
+def _run_phase1(config: PipelineConfig, progress: bool) -> Phase1Data:
+    return run_paper_phase1(config.n_trajectories, config.seed, config.steps_per_trajectory, **config.env_kwargs(), progress=progress)
 
 
 def run_calibration(out: Path, config: PipelineConfig = PipelineConfig(), progress: bool = True, benchmark: bool = True) -> dict[str, Any]:
@@ -82,41 +89,35 @@ def run_calibration(out: Path, config: PipelineConfig = PipelineConfig(), progre
         "summary": ..., "timings_s": {...}}`` (no table or summary without ``benchmark``).
     """
     out = Path(out)
-    _check_folder(out, config)
-    timings: dict[str, float] = {}
-    exploration = gym.make("dvrk_gym/CalibrationExploration-v0", max_steps=config.steps_per_trajectory, **config.env_kwargs())
+    folder = RunFolder(out, dataclasses.asdict(config), stamp=SETTINGS_STAMP)
     grid = gym.make("dvrk_gym/GridTouch-v0", **config.env_kwargs())
     try:
-        phase1 = _cached(
-            out / "phase1.npz", Phase1Data.load,
-            lambda: collect_phase1(exploration, PaperExplorationPolicy(seed=config.seed), config.n_trajectories, seed=config.seed, progress=progress),
-            lambda data, path: data.save(path), timings, "phase1",
-        )
+        phase1 = folder.cached("phase1.npz", lambda: _run_phase1(config, progress), Phase1Data.load, _save)
         clean = phase1.cleaned()
         logger.info("Phase I: %d raw samples, %d kept (%.0f%%)", phase1.n_raw, phase1.n_kept, 100 * phase1.n_kept / max(phase1.n_raw, 1))
-        rbt = _cached(out / "rbt.npz", RigidBodyCalibrator.load, lambda: RigidBodyCalibrator().fit(clean.X, clean.y), lambda m, p: m.save(p), timings, "rbt")
-        dnn = _cached(
-            out / "dnn.npz", DNNCalibrator.load,
+        rbt = folder.cached(CALIBRATOR_FILES["rbt"], lambda: RigidBodyCalibrator().fit(clean.X, clean.y), RigidBodyCalibrator.load, _save)
+        dnn = folder.cached(
+            CALIBRATOR_FILES["dnn"],
             lambda: DNNCalibrator(epochs=config.dnn_epochs, seed=config.seed, progress=progress).fit(clean.X, clean.y),
-            lambda m, p: m.save(p), timings, "dnn",
+            DNNCalibrator.load,
+            _save,
         )
-        phase2 = _cached(
-            out / "phase2.npz", Phase2Data.load, lambda: collect_phase2(grid, dnn, seed=config.seed, progress=progress),
-            lambda data, path: data.save(path), timings, "phase2",
-        )
-        two_phase = _cached(
-            out / "two_phase.npz", TwoPhaseCalibrator.load,
+        phase2 = folder.cached("phase2.npz", lambda: collect_phase2(grid, dnn, seed=config.seed, progress=progress), Phase2Data.load, _save)
+        two_phase = folder.cached(
+            CALIBRATOR_FILES["dnn+rf"],
             lambda: TwoPhaseCalibrator(dnn=dnn, seed=config.seed).fit_phase2(phase2.X, phase2.corrected),
-            lambda m, p: m.save(p), timings, "forests",
+            TwoPhaseCalibrator.load,
+            _save,
+            stage="forests",
         )
         models = {"RBT": rbt, "DNN": dnn, "DNN+RF": two_phase}
+        timings = folder.made_s
         if not benchmark:
             return {"phase1": phase1, "phase2": phase2, "models": models, "timings_s": timings}
         start = time.perf_counter()
-        table = calibration_table(grid, models, seed=config.seed + 1000, progress=progress)
+        table = calibration_table(grid, models, seed=config.seed + BENCHMARK_SEED_OFFSET, progress=progress)
         timings["benchmark"] = time.perf_counter() - start
     finally:
-        exploration.close()
         grid.close()
     save_table(table, out / "calibration_table.json")
     plot_error_maps(table, out / "calibration_error_maps.png")

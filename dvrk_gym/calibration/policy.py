@@ -8,7 +8,8 @@ calibrators were trained on them) and pitch and roll follow from it by the paper
 
 from __future__ import annotations
 
-from typing import Any, Callable, Protocol
+from collections.abc import Callable
+from typing import Any, Protocol
 
 import numpy as np
 

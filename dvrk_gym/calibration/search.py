@@ -19,14 +19,16 @@ from __future__ import annotations
 
 import textwrap
 import time
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
-from typing import Callable, Iterable, Protocol
+from typing import Protocol
 
 import numpy as np
 from matplotlib.figure import Figure
 from sklearn.model_selection import KFold
 from tqdm import tqdm
 
+from dvrk_gym import paper
 from dvrk_gym.calibration.models.dnn import DNNCalibrator
 from dvrk_gym.calibration.models.features import check_inputs, check_targets
 from dvrk_gym.calibration.models.forests import ForestCalibrator
@@ -48,11 +50,12 @@ __all__ = [
     "search_caption",
 ]
 
-PAPER_EPOCHS = 1000
+PAPER_EPOCHS = paper.DNN_EPOCHS
 SWEEP_FOLDS = 3
 SWEEP_BATCH_SIZE = 256
 SWEEP_LEARNING_RATE = 1e-3  # Adam's rate for those mini-batches: the measured setting
-CHOSEN_NET = "DNN_u300_h3_relu"
+CHOSEN_NET = f"DNN_u{paper.DNN_UNITS}_h{paper.DNN_HIDDEN_LAYERS}_{paper.DNN_ACTIVATION}"
+"""The paper's chosen net (3 x 300 ReLU), named as the search names its nets."""
 _M2_TO_MM2 = 1e6
 _QUICK_FOLDS = 3
 _QUICK_EPOCHS = 30
@@ -64,7 +67,7 @@ _LOG_SCALE_RATIO = 10.0  # log y axis when the largest bar is this many times th
 class Calibrator(Protocol):
     """Anything with ``fit(X, y)`` and ``predict(X)`` on SI calibration arrays."""
 
-    def fit(self, X: np.ndarray, y: np.ndarray) -> "Calibrator": ...
+    def fit(self, X: np.ndarray, y: np.ndarray) -> Calibrator: ...
 
     def predict(self, X: np.ndarray) -> np.ndarray: ...
 
@@ -113,24 +116,36 @@ class SearchResult:
     seconds: float
 
 
-def _net(units: int, layers: int, activation: str, epochs: int, batch_size: int,
-         max_folds: int | None) -> ModelSpec:
+def _net(units: int, layers: int, activation: str, epochs: int, batch_size: int, max_folds: int | None) -> ModelSpec:
     return ModelSpec(
-        name=f"DNN_u{units}_h{layers}_{activation}", family="DNN", epochs=epochs,
+        name=f"DNN_u{units}_h{layers}_{activation}",
+        family="DNN",
+        epochs=epochs,
         max_folds=max_folds,
-        make=lambda seed: DNNCalibrator(hidden_layers=layers, units=units, activation=activation,
-                                        epochs=epochs, batch_size=batch_size,
-                                        learning_rate=SWEEP_LEARNING_RATE, seed=seed,
-                                        progress=False))
+        make=lambda seed: DNNCalibrator(
+            hidden_layers=layers,
+            units=units,
+            activation=activation,
+            epochs=epochs,
+            batch_size=batch_size,
+            learning_rate=SWEEP_LEARNING_RATE,
+            seed=seed,
+            progress=False,
+        ),
+    )
 
 
 def _forest(trees: int, depth: int | None) -> ModelSpec:
-    return ModelSpec(name=f"RFs_t{trees}_d{'N' if depth is None else depth}", family="RFs",
-                     make=lambda seed: ForestCalibrator(trees=trees, max_depth=depth, seed=seed))
+    return ModelSpec(
+        name=f"RFs_t{trees}_d{'N' if depth is None else depth}",
+        family="RFs",
+        make=lambda seed: ForestCalibrator(trees=trees, max_depth=depth, seed=seed),
+    )
 
 
-def paper_models(epochs: int = PAPER_EPOCHS, sweep_folds: int | None = SWEEP_FOLDS,
-                 batch_size: int = SWEEP_BATCH_SIZE, quick: bool = False) -> list[ModelSpec]:
+def paper_models(
+    epochs: int = PAPER_EPOCHS, sweep_folds: int | None = SWEEP_FOLDS, batch_size: int = SWEEP_BATCH_SIZE, quick: bool = False
+) -> list[ModelSpec]:
     """The candidates of the paper's search.
 
     Args:
@@ -154,9 +169,8 @@ def paper_models(epochs: int = PAPER_EPOCHS, sweep_folds: int | None = SWEEP_FOL
     for units in (30, 300):
         for layers in (1, 2, 3, 4):
             for activation in ("relu", "sigmoid", "tanh"):
-                chosen = (units, layers, activation) == (300, 3, "relu")
-                specs.append(_net(units, layers, activation, epochs, batch_size,
-                                  None if chosen else sweep_folds))
+                chosen = (units, layers, activation) == (paper.DNN_UNITS, paper.DNN_HIDDEN_LAYERS, paper.DNN_ACTIVATION)
+                specs.append(_net(units, layers, activation, epochs, batch_size, None if chosen else sweep_folds))
     if quick:
         keep = {"Lin_EA", "Lin_Q", "RFs_t10_dN", CHOSEN_NET, "DNN_u300_h1_sigmoid"}
         specs = [spec for spec in specs if spec.name in keep]
@@ -167,9 +181,15 @@ def _mean_squared_l2_mm2(predicted: np.ndarray, actual: np.ndarray) -> float:
     return float(np.mean(np.sum((predicted - actual) ** 2, axis=1)) * _M2_TO_MM2)
 
 
-def cross_validate(make: Callable[[int], Calibrator], X: np.ndarray, y: np.ndarray,
-                   folds: int = 10, seed: int = 0, max_folds: int | None = None,
-                   on_fold: Callable[[], None] | None = None) -> list[float]:
+def cross_validate(
+    make: Callable[[int], Calibrator],
+    X: np.ndarray,
+    y: np.ndarray,
+    folds: int = paper.SEARCH_FOLDS,
+    seed: int = 0,
+    max_folds: int | None = None,
+    on_fold: Callable[[], None] | None = None,
+) -> list[float]:
     """K-fold cross-validation error of one model.
 
     Args:
@@ -197,9 +217,15 @@ def cross_validate(make: Callable[[int], Calibrator], X: np.ndarray, y: np.ndarr
     return errors
 
 
-def run_search(X: np.ndarray, y: np.ndarray, models: Iterable[ModelSpec] | None = None,
-               folds: int = 10, seed: int = 0, quick: bool = False,
-               progress: bool = True) -> list[SearchResult]:
+def run_search(
+    X: np.ndarray,
+    y: np.ndarray,
+    models: Iterable[ModelSpec] | None = None,
+    folds: int = paper.SEARCH_FOLDS,
+    seed: int = 0,
+    quick: bool = False,
+    progress: bool = True,
+) -> list[SearchResult]:
     """Cross-validate every candidate, with a progress bar over (model, fold).
 
     Args:
@@ -223,13 +249,19 @@ def run_search(X: np.ndarray, y: np.ndarray, models: Iterable[ModelSpec] | None 
         for spec in specs:
             bar.set_postfix_str(spec.name)
             start = time.perf_counter()
-            errors = cross_validate(spec.make, X, y, folds=folds, seed=seed,
-                                    max_folds=spec.max_folds, on_fold=lambda: bar.update(1))
-            results.append(SearchResult(
-                name=spec.name, family=spec.family, mean_mm2=float(np.mean(errors)),
-                std_mm2=float(np.std(errors)), fold_mm2=tuple(errors), split_folds=folds,
-                epochs=spec.epochs,
-                seconds=time.perf_counter() - start))
+            errors = cross_validate(spec.make, X, y, folds=folds, seed=seed, max_folds=spec.max_folds, on_fold=lambda: bar.update(1))
+            results.append(
+                SearchResult(
+                    name=spec.name,
+                    family=spec.family,
+                    mean_mm2=float(np.mean(errors)),
+                    std_mm2=float(np.std(errors)),
+                    fold_mm2=tuple(errors),
+                    split_folds=folds,
+                    epochs=spec.epochs,
+                    seconds=time.perf_counter() - start,
+                )
+            )
     return results
 
 
@@ -237,8 +269,7 @@ def search_caption(results: Iterable[SearchResult]) -> str:
     """One line stating the split, the epochs of the nets and any partly scored models."""
     results = list(results)
     split = sorted({result.split_folds for result in results})
-    parts = [f"{'/'.join(map(str, split))}-fold CV: mean squared L2 error (mm^2), "
-             f"+-1 sd over the scored folds"]
+    parts = [f"{'/'.join(map(str, split))}-fold CV: mean squared L2 error (mm^2), +-1 sd over the scored folds"]
     epochs = sorted({result.epochs for result in results if result.epochs is not None})
     if epochs:
         parts.append(f"nets trained {'/'.join(map(str, epochs))} epochs")
@@ -261,12 +292,10 @@ def format_table(results: Iterable[SearchResult], caption: str | None = None) ->
     results = list(results)
     caption = search_caption(results) if caption is None else caption
     width = max([len("model")] + [len(result.name) for result in results])
-    lines = [caption, f"{'model':<{width}}  {'mean mm^2':>9}  {'std mm^2':>8}  "
-                      f"{'folds':>5}  {'epochs':>6}  {'time s':>7}"]
+    lines = [caption, f"{'model':<{width}}  {'mean mm^2':>9}  {'std mm^2':>8}  {'folds':>5}  {'epochs':>6}  {'time s':>7}"]
     for r in results:
         epochs = "-" if r.epochs is None else str(r.epochs)
-        lines.append(f"{r.name:<{width}}  {r.mean_mm2:9.3f}  {r.std_mm2:8.3f}  "
-                     f"{len(r.fold_mm2):>5}  {epochs:>6}  {r.seconds:7.1f}")
+        lines.append(f"{r.name:<{width}}  {r.mean_mm2:9.3f}  {r.std_mm2:8.3f}  {len(r.fold_mm2):>5}  {epochs:>6}  {r.seconds:7.1f}")
     return "\n".join(lines)
 
 
@@ -287,9 +316,15 @@ def plot_search(results: Iterable[SearchResult], path: str, caption: str | None 
     figure = Figure(figsize=(width_in, 5.5), layout="constrained")
     axes = figure.subplots()
     positions = np.arange(len(results))
-    bars = axes.bar(positions, means, yerr=[r.std_mm2 for r in results], capsize=3, alpha=0.8,
-                    error_kw={"ecolor": "0.3"},
-                    color=[_FAMILY_COLOURS.get(r.family, "tab:gray") for r in results])
+    bars = axes.bar(
+        positions,
+        means,
+        yerr=[r.std_mm2 for r in results],
+        capsize=3,
+        alpha=0.8,
+        error_kw={"ecolor": "0.3"},
+        color=[_FAMILY_COLOURS.get(r.family, "tab:gray") for r in results],
+    )
     for bar, result in zip(bars, results):
         if len(result.fold_mm2) < result.split_folds:
             bar.set_hatch("//")

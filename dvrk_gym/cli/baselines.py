@@ -10,6 +10,7 @@ import argparse
 import json
 from pathlib import Path
 
+from dvrk_gym import paper
 from dvrk_gym.cli.options import add_instrument_options, add_progress_option
 
 LOAD_WARNING = (
@@ -20,12 +21,10 @@ LOAD_WARNING = (
 
 
 def _run_train(args: argparse.Namespace) -> int:
-    from dvrk_gym.baselines.budgets import resolve_budget
+    from dvrk_gym.baselines.budgets import AGENT_ENVS, DEBRIDEMENT_ID, resolve_budget
     from dvrk_gym.baselines.checkpoints import save_agent
     from dvrk_gym.baselines.curves import plot_curves, save_curve
     from dvrk_gym.baselines.training import TrainConfig, train
-
-    from dvrk_gym.baselines.budgets import AGENT_ENVS, DEBRIDEMENT_ID
 
     steps = resolve_budget(args.budget, args.steps)
     picks = AGENT_ENVS[args.algo] == DEBRIDEMENT_ID
@@ -38,9 +37,18 @@ def _run_train(args: argparse.Namespace) -> int:
     if args.fragment is not None:
         env_overrides["fragment"] = args.fragment
     config = TrainConfig(
-        agent=args.algo, steps=steps, seed=args.seed, bias=args.bias, bias_seed=args.bias_seed,
-        camera_resolution=tuple(args.resolution), training_yaws=args.training_yaws, n_envs=args.n_envs,
-        vec_env=args.vec_env, eval_points=args.eval_points, overrides=overrides, env_overrides=env_overrides,
+        agent=args.algo,
+        steps=steps,
+        seed=args.seed,
+        bias=args.bias,
+        bias_seed=args.bias_seed,
+        camera_resolution=tuple(args.resolution),
+        training_yaws=args.training_yaws,
+        n_envs=args.n_envs,
+        vec_env=args.vec_env,
+        eval_points=args.eval_points,
+        overrides=overrides,
+        env_overrides=env_overrides,
     )
     out = args.out or Path("dvrk_gym_out/baselines") / f"{args.algo}_{args.budget if args.steps is None else steps}_seed{args.seed}"
     out.mkdir(parents=True, exist_ok=True)
@@ -50,21 +58,35 @@ def _run_train(args: argparse.Namespace) -> int:
     meta = {"agent": args.algo, "seed": args.seed, "env_steps": result.env_steps, "steps_per_second": result.steps_per_second}
     save_curve(result.curve, out / "learning_curve.json", meta)
     env_name = AGENT_ENVS[args.algo].split("/")[-1]
-    plot_curves({label: result.curve}, out / "learning_curve.png", title=f"{args.algo} on {env_name} (bias {args.bias}, seed {args.seed})", metric="success_rate" if picks else "mm_error")
+    plot_curves(
+        {label: result.curve},
+        out / "learning_curve.png",
+        title=f"{args.algo} on {env_name} (bias {args.bias}, seed {args.seed})",
+        metric="success_rate" if picks else "mm_error",
+    )
     first, final = result.curve[0], result.curve[-1]
-    print(f"{args.algo}: {result.env_steps} env steps in {result.train_seconds:.0f} s ({result.steps_per_second:.2f} steps/s; evaluations {result.eval_seconds:.0f} s more)")
+    print(
+        f"{args.algo}: {result.env_steps} env steps in {result.train_seconds:.0f} s "
+        f"({result.steps_per_second:.2f} steps/s; evaluations {result.eval_seconds:.0f} s more)"
+    )
     if picks:
-        print(f"learning curve: success {first.success_rate:.0%}, grip offset {first.mm_error:.2f} mm at 0 steps -> "
-              f"success {final.success_rate:.0%}, {final.mm_error:.2f} mm, {final.time_per_fragment_s:.2f} s per fragment at {final.env_steps}")
+        print(
+            f"learning curve: success {first.success_rate:.0%}, grip offset {first.mm_error:.2f} mm at 0 steps -> "
+            f"success {final.success_rate:.0%}, {final.mm_error:.2f} mm, "
+            f"{final.time_per_fragment_s:.2f} s per fragment at {final.env_steps}"
+        )
     else:
-        print(f"learning curve: {first.mm_error:.2f} mm at 0 steps -> {final.mm_error:.2f} mm ({final.pixel_error:.1f} px) at {final.env_steps}")
+        print(
+            f"learning curve: {first.mm_error:.2f} mm at 0 steps -> "
+            f"{final.mm_error:.2f} mm ({final.pixel_error:.1f} px) at {final.env_steps}"
+        )
     print(f"wrote {model_path}, {model_path.with_suffix('.json')}, {out / 'learning_curve.json'}, {out / 'learning_curve.png'}")
     return 0
 
 
 def _run_evaluate(args: argparse.Namespace) -> int:
-    from dvrk_gym.baselines.checkpoints import load_agent
     from dvrk_gym.baselines.budgets import GRID_TOUCH_ID
+    from dvrk_gym.baselines.checkpoints import load_agent
 
     if args.trials < 1:
         raise ValueError(f"--trials must be >= 1, got {args.trials}")
@@ -87,7 +109,12 @@ def _run_evaluate(args: argparse.Namespace) -> int:
 def _evaluate_touch_grid(agents: list, args: argparse.Namespace) -> list[Path]:
     """The calibrators' touch-grid benchmark for GridTouch agents, and the comparison with --calibration."""
     from dvrk_gym.baselines.comparison import (
-        BENCHMARK_SEED, agent_row, benchmark_agent, calibration_rows, format_comparison, setting_mismatches,
+        BENCHMARK_SEED,
+        agent_row,
+        benchmark_agent,
+        calibration_rows,
+        format_comparison,
+        setting_mismatches,
     )
     from dvrk_gym.calibration.benchmark import format_table, save_table
 
@@ -116,9 +143,13 @@ def _evaluate_touch_grid(agents: list, args: argparse.Namespace) -> list[Path]:
 def _evaluate_debridement(agents: list, args: argparse.Namespace) -> list[Path]:
     """Debridement trials for pick agents (and transferred GridTouch agents), beside the calibrators' with --calibration."""
     from dvrk_gym.baselines.comparison import (
-        benchmark_debridement, calibration_debridement_rows, debridement_row, format_debridement_comparison, setting_mismatches,
+        benchmark_debridement,
+        calibration_debridement_rows,
+        debridement_row,
+        format_debridement_comparison,
+        setting_mismatches,
     )
-    from dvrk_gym.cli.debridement import format_trial_table
+    from dvrk_gym.evaluation.trials import format_trial_table
 
     seed = args.seed if args.seed is not None else 0
     texts, rows, notes = [], [], []
@@ -128,21 +159,29 @@ def _evaluate_debridement(agents: list, args: argparse.Namespace) -> list[Path]:
         rows.append(debridement_row(agent.label, agent.env_steps, trials, str(agent.path)))
     if args.calibration is not None:
         resolution = agents[0].config.camera_resolution
-        calibrators, calibration = calibration_debridement_rows(args.calibration, args.trials, seed, args.fragment, resolution, progress=not args.no_progress)
+        calibrators, calibration = calibration_debridement_rows(
+            args.calibration, args.trials, seed, args.fragment, resolution, progress=not args.no_progress
+        )
         rows = calibrators + rows
         notes = [note for agent in agents for note in setting_mismatches(agent, calibration)]
     text = "\n\n".join(texts + [format_debridement_comparison(rows, notes)])
     print()
     print(text)
     (args.out / "debridement.txt").write_text(text + "\n")
-    data = {"seed": seed, "trials": args.trials, "fragment": args.fragment, "rows": [{**row.__dict__, "success_rate": row.success_rate} for row in rows], "notes": notes}
+    data = {
+        "seed": seed,
+        "trials": args.trials,
+        "fragment": args.fragment,
+        "rows": [{**row.__dict__, "success_rate": row.success_rate} for row in rows],
+        "notes": notes,
+    }
     (args.out / "debridement.json").write_text(json.dumps(data, indent=1))
     return [args.out / "debridement.txt", args.out / "debridement.json"]
 
 
 def _add_train(subparsers: argparse._SubParsersAction) -> None:
-    from dvrk_gym.baselines.budgets import BUDGETS
     from dvrk_gym.baselines.budgets import AGENT_DESCRIPTIONS as AGENTS
+    from dvrk_gym.baselines.budgets import BUDGETS
 
     train = subparsers.add_parser(
         "train",
@@ -151,19 +190,33 @@ def _add_train(subparsers: argparse._SubParsersAction) -> None:
         "save the model (SB3 zip + settings JSON), its learning curve (JSON) and a plot of it against env steps "
         "(touch error; debridement success). Agents: "
         + "; ".join(f"{name}: {description}" for name, description in AGENTS.items())
-        + ". Budgets: " + ", ".join(f"{name} = {steps:,} env steps" for name, steps in BUDGETS.items()) + ".",
+        + ". Budgets: "
+        + ", ".join(f"{name} = {steps:,} env steps" for name, steps in BUDGETS.items())
+        + ".",
     )
     train.add_argument("--algo", choices=sorted(AGENTS), default="sac_her", help="the agent (default: %(default)s)")
-    train.add_argument("--budget", choices=sorted(BUDGETS), default="calibrator", help="env steps, matched to the calibrator's robot moves (default: %(default)s)")
+    train.add_argument(
+        "--budget",
+        choices=sorted(BUDGETS),
+        default="calibrator",
+        help="env steps, matched to the calibrator's robot moves (default: %(default)s)",
+    )
     train.add_argument("--steps", type=int, help="an explicit number of env steps (overrides --budget), for tests and quick runs")
     train.add_argument("--seed", type=int, default=0, help="seeds the model and the envs (default: %(default)s)")
     train.add_argument("--out", type=Path, help="output folder (default: dvrk_gym_out/baselines/<algo>_<budget>_seed<seed>)")
     add_instrument_options(train)
-    train.add_argument("--training-yaws", choices=("paper", "random"), default="paper", help="yaws of the training touches: a tour of the circles per paper yaw, or random (default: %(default)s)")
+    train.add_argument(
+        "--training-yaws",
+        choices=("paper", "random"),
+        default="paper",
+        help="yaws of the training touches: a tour of the circles per paper yaw, or random (default: %(default)s)",
+    )
     train.add_argument("--reward", choices=("dense", "sparse"), help="GridTouch reward (default: the agent's, dense)")
-    train.add_argument("--fragment", choices=("pumpkin_seed", "raisin"), help="pick agents: what to pick (default: pumpkin_seed)")
+    train.add_argument("--fragment", choices=sorted(paper.FRAGMENT_LABELS), help="pick agents: what to pick (default: pumpkin_seed)")
     train.add_argument("--n-envs", type=int, default=1, help="parallel training envs (default: %(default)s; 1 was fastest on 2 cores)")
-    train.add_argument("--vec-env", choices=("dummy", "subproc"), default="dummy", help="vector env for --n-envs > 1 (default: %(default)s)")
+    train.add_argument(
+        "--vec-env", choices=("dummy", "subproc"), default="dummy", help="vector env for --n-envs > 1 (default: %(default)s)"
+    )
     train.add_argument("--learning-starts", type=int, help="random moves before learning (default: the agent's, 200; sac_pick 100)")
     train.add_argument("--eval-points", type=int, default=20, help="evaluations along the learning curve (default: %(default)s)")
     add_progress_option(train)
@@ -180,20 +233,42 @@ def _add_evaluate(subparsers: argparse._SubParsersAction) -> None:
         "per fragment). With --calibration, the calibrators' rows beside them: their touch errors from the run's table, and "
         "their debridement trials run here with the same seeds (as 'dvrk-gym debride'). " + LOAD_WARNING,
     )
-    evaluate.add_argument("--model", type=Path, nargs="+", required=True, help="model.zip file(s) written by 'baseline train' (with their .json beside)")
-    evaluate.add_argument("--out", type=Path, default=Path("dvrk_gym_out/baselines/evaluation"), help="output folder (default: %(default)s)")
-    evaluate.add_argument("--calibration", type=Path, help="a calibration run folder with calibration_table.json (from 'dvrk-gym evaluate')")
-    evaluate.add_argument("--seed", type=int, help="touch grid: benchmark seed, as a calibration run's --seed (default: the --calibration run's, else 0); debridement: the trials' seed (default 0)")
-    evaluate.add_argument("--trials", type=int, default=15, help="debridement trials of 8 picks per method (default: %(default)s, the paper's)")
-    evaluate.add_argument("--fragment", choices=("pumpkin_seed", "raisin"), default="pumpkin_seed", help="debridement: what to pick (default: %(default)s)")
-    evaluate.add_argument("--transfer", action="store_true", help="also run GridTouch agents through the debridement trials (aimed by pick_policy)")
+    evaluate.add_argument(
+        "--model", type=Path, nargs="+", required=True, help="model.zip file(s) written by 'baseline train' (with their .json beside)"
+    )
+    evaluate.add_argument(
+        "--out", type=Path, default=Path("dvrk_gym_out/baselines/evaluation"), help="output folder (default: %(default)s)"
+    )
+    evaluate.add_argument(
+        "--calibration", type=Path, help="a calibration run folder with calibration_table.json (from 'dvrk-gym evaluate')"
+    )
+    evaluate.add_argument(
+        "--seed",
+        type=int,
+        help="touch grid: benchmark seed, as a calibration run's --seed (default: the --calibration run's, else 0); "
+        "debridement: the trials' seed (default 0)",
+    )
+    evaluate.add_argument(
+        "--trials",
+        type=int,
+        default=paper.DEBRIDEMENT_TRIALS,
+        help="debridement trials of 8 picks per method (default: %(default)s, the paper's)",
+    )
+    evaluate.add_argument(
+        "--fragment", choices=sorted(paper.FRAGMENT_LABELS), default="pumpkin_seed", help="debridement: what to pick (default: %(default)s)"
+    )
+    evaluate.add_argument(
+        "--transfer", action="store_true", help="also run GridTouch agents through the debridement trials (aimed by pick_policy)"
+    )
     add_progress_option(evaluate)
     evaluate.set_defaults(func=_run_evaluate)
 
 
 def add_commands(subparsers: argparse._SubParsersAction) -> None:
     """Register ``baseline`` with its sub-commands ``train`` and ``evaluate``."""
-    baseline = subparsers.add_parser("baseline", help="reinforcement-learning baselines (SAC+HER, SAC, SAC on picks) against the calibrators")
+    baseline = subparsers.add_parser(
+        "baseline", help="reinforcement-learning baselines (SAC+HER, SAC, SAC on picks) against the calibrators"
+    )
     commands = baseline.add_subparsers(dest="baseline_command", required=True, metavar="SUBCOMMAND")
     _add_train(commands)
     _add_evaluate(commands)

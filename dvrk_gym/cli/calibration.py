@@ -6,6 +6,7 @@ import argparse
 import json
 from pathlib import Path
 
+from dvrk_gym import paper
 from dvrk_gym.cli.options import add_instrument_options
 
 
@@ -15,16 +16,16 @@ def _add_world_options(parser: argparse.ArgumentParser) -> None:
 
 
 def _add_budget_options(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--trajectories", type=int, default=57, help="Phase I trajectories (the paper: %(default)s)")
-    parser.add_argument("--epochs", type=int, default=1000, help="DNN training epochs (the paper: %(default)s)")
+    parser.add_argument("--trajectories", type=int, default=paper.PHASE1_TRAJECTORIES, help="Phase I trajectories (the paper: %(default)s)")
+    parser.add_argument("--epochs", type=int, default=paper.DNN_EPOCHS, help="DNN training epochs (the paper: %(default)s)")
 
 
 def _config(args: argparse.Namespace):
     from dvrk_gym.calibration.pipeline import PipelineConfig
 
     return PipelineConfig(
-        n_trajectories=getattr(args, "trajectories", 57),
-        dnn_epochs=getattr(args, "epochs", 1000),
+        n_trajectories=args.trajectories,
+        dnn_epochs=args.epochs,
         bias=args.bias,
         bias_seed=args.bias_seed,
         camera_resolution=tuple(args.resolution),
@@ -33,20 +34,19 @@ def _config(args: argparse.Namespace):
 
 
 def _run_collect(args: argparse.Namespace) -> int:
-    import gymnasium as gym
+    from dvrk_gym.calibration.phase1 import run_paper_phase1
 
-    import dvrk_gym  # noqa: F401
-    from dvrk_gym.calibration.phase1 import PaperExplorationPolicy, collect_phase1
-
+    data = run_paper_phase1(
+        args.trajectories, args.seed, bias=args.bias, bias_seed=args.bias_seed, camera_resolution=tuple(args.resolution)
+    )
     args.out.mkdir(parents=True, exist_ok=True)
-    env = gym.make("dvrk_gym/CalibrationExploration-v0", bias=args.bias, bias_seed=args.bias_seed, camera_resolution=tuple(args.resolution))
-    try:
-        data = collect_phase1(env, PaperExplorationPolicy(seed=args.seed), args.trajectories, seed=args.seed)
-    finally:
-        env.close()
     path = args.out / "phase1.npz"
     data.save(path)
-    print(f"Phase I: {args.trajectories} trajectories, {data.n_raw} raw samples, {data.n_kept} kept ({data.n_kept / data.n_raw:.0%}; the paper: 5256 and 1939, 37%)")
+    raw, kept = paper.PHASE1_RAW_SAMPLES, paper.PHASE1_KEPT_SAMPLES
+    print(
+        f"Phase I: {args.trajectories} trajectories, {data.n_raw} raw samples, {data.n_kept} kept "
+        f"({data.n_kept / data.n_raw:.0%}; the paper: {raw} and {kept}, {kept / raw:.0%})"
+    )
     print(f"wrote {path}")
     return 0
 
@@ -74,24 +74,17 @@ def _run_evaluate(args: argparse.Namespace) -> int:
 
 
 def _evaluate_policy(args: argparse.Namespace) -> int:
-    import gymnasium as gym
+    from dvrk_gym.evaluation.episodes import evaluate_policy, load_policy_factory, summarize_metric
 
-    import dvrk_gym  # noqa: F401
-    from dvrk_gym.evaluation.episodes import load_policy_factory, run_episodes, summarize
-
-    factory = load_policy_factory(args.policy)
-    env = gym.make(args.env, bias=args.bias, bias_seed=args.bias_seed, camera_resolution=tuple(args.resolution))
-    try:
-        policy = factory(env)
-        options = json.loads(args.options) if args.options else None
-        results = run_episodes(env, policy, args.episodes, seed=args.seed, options=options)
-    finally:
-        env.close()
+    factory = load_policy_factory(args.policy)  # a bad name fails before any env is built
+    options = json.loads(args.options) if args.options else None
+    world = {"bias": args.bias, "bias_seed": args.bias_seed, "camera_resolution": tuple(args.resolution)}
+    results = evaluate_policy(factory, args.env, args.episodes, seed=args.seed, options=options, **world)
     names = sorted({name for r in results for name in r.metrics})
     print(f"{args.policy} on {args.env}, {args.episodes} episodes (seed {args.seed})")
     print(f"{'metric':<22}{'mean':>10}{'s.e.':>9}{'median':>10}{'min':>10}{'max':>10}")
     for name in names:
-        stats = summarize(r.metrics[name] for r in results if name in r.metrics)
+        stats = summarize_metric(results, name)
         print(f"{name:<22}{stats['mean']:>10.3f}{stats['sem']:>9.3f}{stats['median']:>10.3f}{stats['min']:>10.3f}{stats['max']:>10.3f}")
     args.out.mkdir(parents=True, exist_ok=True)
     path = args.out / "evaluation.json"
@@ -119,7 +112,17 @@ def _run_search(args: argparse.Namespace) -> int:
     print(format_table(results, caption))
     args.out.mkdir(parents=True, exist_ok=True)
     plot_search(results, str(args.out / "model_search.png"), caption)
-    rows = [{"name": r.name, "family": r.family, "mean_mm2": r.mean_mm2, "std_mm2": r.std_mm2, "folds_mm2": list(r.fold_mm2), "epochs": r.epochs} for r in results]
+    rows = [
+        {
+            "name": r.name,
+            "family": r.family,
+            "mean_mm2": r.mean_mm2,
+            "std_mm2": r.std_mm2,
+            "folds_mm2": list(r.fold_mm2),
+            "epochs": r.epochs,
+        }
+        for r in results
+    ]
     (args.out / "model_search.json").write_text(json.dumps(rows, indent=1))
     print(f"wrote {args.out / 'model_search.png'}, {args.out / 'model_search.json'} ({np.size(results)} models)")
     return 0
@@ -129,7 +132,7 @@ def add_commands(subparsers: argparse._SubParsersAction) -> None:
     """Register collect, calibrate, evaluate and search."""
     collect = subparsers.add_parser("collect", help="Phase I: run the paper's random exploration and save the data")
     collect.add_argument("--out", type=Path, default=Path("dvrk_gym_out/calibration"), help="output folder (default: %(default)s)")
-    collect.add_argument("--trajectories", type=int, default=57, help="trajectories (the paper: %(default)s)")
+    collect.add_argument("--trajectories", type=int, default=paper.PHASE1_TRAJECTORIES, help="trajectories (the paper: %(default)s)")
     _add_world_options(collect)
     collect.set_defaults(func=_run_collect)
 
@@ -150,15 +153,17 @@ def add_commands(subparsers: argparse._SubParsersAction) -> None:
     evaluate.add_argument("--policy", help="evaluate another policy: 'package.module:factory', factory(env) returns the policy")
     evaluate.add_argument("--env", default="dvrk_gym/GridTouch-v0", help="environment for --policy (default: %(default)s)")
     evaluate.add_argument("--episodes", type=int, default=35, help="episodes for --policy (default: %(default)s)")
-    evaluate.add_argument("--options", help="reset options for --policy as JSON, e.g. '{\"yaw\": \"random\"}'")
+    evaluate.add_argument("--options", help='reset options for --policy as JSON, e.g. \'{"yaw": "random"}\'')
     _add_budget_options(evaluate)
     _add_world_options(evaluate)
     evaluate.set_defaults(func=_run_evaluate)
 
     search = subparsers.add_parser("search", help="the paper's model search: 10-fold CV of 24 nets, linear and forests, with its bar chart")
-    search.add_argument("--data", default="paper", help="'paper' (the authors' real data) or a phase1.npz from collect (default: %(default)s)")
+    search.add_argument(
+        "--data", default="paper", help="'paper' (the authors' real data) or a phase1.npz from collect (default: %(default)s)"
+    )
     search.add_argument("--out", type=Path, default=Path("dvrk_gym_out/search"), help="output folder (default: %(default)s)")
-    search.add_argument("--folds", type=int, default=10, help="cross-validation folds (default: %(default)s)")
+    search.add_argument("--folds", type=int, default=paper.SEARCH_FOLDS, help="cross-validation folds (default: %(default)s)")
     search.add_argument("--seed", type=int, default=0, help="seeds the folds and the models (default: %(default)s)")
     search.add_argument("--quick", action="store_true", help="a few models, few epochs, 3 folds")
     search.set_defaults(func=_run_search)

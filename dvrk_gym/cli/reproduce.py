@@ -18,8 +18,15 @@ def _run_reproduce(args: argparse.Namespace) -> int:
 
     profile = "quick" if args.quick else "full"
     out = args.out or DEFAULT_OUT[profile]
-    config = ReproduceConfig(out=out, profile=PROFILES[profile], seed=args.seed, workers=args.workers,
-                             bias=args.bias, bias_seed=args.bias_seed, progress=not args.no_progress)
+    config = ReproduceConfig(
+        out=out,
+        profile=PROFILES[profile],
+        seed=args.seed,
+        workers=args.workers,
+        bias=args.bias,
+        bias_seed=args.bias_seed,
+        progress=not args.no_progress,
+    )
     try:
         run = run_reproduce(config)
     except TaskError as error:
@@ -55,8 +62,12 @@ def add_commands(subparsers: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("--quick", action="store_true", help="the quick profile (a few minutes) instead of the full run")
     parser.add_argument("--out", type=Path, help="run folder (default: dvrk_gym_out/reproduce-quick or dvrk_gym_out/reproduce)")
-    parser.add_argument("--workers", type=int, default=min(2, os.cpu_count() or 1),
-                        help="processes running stages side by side; results do not depend on it (default: %(default)s)")
+    parser.add_argument(
+        "--workers",
+        type=int,
+        default=min(2, os.cpu_count() or 1),
+        help="processes running stages side by side; results do not depend on it (default: %(default)s)",
+    )
     parser.add_argument("--seed", type=int, default=0, help="seeds every stage (default: %(default)s)")
     add_instrument_options(parser, resolution=False)
     add_progress_option(parser)

@@ -1,22 +1,25 @@
 """The base every dvrk_gym environment is built on: one world, one config, strict inputs.
 
-A subclass names its config dataclass (``config_class``), its action components
-(``action_names``) and implements ``_reset_episode`` and ``_step_episode``. The base owns
-the world, the argument and action checks, seeding, state restoration and rendering, so
-no environment repeats them.
+A subclass has a frozen config dataclass extending :class:`EnvConfig`, and an ``__init__``
+whose keyword arguments are that config's fields, written out (so ``help()``, editors and
+``inspect.signature`` show them) and documented by the config's docstring (appended to the
+``__init__`` docstring for ``help()``). It names its action components (``action_names``)
+and implements ``_reset_episode`` and ``_step_episode``. The base owns the world, the
+action checks, seeding, state restoration and rendering, so no environment repeats them.
 """
 
 from __future__ import annotations
 
-import dataclasses
+import inspect
 from dataclasses import dataclass
-from typing import Any, ClassVar
+from typing import Any, ClassVar, Generic, TypeVar
 
 import gymnasium as gym
 import numpy as np
 from gymnasium.error import ResetNeeded
 
 from dvrk_gym.sim.robot.bias import BiasConfig
+from dvrk_gym.sim.robot.kinematics import JOINT_NAMES
 from dvrk_gym.sim.world import DvrkWorld, WorldConfig
 
 
@@ -43,13 +46,22 @@ class EnvConfig:
         object.__setattr__(self, "camera_resolution", tuple(self.camera_resolution))
 
 
-def make_config(config_class: type[EnvConfig], kwargs: dict[str, Any]) -> EnvConfig:
-    """Build ``config_class`` from keyword arguments, refusing unknown names clearly."""
-    valid = {f.name for f in dataclasses.fields(config_class)}
-    unknown = sorted(set(kwargs) - valid)
-    if unknown:
-        raise ValueError(f"unknown argument(s) {unknown} for {config_class.__name__}; valid: {sorted(valid)}")
-    return config_class(**kwargs)
+ConfigT = TypeVar("ConfigT", bound=EnvConfig)
+
+
+def config_arguments(arguments: dict[str, Any]) -> dict[str, Any]:
+    """An env constructor's keyword arguments, from its ``locals()``: all but ``self``, ``render_mode`` and ``__class__``."""
+    return {name: value for name, value in arguments.items() if name not in ("self", "render_mode", "__class__")}
+
+
+def config_docs(config_class: type) -> str:
+    """The ``Attributes:`` entries of ``config_class`` and its bases, as one indented block."""
+    blocks = []
+    for klass in reversed(config_class.__mro__):
+        doc = inspect.getdoc(klass) or ""
+        if "Attributes:" in doc and klass is not object:
+            blocks.append(doc.split("Attributes:", 1)[1].strip("\n"))
+    return "\n".join(blocks)
 
 
 def check_action(action: Any, space: gym.spaces.Box, names: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray]:
@@ -66,33 +78,42 @@ def check_action(action: Any, space: gym.spaces.Box, names: tuple[str, ...]) -> 
         raise ValueError(f"action must have shape {space.shape} ({', '.join(names)}), got {array.shape}")
     for i, value in enumerate(array):
         if not np.isfinite(value):
-            raise ValueError(
-                f"action[{i}] ({names[i]}) is {value}; expected a finite value in "
-                f"[{space.low[i]:.4g}, {space.high[i]:.4g}]"
-            )
+            raise ValueError(f"action[{i}] ({names[i]}) is {value}; expected a finite value in [{space.low[i]:.4g}, {space.high[i]:.4g}]")
     clipped = np.clip(array, space.low.astype(np.float64), space.high.astype(np.float64))
     return clipped, clipped != array
 
 
-class DvrkEnv(gym.Env):
+class DvrkEnv(gym.Env, Generic[ConfigT]):
     """Shared machinery of the dvrk_gym environments.
 
     Args:
+        config: the environment's settings (a subclass builds it from its keyword arguments).
         render_mode: None (default), "rgb_array" (the left endoscope image) or "human"
             (the PyBullet GUI; needs a display).
-        **kwargs: fields of the environment's config dataclass.
     """
 
-    metadata: ClassVar[dict[str, Any]] = {"render_modes": ["human", "rgb_array"], "render_fps": 4}
+    metadata: dict[str, Any] = {"render_modes": ["human", "rgb_array"], "render_fps": 4}
     config_class: ClassVar[type[EnvConfig]] = EnvConfig
-    action_names: ClassVar[tuple[str, ...]] = ()
+    action_names: tuple[str, ...] = ()
+    action_space: gym.spaces.Box  # every dvrk_gym env acts through a Box
     option_names: ClassVar[tuple[str, ...]] = ()
 
-    def __init__(self, render_mode: str | None = None, **kwargs: Any) -> None:
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        """Append the config's field docs to the subclass's ``__init__`` docstring, for ``help()``."""
+        super().__init_subclass__(**kwargs)
+        if "__init__" in cls.__dict__:
+            fields = "\n".join("    " + line if line else line for line in config_docs(cls.config_class).splitlines())
+            cls.__init__.__doc__ = (
+                f"{inspect.cleandoc(cls.__init__.__doc__ or '')}\n\nKeyword arguments ({cls.config_class.__name__}'s fields):\n{fields}\n"
+            )
+
+    def __init__(self, config: ConfigT, render_mode: str | None = None) -> None:
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be None or one of {self.metadata['render_modes']}, got {render_mode!r}")
+        if not isinstance(config, self.config_class):
+            raise TypeError(f"{type(self).__name__} needs a {self.config_class.__name__}, got {type(config).__name__}")
         self.render_mode = render_mode
-        self.config = make_config(self.config_class, kwargs)
+        self.config: ConfigT = config
         self.world = DvrkWorld(
             WorldConfig(
                 camera_resolution=self.config.camera_resolution,
@@ -152,7 +173,5 @@ class DvrkEnv(gym.Env):
         """Names of the clamped action elements and joints, for ``info["clamped"]``."""
         names = [self.action_names[i] for i in np.flatnonzero(clamped)]
         if joints_clamped is not None:
-            from dvrk_gym.sim.robot.kinematics import JOINT_NAMES
-
             names += [f"joint:{JOINT_NAMES[i]}" for i in np.flatnonzero(joints_clamped)]
         return names

@@ -6,14 +6,16 @@ happens through contact only (:mod:`dvrk_gym.sim.table.grasp`), so the paper's f
 come out of the physics, and a judge (:mod:`dvrk_gym.sim.table.judge`) labels each
 pick from the simulator's truth.
 
-Two action modes:
+The env owns a world (the arm and the cameras) and the
+:class:`~dvrk_gym.sim.table.table.DebridementTable` beside it (the fragments and the
+gripper); every reset rebuilds both. Two action modes:
 
 * ``"primitive"`` (default): one step is one pick at a base-frame target
   ``(bx, by, bz, yaw)`` (metres, radians): the commanded (reported) position that should
   put the closed jaw tip on the fragment, as GridTouch's and a calibrator's output. The
-  pick has the paper's six phases: to the fragment (free space), lower, grip, raise, to
-  the receptacle, drop and rotate. The episode ends after ``max_picks`` picks or when no
-  fragment is left on the paper.
+  pick (:mod:`dvrk_gym.envs.picks`) has the paper's six phases: to the fragment (free
+  space), lower, grip, raise, to the receptacle, drop and rotate. The episode ends after
+  ``max_picks`` picks or when no fragment is left on the paper.
 * ``"delta"``: Cartesian and jaw increments at 10 Hz for learning agents,
   ``(dx, dy, dz, djaw)`` (metres and radians per step), physics stepped for the whole
   control period; truncated after ``max_steps``.
@@ -34,45 +36,32 @@ import numpy as np
 import pybullet
 from gymnasium import spaces
 
-from dvrk_gym.envs.base import DvrkEnv, EnvConfig
+from dvrk_gym import paper
+from dvrk_gym.envs.base import DvrkEnv, config_arguments
+from dvrk_gym.envs.debridement_config import (
+    DEFAULT_PICK_TIMING,
+    DELTA_ACTION_NAMES,
+    DELTA_BOX_HIGH_M,
+    DELTA_BOX_LOW_M,
+    PICK_ACTION_NAMES,
+    SERRATED_GRIPPER,
+    DebridementConfig,
+)
 from dvrk_gym.envs.exploration import CAMERA_BOX_HIGH_M, CAMERA_BOX_LOW_M, encode_reported, reported_observation_space
 from dvrk_gym.envs.grid_touch import ACTION_HIGH as PICK_HIGH
 from dvrk_gym.envs.grid_touch import ACTION_LOW as PICK_LOW
 from dvrk_gym.envs.grid_touch import tool_pose
-from dvrk_gym.sim.table import judge
-from dvrk_gym.sim.robot import kinematics as kin
+from dvrk_gym.envs.picks import CLOSED_JAW_RAD, PHASES, PickPrimitive, PickRun, PickTiming
 from dvrk_gym.sim.endoscope.fragment_detection import MAX_FRAGMENTS, FragmentDetection, FragmentObserver
-from dvrk_gym.sim.table.fragments import FRAGMENT_TYPES
+from dvrk_gym.sim.robot import ik
+from dvrk_gym.sim.robot import kinematics as kin
+from dvrk_gym.sim.robot.bias import BiasConfig
+from dvrk_gym.sim.table import judge
 from dvrk_gym.sim.table.grasp import GRASP_TIP_CLEARANCE_M, GripperConfig
-from dvrk_gym.sim.robot.motion import MotionLimits
-from dvrk_gym.sim.physics.scene import RECEPTACLE_CENTER_M
+from dvrk_gym.sim.table.table import DebridementTable
 
 logger = logging.getLogger(__name__)
 
-ACTION_MODES = ("primitive", "delta")
-PICK_ACTION_NAMES = ("bx", "by", "bz", "yaw")
-DELTA_ACTION_NAMES = ("dx", "dy", "dz", "djaw")
-PHASES = ("to_seed", "lower", "grip", "raise", "to_receptacle", "drop_and_rotate")
-"""The paper's six phases of a pick, in order."""
-PAPER_PHASE_S = dict(zip(PHASES, np.array([26.0, 16.1, 37.5, 24.0, 42.1, 38.5]) / 25.0))
-"""The paper's mean phase durations (frames at 25 fps), seconds: 7.37 s a fragment in all."""
-
-CLOSED_JAW_RAD = kin.JAW_LOWER_RAD
-"""The jaw command that closes the jaws as far as what they hold allows."""
-DROP_OFFSETS_M = np.array([[x, y] for y in (-0.007, 0.0, 0.007) for x in (-0.006, 0.0, 0.006)])
-"""Where in the receptacle successive picks drop the jaw tip (about its centre, metres):
-eight raisins dropped at one point pile over the rim."""
-TEACH_ITERATIONS = 4
-"""Fixed-point iterations that find the command putting the true jaw tip on a drop point."""
-DELTA_BOX_LOW_M = np.array([-0.035, 0.0, -0.175])
-DELTA_BOX_HIGH_M = np.array([0.085, 0.085, -0.125])
-"""The commanded positions delta mode may reach (the phantom and the receptacle), metres."""
-SERRATED_JAW_FRICTION = 1.5
-"""The jaws' friction coefficient here (PyBullet multiplies it with a fragment's: 0.68 on a
-seed, 1.8 on a raisin). The Large Needle Driver's jaws are serrated. Measured with the
-paper's calibrators (64 picks each): with 1.0, seeds squeezed off-centre by a millimetre
-at the up to 22.5 degrees the yaw rounding leaves turn out of the jaws too often (DNN+RF
-83 % with B 17 %; the paper: 92 %, B 7.5 %); with 1.5, 94 % and B 6 %."""
 IMAGE_YAW_OFFSET_RAD = math.radians(7.0)
 """Tool yaw = IMAGE_YAW_OFFSET_RAD - image angle of the fragment's major axis (mod pi): the
 endoscope looks down with image u along base -x, turned about 7 degrees. The jaws close
@@ -80,110 +69,6 @@ across a fragment whose length lies along the tool's yaw (measured here: mean 1.
 4.6 degrees off over the workspace, before the rounding to 45 degree steps)."""
 NOTHING_SEEN_TARGET_M = np.array([0.0, 0.0, 0.19])
 """Camera-frame target when no fragment is seen: the middle of the view, 19 cm away."""
-
-
-@dataclass(frozen=True)
-class PickTiming:
-    """How a pick moves: heights (m), speed limits and dwell times (s).
-
-    Tuned so that over a trial the phases last as the paper's (mean frames at 25 fps: to
-    seed 26.0, lower 16.1, grip 37.5, raise 24.0, to receptacle 42.1, drop and rotate
-    38.5; 7.37 s a fragment) under the paper's bias. Free moves go at 6.5 cm/s (10 cm in
-    1.64 s; the authors' "fast" setting took 1.49 s); the robot carries a fragment at
-    3.8 cm/s, and lowers and lifts it at 3 cm/s.
-
-    Attributes:
-        approach_height_m: the free move ends this far above the target, m.
-        grip_depth_m: the jaws are lowered to this far below the target (the floor,
-            GRASP_TIP_CLEARANCE_M above the paper, stops them first), m.
-        raise_height_m: how far the jaws lift the fragment, m.
-        drop_height_m: the closed jaw tip's height above the receptacle's floor when the
-            jaws open (its walls are 14 mm high), m.
-        travel: limits of the free move to the fragment (and the rotation after a drop).
-        descend: limits of lowering and raising.
-        carry: limits of the move to the receptacle with a fragment.
-        grip_dwell_s: the grip phase lasts at least this long (the jaws close and the
-            grasp settles), s.
-        drop_fall_s: physics time the fragment gets to fall once the jaws open, s.
-        drop_dwell_s: the drop-and-rotate phase lasts at least this long, s.
-    """
-
-    approach_height_m: float = 0.012
-    grip_depth_m: float = 0.002
-    raise_height_m: float = 0.025
-    drop_height_m: float = 0.012
-    travel: MotionLimits = field(default_factory=lambda: MotionLimits(max_speed_m_s=0.065, max_accel_m_s2=0.65))
-    descend: MotionLimits = field(default_factory=lambda: MotionLimits(max_speed_m_s=0.03, max_accel_m_s2=0.3))
-    carry: MotionLimits = field(default_factory=lambda: MotionLimits(max_speed_m_s=0.038, max_accel_m_s2=0.3))
-    grip_dwell_s: float = 1.5
-    drop_fall_s: float = 0.35
-    drop_dwell_s: float = 1.54
-
-    def __post_init__(self) -> None:
-        for name in ("approach_height_m", "grip_depth_m", "raise_height_m", "drop_height_m", "grip_dwell_s", "drop_fall_s", "drop_dwell_s"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value >= 0):
-                raise ValueError(f"PickTiming.{name} must be finite and >= 0, got {value}")
-
-
-@dataclass(frozen=True)
-class DebridementConfig(EnvConfig):
-    """Settings of Debridement-v0.
-
-    Attributes:
-        fragment: "pumpkin_seed" or "raisin".
-        action_mode: "primitive" (one pick per step) or "delta" (increments at 10 Hz).
-        max_picks: picks per episode in primitive mode (the paper: 8).
-        max_steps: steps per episode in delta mode.
-        remove_failed: after a failed pick the fragment is taken away, so each fragment
-            gets one attempt (the paper's protocol); False leaves it for another try.
-        timing: heights, speeds and dwell times of a pick.
-        gripper: grip force, jaw speed, jaw friction (SERRATED_JAW_FRICTION) and contact
-            thresholds.
-        control_period_s: delta mode's time per step, s.
-        max_delta_m: largest position increment per delta step, per axis, m.
-        max_delta_jaw_rad: largest jaw increment per delta step, rad.
-        delta_yaw_rad: the tool's yaw in delta mode (pitch and roll by the paper's rule), rad.
-    """
-
-    fragment: str = "pumpkin_seed"
-    action_mode: str = "primitive"
-    max_picks: int = 8
-    max_steps: int = 600
-    remove_failed: bool = True
-    timing: PickTiming = field(default_factory=PickTiming)
-    gripper: GripperConfig = field(default_factory=lambda: GripperConfig(jaw_friction=SERRATED_JAW_FRICTION))
-    control_period_s: float = 0.1
-    max_delta_m: float = 0.005
-    max_delta_jaw_rad: float = 0.25
-    delta_yaw_rad: float = 0.0
-
-    def __post_init__(self) -> None:
-        super().__post_init__()
-        # Settings read back from JSON (a saved agent's, say) hold the nested configs as dicts.
-        try:
-            if isinstance(self.timing, dict):
-                limits = {k: MotionLimits(**v) if isinstance(v, dict) else v for k, v in self.timing.items()}
-                object.__setattr__(self, "timing", PickTiming(**limits))
-            if isinstance(self.gripper, dict):
-                object.__setattr__(self, "gripper", GripperConfig(**self.gripper))
-        except TypeError as error:  # a misspelt field
-            raise ValueError(f"bad timing or gripper settings: {error}") from error
-        if not isinstance(self.timing, PickTiming) or not isinstance(self.gripper, GripperConfig):
-            raise ValueError(f"timing must be a PickTiming and gripper a GripperConfig (or their fields as dicts), got {type(self.timing).__name__} and {type(self.gripper).__name__}")
-        if self.fragment not in FRAGMENT_TYPES:
-            raise ValueError(f"fragment must be one of {sorted(FRAGMENT_TYPES)}, got {self.fragment!r}")
-        if self.action_mode not in ACTION_MODES:
-            raise ValueError(f"action_mode must be one of {ACTION_MODES}, got {self.action_mode!r}")
-        for name in ("max_picks", "max_steps"):
-            if int(getattr(self, name)) < 1:
-                raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
-        for name in ("control_period_s", "max_delta_m", "max_delta_jaw_rad"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value > 0):
-                raise ValueError(f"{name} must be finite and > 0, got {value}")
-        if not (math.isfinite(self.delta_yaw_rad) and abs(self.delta_yaw_rad) <= math.pi / 2):
-            raise ValueError(f"delta_yaw_rad must be in [-pi/2, pi/2], got {self.delta_yaw_rad}")
 
 
 def image_angle_to_yaw(angle_rad: float) -> float:
@@ -207,7 +92,7 @@ def fragment_target(observation: dict[str, np.ndarray]) -> tuple[np.ndarray, flo
     return position, image_angle_to_yaw(float(observation["fragment_angles"][i]))
 
 
-class DebridementEnv(DvrkEnv):
+class DebridementEnv(DvrkEnv[DebridementConfig]):
     """Pick the fragments and drop them in the receptacle (the paper's debridement trials).
 
     Observation (a Dict): ``reported_pose`` (bx, by, bz m; yaw, pitch, roll rad),
@@ -223,8 +108,28 @@ class DebridementEnv(DvrkEnv):
 
     config_class = DebridementConfig
 
-    def __init__(self, render_mode: str | None = None, **kwargs: Any) -> None:
-        super().__init__(render_mode=render_mode, **kwargs)
+    def __init__(
+        self,
+        render_mode: str | None = None,
+        *,
+        bias: str | BiasConfig = "paper",
+        bias_seed: int = 0,
+        fragment: str = "pumpkin_seed",
+        action_mode: str = "primitive",
+        max_picks: int = paper.FRAGMENTS_PER_TRIAL,
+        max_steps: int = 600,
+        remove_failed: bool = True,
+        timing: PickTiming | dict[str, Any] = DEFAULT_PICK_TIMING,
+        gripper: GripperConfig | dict[str, Any] = SERRATED_GRIPPER,
+        control_period_s: float = 0.1,
+        max_delta_m: float = 0.005,
+        max_delta_jaw_rad: float = 0.25,
+        delta_yaw_rad: float = 0.0,
+        camera_resolution: tuple[int, int] = (1920, 1080),
+        pixel_noise_px: float = 0.0,
+    ) -> None:
+        """Debridement-v0, set up by the fields of :class:`DebridementConfig` (listed below)."""
+        super().__init__(DebridementConfig(**config_arguments(locals())), render_mode=render_mode)
         self.primitive = self.config.action_mode == "primitive"
         if self.primitive:
             self.action_names = PICK_ACTION_NAMES
@@ -245,6 +150,8 @@ class DebridementEnv(DvrkEnv):
             }
         )
         self.observer = FragmentObserver(self.world.camera, pixel_noise_px=self.config.pixel_noise_px)
+        self.table = DebridementTable(self.world, gripper_config=self.config.gripper)
+        self.picker = PickPrimitive(self.world, self.table, self.config.timing)
         self._episode = _Episode()
 
     # ------------------------------------------------------------------ episode
@@ -252,14 +159,14 @@ class DebridementEnv(DvrkEnv):
         """Nothing to restore: every reset rebuilds the world (see :meth:`_reset_episode`)."""
 
     def _reset_episode(self, options: dict[str, Any]) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
-        world = self.world
+        world, table = self.world, self.table
         world.rebuild()
-        world.reset_robot(kin.inverse_kinematics(tool_pose(self._drop_command(0, 0.0), 0.0)))
-        world.add_fragments(self.config.fragment, self.np_random, gripper_config=self.config.gripper)
-        self._episode = _Episode(sizes=np.array([f.size_m for f in world.fragments]))
+        world.reset_robot(ik.inverse_kinematics(tool_pose(self.picker.drop_command(0, 0.0), 0.0)))
+        table.add_fragments(self.config.fragment, self.np_random)
+        self._episode = _Episode(sizes=np.array([f.size_m for f in table.fragments]))
         self._jaw_target = world.jaw_angle
         observation = self._observe()
-        info = {"sim_time_s": 0.0, "true_fragment_positions": world.true_fragment_positions(), "fragments_on_paper": len(self._on_paper())}
+        info = {"sim_time_s": 0.0, "true_fragment_positions": table.true_fragment_positions(), "fragments_on_paper": len(self._on_paper())}
         return observation, info
 
     def _step_episode(self, action: np.ndarray, clamped: np.ndarray):
@@ -284,88 +191,32 @@ class DebridementEnv(DvrkEnv):
             terminated = error is not None or on_paper == 0 or len(episode.outcomes) >= self.config.max_picks
             truncated = False
         else:
-            terminated = error is not None or (on_paper == 0 and not self.world.gripper.holds)
+            terminated = error is not None or (on_paper == 0 and not self.table.held())
             truncated = not terminated and episode.steps >= self.config.max_steps
         return observation, float(reward), terminated, truncated, info
 
     # ------------------------------------------------------------------ a pick
-    def _drop_point(self, pick: int) -> np.ndarray:
-        """Where the closed jaw tip should be when pick number ``pick`` drops, base frame, m."""
-        offset = DROP_OFFSETS_M[pick % len(DROP_OFFSETS_M)]
-        return RECEPTACLE_CENTER_M + [offset[0], offset[1], self.config.timing.drop_height_m]
-
-    def _drop_command(self, pick: int, yaw: float) -> np.ndarray:
-        """The commanded position that puts the true jaw tip on the drop point (taught).
-
-        The receptacle lies outside the calibrated workspace, where the uncalibrated
-        robot misses by about 9 mm; on the real robot the drop pose is taught once by
-        hand. Here the teaching is a fixed-point search on the cable model at rest (no
-        noise), which leaves its state as it was.
-        """
-        cable = self.world.cable
-        state = cable.get_state()
-        tip = self._drop_point(pick)
-        command = tip.copy()
-        for _ in range(TEACH_ITERATIONS):
-            q, _ = kin.inverse_kinematics_clamped(tool_pose(command, yaw), q_ref=self.world.q_cmd)
-            cable.reset(q)
-            command = command + tip - kin.jaw_tip_positions(cable.true_joints(q), 0.0, cable.true_dh)[0]
-        cable.set_state(state)
-        return command
-
     def _pick(self, action: np.ndarray) -> tuple[float, dict[str, Any]]:
-        world, timing, rng, episode = self.world, self.config.timing, self.np_random, self._episode
         target, yaw = action[:3].astype(float), float(action[3])
         candidates = self._on_paper()
-        poses_before = [f.pose() for f in world.fragments]
-        pierced: set[int] = set()
-        marks = [world.clock.time_s]
-        joints_clamped = np.zeros(6, dtype=bool)
+        episode = self._episode
+        run = self.picker.run(target, yaw, self.np_random, len(episode.outcomes), episode.sizes, candidates)
+        return self._judge(run)
 
-        def phase_done() -> None:
-            marks.append(world.clock.time_s)
-            pierced.update(self._pierced())
-
-        move = world.move_to(tool_pose(target + [0.0, 0.0, timing.approach_height_m], yaw), kin.JAW_FULLY_OPEN_RAD, rng, True, timing.travel)
-        joints_clamped |= move.joints_clamped
-        phase_done()
-        move = world.move_stepped(tool_pose(target - [0.0, 0.0, timing.grip_depth_m], yaw), rng, GRASP_TIP_CLEARANCE_M, timing.descend)
-        joints_clamped |= move.joints_clamped
-        record = judge.grip_record(world.true_touch_point(), poses_before, episode.sizes, candidates)
-        phase_done()
-        spent = world.actuate_jaws(CLOSED_JAW_RAD)
-        world.dwell(timing.grip_dwell_s - spent, step_physics=False)
-        phase_done()
-        lifted = world.reported_pose()[:3, 3] + [0.0, 0.0, timing.raise_height_m]
-        world.move_stepped(tool_pose(lifted, yaw), rng, limits=timing.descend)
-        phase_done()
-        drop = self._drop_command(len(episode.outcomes), yaw)
-        world.move_to(tool_pose(drop, yaw), None, rng, True, timing.carry)
-        phase_done()
-        spent = world.actuate_jaws(kin.JAW_FULLY_OPEN_RAD, timing.drop_fall_s)
-        spent += world.move_to(tool_pose(drop, 0.0), None, rng, True, timing.travel).duration_s
-        world.dwell(timing.drop_dwell_s - spent, step_physics=False)
-        marks.append(world.clock.time_s)
-        return self._judge(record, pierced, np.diff(marks), joints_clamped)
-
-    def _pierced(self) -> set[int]:
-        holds = self.world.gripper.held()
-        return {i for i, f in enumerate(self.world.fragments) if holds.get(f.name) == "pierce"}
-
-    def _judge(self, record: judge.GripRecord | None, pierced: set[int], phase_s: np.ndarray, joints_clamped: np.ndarray) -> tuple[float, dict[str, Any]]:
-        world, episode = self.world, self._episode
-        stuck = [i for i, f in enumerate(world.fragments) if f.name in world.gripper.holds]
+    def _judge(self, run: PickRun) -> tuple[float, dict[str, Any]]:
+        table, episode, record, phase_s = self.table, self._episode, run.record, run.phase_s
+        stuck = list(table.held())
         for i in stuck:  # still on the jaws after the drop: the operator takes it off
-            world.set_aside_fragment(i)
+            table.set_aside_fragment(i)
             episode.set_aside.add(i)
         if record is None:  # nothing was on the paper
             outcome, ratio, index = judge.MISSED, math.inf, -1
         else:
             index, ratio = record.fragment, record.ratio
-            delivered = index not in stuck and judge.in_receptacle(world.fragments[index].position())
-            outcome = judge.judge(delivered, index in pierced, ratio, record.above_top_m)
+            delivered = index not in stuck and judge.in_receptacle(table.fragments[index].position())
+            outcome = judge.judge(delivered, index in run.pierced, ratio, record.above_top_m)
             if outcome != judge.SUCCESS and self.config.remove_failed and index not in episode.set_aside:
-                world.set_aside_fragment(index)
+                table.set_aside_fragment(index)
                 episode.set_aside.add(index)
         episode.outcomes.append(outcome)
         episode.phase_s.append(np.array(phase_s, dtype=float))
@@ -378,20 +229,21 @@ class DebridementEnv(DvrkEnv):
             "true_tip_above_fragment_m": None if record is None else record.above_top_m,
             "phase_times_s": dict(zip(PHASES, (float(t) for t in phase_s))),
             "pick_time_s": float(np.sum(phase_s)),
-            "clamped_joints": [f"joint:{kin.JOINT_NAMES[j]}" for j in np.flatnonzero(joints_clamped)],
+            "clamped_joints": [f"joint:{kin.JOINT_NAMES[j]}" for j in np.flatnonzero(run.joints_clamped)],
         }
         return float(outcome == judge.SUCCESS), info
 
     # ------------------------------------------------------------------ delta control
     def _delta(self, action: np.ndarray) -> tuple[float, dict[str, Any]]:
-        world, config = self.world, self.config
+        table, config = self.table, self.config
         before = self._delivered()
-        wanted = world.reported_pose()[:3, 3] + action[:3]
+        wanted = self.world.reported_pose()[:3, 3] + action[:3]
         target = np.clip(wanted, DELTA_BOX_LOW_M, DELTA_BOX_HIGH_M)
         self._jaw_target = float(np.clip(self._jaw_target + action[3], CLOSED_JAW_RAD, kin.JAW_FULLY_OPEN_RAD))
-        world.gripper.command_jaw(self._jaw_target)
-        move = world.move_stepped(tool_pose(target, config.delta_yaw_rad), self.np_random, GRASP_TIP_CLEARANCE_M, duration_s=config.control_period_s)
-        world.dwell(config.control_period_s - move.duration_s)
+        table.command_jaws(self._jaw_target)
+        pose = tool_pose(target, config.delta_yaw_rad)
+        move = table.move_stepped(pose, self.np_random, GRASP_TIP_CLEARANCE_M, duration_s=config.control_period_s)
+        table.dwell(config.control_period_s - move.duration_s)
         delivered = self._delivered()
         clamped = [f"position:{axis}" for axis, c in zip("xyz", target != wanted) if c]
         clamped += [f"joint:{kin.JOINT_NAMES[j]}" for j in np.flatnonzero(move.joints_clamped)]
@@ -400,28 +252,28 @@ class DebridementEnv(DvrkEnv):
     # ------------------------------------------------------------------ what is true
     def _on_paper(self) -> list[int]:
         """Indices of the fragments lying on the paper and not held (truth)."""
-        world = self.world
-        held = world.gripper.holds if world.gripper is not None else {}
+        held = self.table.held()
         return [
-            i for i, f in enumerate(world.fragments)
-            if i not in self._episode.set_aside and f.name not in held and f.on_paper(tolerance_m=0.002)
+            i
+            for i, f in enumerate(self.table.fragments)
+            if i not in self._episode.set_aside and i not in held and f.on_paper(tolerance_m=0.002)
         ]
 
     def _delivered(self) -> set[int]:
-        return {i for i, f in enumerate(self.world.fragments) if i not in self._episode.set_aside and judge.in_receptacle(f.position())}
+        return {i for i, f in enumerate(self.table.fragments) if i not in self._episode.set_aside and judge.in_receptacle(f.position())}
 
     def _physics_failure(self) -> str | None:
         world = self.world
         if not (np.isfinite(world.q_true).all() and np.isfinite(world.jaw_angle)):
             return "the robot's joints are not finite"
-        live = [i for i in range(len(world.fragments)) if i not in self._episode.set_aside]
-        return judge.physics_failure(world.true_fragment_positions()[live])
+        live = [i for i in range(len(self.table.fragments)) if i not in self._episode.set_aside]
+        return judge.physics_failure(self.table.true_fragment_positions()[live])
 
     def _episode_info(self) -> dict[str, Any]:
         episode, world = self._episode, self.world
         info: dict[str, Any] = {
             "sim_time_s": world.clock.time_s,
-            "true_fragment_positions": world.true_fragment_positions(),
+            "true_fragment_positions": self.table.true_fragment_positions(),
             "true_tip_position": world.true_touch_point(),
         }
         if self.primitive:

@@ -14,12 +14,15 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
-from dvrk_gym.envs.base import DvrkEnv, EnvConfig
+from dvrk_gym import paper
+from dvrk_gym.envs.base import DvrkEnv, EnvConfig, config_arguments
+from dvrk_gym.sim.endoscope.stereo import StereoDetection
+from dvrk_gym.sim.robot import ik
 from dvrk_gym.sim.robot import kinematics as kin
-from dvrk_gym.sim.world import StereoDetection
+from dvrk_gym.sim.robot.bias import BiasConfig
 
-SAFE_X_M = (0.005, 0.070)
-SAFE_Y_M = (0.011, 0.074)
+SAFE_X_M = paper.REAL_PHASE1_X_RANGE_M
+SAFE_Y_M = paper.REAL_PHASE1_Y_RANGE_M
 """The paper's safe exploration ranges in the base frame, metres (its data span these)."""
 SAFE_Z_M = (-0.153, -0.147)
 """Heights of the reported point that keep the 10 mm jaws 1-8 mm above the paper, metres."""
@@ -50,12 +53,12 @@ def sample_paper_poses(rng: np.random.Generator, n: int) -> list[np.ndarray]:
     """
     poses: list[np.ndarray] = []
     while len(poses) < n:
-        position = [rng.uniform(*SAFE_X_M), rng.uniform(*SAFE_Y_M), rng.uniform(*SAFE_Z_M)]
+        position = np.array([rng.uniform(*SAFE_X_M), rng.uniform(*SAFE_Y_M), rng.uniform(*SAFE_Z_M)])
         angles = [rng.uniform(*YAW_RANGE_RAD), rng.uniform(*PITCH_RANGE_RAD), rng.uniform(*ROLL_RANGE_RAD)]
         pose = kin.pose_from_euler(position, *angles)
         try:
-            kin.inverse_kinematics(pose)
-        except kin.UnreachablePoseError:
+            ik.inverse_kinematics(pose)
+        except ik.UnreachablePoseError:
             continue
         poses.append(pose)
     return poses
@@ -76,7 +79,7 @@ class ExplorationConfig(EnvConfig):
             trajectories, about 92 each: 31 pauses x 3 rotations).
     """
 
-    max_steps: int = 93
+    max_steps: int = paper.PHASE1_POSES_PER_TRAJECTORY
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -121,7 +124,7 @@ def encode_reported(reported_pose: np.ndarray, jaw_angle_rad: float) -> dict[str
     return {"reported_pose": pose.astype(np.float32), "jaw_angle": np.array([jaw_angle_rad], dtype=np.float32)}
 
 
-class CalibrationExplorationEnv(DvrkEnv):
+class CalibrationExplorationEnv(DvrkEnv[ExplorationConfig]):
     """Phase I of the paper: command poses, observe the reported pose and the red marker.
 
     Observation (a Dict): ``reported_pose`` (bx, by, bz in m; yaw, pitch, roll in rad),
@@ -135,8 +138,18 @@ class CalibrationExplorationEnv(DvrkEnv):
     action_names = ACTION_NAMES
     option_names = ("corner",)
 
-    def __init__(self, render_mode: str | None = None, **kwargs: Any) -> None:
-        super().__init__(render_mode=render_mode, **kwargs)
+    def __init__(
+        self,
+        render_mode: str | None = None,
+        *,
+        bias: str | BiasConfig = "paper",
+        bias_seed: int = 0,
+        max_steps: int = paper.PHASE1_POSES_PER_TRAJECTORY,
+        camera_resolution: tuple[int, int] = (1920, 1080),
+        pixel_noise_px: float = 0.0,
+    ) -> None:
+        """CalibrationExploration-v0, set up by the fields of :class:`ExplorationConfig` (listed below)."""
+        super().__init__(ExplorationConfig(**config_arguments(locals())), render_mode=render_mode)
         width, height = self.config.camera_resolution
         self.action_space = spaces.Box(ACTION_LOW.astype(np.float32), ACTION_HIGH.astype(np.float32), dtype=np.float32)
         self.observation_space = spaces.Dict({**reported_observation_space(), **marker_observation_space(width, height)})
@@ -149,7 +162,7 @@ class CalibrationExplorationEnv(DvrkEnv):
         elif corner not in (0, 1, 2, 3):
             raise ValueError(f"option 'corner' must be 0, 1, 2 or 3, got {corner!r}")
         start = kin.pose_from_euler(workspace_corners()[corner], *home_orientation())
-        self.world.reset_robot(kin.inverse_kinematics(start))
+        self.world.reset_robot(ik.inverse_kinematics(start))
         self._steps = 0
         observation = self._observe()
         return observation, self._info(np.zeros(6, dtype=bool), np.zeros(6, dtype=bool), corner=corner)

@@ -21,10 +21,13 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
-from dvrk_gym.envs.base import DvrkEnv, EnvConfig
+from dvrk_gym.envs.base import DvrkEnv, EnvConfig, config_arguments
 from dvrk_gym.envs.exploration import CAMERA_BOX_HIGH_M, CAMERA_BOX_LOW_M, encode_reported
-from dvrk_gym.sim.robot import kinematics as kin
+from dvrk_gym.sim.endoscope.noise import PixelNoise
 from dvrk_gym.sim.physics.scene import GRID_COLUMNS, GRID_ROWS, WORKSPACE_CENTER_M, grid_circle_centers
+from dvrk_gym.sim.robot import ik
+from dvrk_gym.sim.robot import kinematics as kin
+from dvrk_gym.sim.robot.bias import BiasConfig
 
 N_CIRCLES = GRID_ROWS * GRID_COLUMNS
 ACTION_NAMES = ("bx", "by", "bz", "yaw")
@@ -91,7 +94,7 @@ def tool_pose(position: np.ndarray, yaw_rad: float) -> np.ndarray:
     return kin.pose_from_euler(position, yaw_rad, float(pitch), float(roll))
 
 
-class GridTouchEnv(DvrkEnv):
+class GridTouchEnv(DvrkEnv[GridTouchConfig]):
     """Touch a grid circle; successive episodes tour all 35 (the paper's Phase II and benchmark).
 
     Observation (a Dict, as HER wants): ``observation`` = reported (bx, by, bz) m,
@@ -112,8 +115,21 @@ class GridTouchEnv(DvrkEnv):
     action_names = ACTION_NAMES
     option_names = ("yaw", "circle")
 
-    def __init__(self, render_mode: str | None = None, **kwargs: Any) -> None:
-        super().__init__(render_mode=render_mode, **kwargs)
+    def __init__(
+        self,
+        render_mode: str | None = None,
+        *,
+        bias: str | BiasConfig = "paper",
+        bias_seed: int = 0,
+        reward_type: str = "dense",
+        distance_threshold_m: float = 0.001,
+        approach_height_m: float = 0.008,
+        correction_noise_m: float = 0.0002,
+        camera_resolution: tuple[int, int] = (1920, 1080),
+        pixel_noise_px: float = 0.0,
+    ) -> None:
+        """GridTouch-v0, set up by the fields of :class:`GridTouchConfig` (listed below)."""
+        super().__init__(GridTouchConfig(**config_arguments(locals())), render_mode=render_mode)
         self.action_space = spaces.Box(ACTION_LOW.astype(np.float32), ACTION_HIGH.astype(np.float32), dtype=np.float32)
         goal = spaces.Box(CAMERA_BOX_LOW_M.astype(np.float32), CAMERA_BOX_HIGH_M.astype(np.float32), dtype=np.float32)
         obs_low = np.array([-0.3, -0.3, -0.3, -np.pi, -np.pi, -np.pi, kin.JAW_LOWER_RAD, -np.pi / 2], dtype=np.float32)
@@ -146,7 +162,7 @@ class GridTouchEnv(DvrkEnv):
             self._yaw = float(self.np_random.uniform(-np.pi / 2, np.pi / 2))
         else:
             self._yaw = float(self._yaw_setting)
-        self.world.reset_robot(kin.inverse_kinematics(tool_pose(HOME_POSITION_M, 0.0)))
+        self.world.reset_robot(ik.inverse_kinematics(tool_pose(HOME_POSITION_M, 0.0)))
         self._achieved = self._seen_touch_point()
         info = {"circle_index": self._circle, "target_yaw": self._yaw, "sim_time_s": 0.0}
         return self._observation(), info
@@ -156,7 +172,9 @@ class GridTouchEnv(DvrkEnv):
         above = target + [0.0, 0.0, self.config.approach_height_m]
         first = self.world.move_to(tool_pose(above, yaw), noise_rng=self.np_random, clamp_to_limits=True)
         touch_z = self._contact_height(target, yaw)
-        touch = self.world.move_to(tool_pose([target[0], target[1], touch_z], yaw), noise_rng=self.np_random, clamp_to_limits=True)
+        touch = self.world.move_to(
+            tool_pose(np.array([target[0], target[1], touch_z]), yaw), noise_rng=self.np_random, clamp_to_limits=True
+        )
         self._achieved = self._seen_touch_point()
         info = self._touch_info(yaw, clamped, first.joints_clamped | touch.joints_clamped)
         observation = self._observation()
@@ -181,7 +199,7 @@ class GridTouchEnv(DvrkEnv):
         """Where the jaws would truly be if commanded to ``position`` now (state untouched)."""
         cable = self.world.cable
         state = cable.get_state()
-        q_cmd, _ = kin.inverse_kinematics_clamped(tool_pose(position, yaw), q_ref=self.world.q_cmd)
+        q_cmd, _ = ik.inverse_kinematics_clamped(tool_pose(position, yaw), q_ref=self.world.q_cmd)
         tip = kin.touch_point(cable.true_joints(q_cmd), cable.true_dh)
         cable.set_state(state)
         return tip
@@ -219,10 +237,9 @@ class GridTouchEnv(DvrkEnv):
         """The jaws' touch point as the endoscope sees it (projected, with pixel noise)."""
         camera = self.world.camera
         left, right = camera.project(self.world.true_touch_point())
-        sigma = self.config.pixel_noise_px * camera.intrinsics.width / 1920.0
-        if sigma > 0:
-            left = left + self.np_random.normal(0.0, sigma, size=2)
-            right = right + self.np_random.normal(0.0, sigma, size=2)
+        noise = PixelNoise(self.config.pixel_noise_px, camera.intrinsics.width)
+        left = noise.apply(left, self.np_random)
+        right = noise.apply(right, self.np_random)  # after left's: the draw order is part of the episode
         return camera.triangulate(left, right)[0]
 
     def _desired(self, index: int) -> np.ndarray:

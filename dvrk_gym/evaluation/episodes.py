@@ -11,8 +11,9 @@ error, median, minimum and maximum.
 from __future__ import annotations
 
 import importlib
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
-from typing import Any, Callable, Iterable
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -108,6 +109,28 @@ def run_episodes(
         metrics.update({"return": total, "length": float(length)})
         results.append(EpisodeResult(index, episode_options, length, total, metrics, info))
     return results
+
+
+def evaluate_policy(
+    factory: str | Callable[[gym.Env], Any], env_id: str, n_episodes: int, seed: int = 0, options: Options = None, **env_kwargs: Any
+) -> list[EpisodeResult]:
+    """Run a policy made for a fresh environment: ``factory(env)`` gives the policy.
+
+    Args:
+        factory: a function of the env returning the policy, or its ``"package.module:factory"``
+            name (:func:`load_policy_factory`).
+        env_id: the environment, e.g. ``"dvrk_gym/GridTouch-v0"``.
+        n_episodes: how many episodes (:func:`run_episodes`, with a progress bar).
+        seed: the first episode's reset seed.
+        options: reset options, fixed or a function of the episode index.
+        **env_kwargs: ``gym.make`` keywords (``bias``, ``bias_seed``, ``camera_resolution``...).
+    """
+    make_policy = load_policy_factory(factory) if isinstance(factory, str) else factory
+    env = gym.make(env_id, **env_kwargs)
+    try:
+        return run_episodes(env, make_policy(env), n_episodes, seed=seed, options=options)
+    finally:
+        env.close()
 
 
 def _is_scalar(value: Any) -> bool:

@@ -7,6 +7,6 @@ PosixPath('dvrk_gym_out/reproduce-quick/report.md')
 """
 
 from dvrk_gym.reproduce.profiles import FULL, PROFILES, QUICK, Profile
-from dvrk_gym.reproduce.run import Reproduction, ReproduceConfig, build_tasks, run_reproduce
+from dvrk_gym.reproduce.run import ReproduceConfig, Reproduction, build_tasks, run_reproduce
 
 __all__ = ["FULL", "PROFILES", "QUICK", "Profile", "Reproduction", "ReproduceConfig", "build_tasks", "run_reproduce"]

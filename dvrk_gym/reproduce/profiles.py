@@ -6,6 +6,9 @@ import dataclasses
 from dataclasses import dataclass
 from typing import Any
 
+from dvrk_gym import paper
+from dvrk_gym.baselines.budgets import AGENT_ENVS, GRID_TOUCH_ID
+
 SEARCHES = ("paper", "quick")
 
 
@@ -31,16 +34,16 @@ class Profile:
     """
 
     name: str
-    n_trajectories: int = 57
-    steps_per_trajectory: int = 93
-    dnn_epochs: int = 1000
+    n_trajectories: int = paper.PHASE1_TRAJECTORIES
+    steps_per_trajectory: int = paper.PHASE1_POSES_PER_TRAJECTORY
+    dnn_epochs: int = paper.DNN_EPOCHS
     search: str = "paper"
-    debridement_trials: int = 15
-    debridement_picks: int = 8
+    debridement_trials: int = paper.DEBRIDEMENT_TRIALS
+    debridement_picks: int = paper.FRAGMENTS_PER_TRIAL
     rl_agents: tuple[str, ...] = ("sac_her", "sac")
     rl_steps: int | None = None
     rl_eval_points: int = 20
-    camera_resolution: tuple[int, int] = (1920, 1080)
+    camera_resolution: tuple[int, int] = paper.ENDOSCOPE_RESOLUTION_PX
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "camera_resolution", tuple(int(v) for v in self.camera_resolution))
@@ -50,8 +53,6 @@ class Profile:
         for name in ("n_trajectories", "steps_per_trajectory", "dnn_epochs", "debridement_trials", "debridement_picks", "rl_eval_points"):
             if int(getattr(self, name)) < 1:
                 raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
-        from dvrk_gym.baselines.budgets import AGENT_ENVS, GRID_TOUCH_ID
-
         grid_agents = sorted(name for name, env_id in AGENT_ENVS.items() if env_id == GRID_TOUCH_ID)
         unknown = [agent for agent in self.rl_agents if agent not in grid_agents]
         if unknown:

@@ -12,14 +12,14 @@ from typing import Any
 
 import numpy as np
 
-from dvrk_gym.calibration.benchmark import PAPER_MEAN_MM, PAPER_PIXELS, YAW_SETTINGS
+from dvrk_gym import paper
+from dvrk_gym.baselines.curves import plot_curves
+from dvrk_gym.baselines.training import CurvePoint
+from dvrk_gym.calibration.benchmark import YAW_SETTINGS
+from dvrk_gym.calibration.search import SearchResult, plot_search
 
-PAPER_PHASE1 = {"raw": 5256, "kept": 1939}
+PAPER_PHASE1 = {"raw": paper.PHASE1_RAW_SAMPLES, "kept": paper.PHASE1_KEPT_SAMPLES}
 """The paper's Phase I: raw samples and those both cameras saw at the same place."""
-PAPER_SEARCH_MM2 = {"DNN_u300_h3_relu": 2.06, "DNN_u300_h1_sigmoid": 1.21}
-"""The paper's 10-fold CV errors (mm^2) on its real Phase I data: the chosen net and the best."""
-PAPER_TIME_PER_FRAGMENT_S = (7.2, 7.3)
-"""The paper's seconds per fragment (about 58 s per 8-fragment trial)."""
 _PACKAGES = ("dvrk-gym", "pybullet", "gymnasium", "numpy", "torch", "scikit-learn", "stable-baselines3")
 
 
@@ -33,6 +33,11 @@ def _versions() -> dict[str, str]:
     return versions
 
 
+def _per_setting(values: tuple[float, ...]) -> dict[str, float]:
+    """The paper's figures of a method by setting label."""
+    return dict(zip((label for label, _ in YAW_SETTINGS), values))
+
+
 def _relative(path: str, run_folder: Path) -> str:
     """A path inside the run folder, relative to it (so the folder can be moved)."""
     return os.path.relpath(os.path.abspath(path), os.path.abspath(run_folder))
@@ -40,9 +45,6 @@ def _relative(path: str, run_folder: Path) -> str:
 
 def collect_results(config: Any, task_results: dict[str, dict[str, Any]]) -> dict[str, Any]:
     """Everything the report shows, as plain numbers, from the tasks' summaries."""
-    from dvrk_gym.cli.debridement import PAPER_RESULTS
-    from dvrk_gym.envs.debridement import PAPER_PHASE_S
-
     calibration = task_results["calibration"]
     phase1 = calibration["phase1"]
     profile = config.profile
@@ -54,31 +56,39 @@ def collect_results(config: Any, task_results: dict[str, dict[str, Any]]) -> dic
             "mean_px": rows["all settings"]["pixel"]["mean"],
             "per_setting_px": {label: rows[label]["pixel"]["mean"] for label, _ in YAW_SETTINGS},
             "per_setting_mm": {label: rows[label]["mm"]["mean"] for label, _ in YAW_SETTINGS},
-            "paper_mean_mm": PAPER_MEAN_MM.get(method),
-            "paper_per_setting_px": dict(zip((label for label, _ in YAW_SETTINGS), PAPER_PIXELS[method])) if method in PAPER_PIXELS else None,
+            "paper_mean_mm": paper.CALIBRATION_MEAN_MM.get(method),
+            "paper_per_setting_px": _per_setting(paper.CALIBRATION_PIXELS[method]) if method in paper.CALIBRATION_PIXELS else None,
             "robot_moves": moves_phase1 + (calibration["phase2_touches"] if method == "DNN+RF" else 0),
         }
     search = [
         {key: task_results[name][key] for key in ("name", "family", "mean_mm2", "std_mm2", "fold_mm2", "split_folds", "epochs", "seconds")}
-        for name in task_results if name.startswith("search_")
+        for name in task_results
+        if name.startswith("search_")
     ]
     debridement = []
     for name, cell in task_results.items():
         if name.startswith("debridement_"):
-            paper = PAPER_RESULTS.get((cell["calibrator"], cell["fragment"]))
-            debridement.append({key: value for key, value in cell.items() if key != "cached"} | {"paper": paper, "figure": _relative(cell["figure"], config.out)})
-    agents = [{k: v for k, v in result.items() if k != "cached"} | {"model": _relative(result["model"], config.out)}
-              for name, result in task_results.items() if name.startswith("rl_")]
+            reference = paper.DEBRIDEMENT_RESULTS.get((cell["calibrator"], cell["fragment"]))
+            debridement.append(
+                {key: value for key, value in cell.items() if key != "cached"}
+                | {"paper": reference, "figure": _relative(cell["figure"], config.out)}
+            )
+    agents = [
+        {k: v for k, v in result.items() if k != "cached"} | {"model": _relative(result["model"], config.out)}
+        for name, result in task_results.items()
+        if name.startswith("rl_")
+    ]
     return {
         "settings": {**config.settings(), "workers": config.workers, "versions": _versions()},
-        "bias": {k: v for k, v in task_results["bias_field"].items() if k != "cached"} | {"figure": _relative(task_results["bias_field"]["figure"], config.out)},
+        "bias": {k: v for k, v in task_results["bias_field"].items() if k != "cached"}
+        | {"figure": _relative(task_results["bias_field"]["figure"], config.out)},
         "phase1": {**phase1, "kept_fraction": phase1["kept"] / max(phase1["raw"], 1), "paper": PAPER_PHASE1},
         "search": search,
-        "search_paper_mm2": PAPER_SEARCH_MM2,
+        "search_paper_mm2": paper.SEARCH_MM2,
         "calibration": methods,
         "debridement": debridement,
-        "debridement_paper_phase_s": PAPER_PHASE_S,
-        "paper_time_per_fragment_s": PAPER_TIME_PER_FRAGMENT_S,
+        "debridement_paper_phase_s": paper.DEBRIDEMENT_PHASE_S,
+        "paper_time_per_fragment_s": paper.TIME_PER_FRAGMENT_S,
         "rl": agents,
         "task_wall_s": {name: result["wall_s"] for name, result in task_results.items()},
         "task_cached": sorted(name for name, result in task_results.items() if result.get("cached")),
@@ -88,10 +98,6 @@ def collect_results(config: Any, task_results: dict[str, dict[str, Any]]) -> dic
 def write_figures(folder: Path, data: dict[str, Any]) -> dict[str, str]:
     """Draw the figures made from several tasks' results; returns every figure's path,
     relative to the run folder."""
-    from dvrk_gym.baselines.curves import plot_curves
-    from dvrk_gym.baselines.training import CurvePoint
-    from dvrk_gym.calibration.search import SearchResult, plot_search
-
     folder = Path(folder)
     figures = {"bias_field": "figures/bias_field.png", "calibration_error_maps": "figures/calibration_error_maps.png"}
     if data["search"]:
@@ -107,10 +113,10 @@ def write_figures(folder: Path, data: dict[str, Any]) -> dict[str, str]:
     return figures
 
 
-def _percent(sim: float, paper: float | None) -> str:
-    if paper is None or not np.isfinite(sim):
+def _percent(sim: float, reference: float | None) -> str:
+    if reference is None or not np.isfinite(sim):
         return "-"
-    return f"{100.0 * (sim - paper) / paper:+.0f}%"
+    return f"{100.0 * (sim - reference) / reference:+.0f}%"
 
 
 def _table(header: list[str], rows: list[list[str]]) -> list[str]:
@@ -140,7 +146,10 @@ def write_report(path: Path, data: dict[str, Any]) -> Path:
     lines += _bias_section(data) + _phase1_section(data) + _search_section(data) + _calibration_section(data)
     lines += _debridement_section(data) + _rl_section(data)
     lines += ["## Run", "", "Wall time per task (seconds; cached tasks show the time they took when they ran):", ""]
-    lines += _table(["task", "wall s", "cached"], [[name, f"{s:.1f}", "yes" if name in data["task_cached"] else ""] for name, s in data["task_wall_s"].items()])
+    lines += _table(
+        ["task", "wall s", "cached"],
+        [[name, f"{s:.1f}", "yes" if name in data["task_cached"] else ""] for name, s in data["task_wall_s"].items()],
+    )
     lines += ["", "Versions: " + ", ".join(f"{k} {v}" for k, v in settings["versions"].items()), ""]
     path = Path(path)
     path.write_text("\n".join(lines))
@@ -156,38 +165,69 @@ def _timing_sentence(data: dict[str, Any]) -> str:
 def _bias_section(data: dict[str, Any]) -> list[str]:
     bias = data["bias"]
     yaws = ["-90", "-45", "0", "45", "90"]
-    lines = ["## The simulated instrument", "",
-             f"The cable model misses by {bias['raw_mean_mm']:.2f} mm on average (raw, over {bias['samples']} random moves). "
-             f"A rigid fit per yaw leaves {bias['rigid_mean_mm']:.2f} mm (the paper's rigid-body calibration: 4.55 mm); "
-             f"a smooth model {bias['smooth_mean_mm']:.2f} mm (the paper's DNN+RF: 1.08 mm). Hysteresis: approaching a command "
-             f"from either side changes the tip by {bias['hysteresis_gap_mm']:.2f} mm on average.", ""]
-    lines += _table(["yaw (deg)"] + yaws, [["rigid residual, random moves (mm)"] + [f"{v:.2f}" for v in bias["rigid_by_yaw_mm"]],
-                                           ["rigid residual, 35-point grid (mm)"] + [f"{v:.2f}" for v in bias["grid_rigid_by_yaw_mm"]]])
+    lines = [
+        "## The simulated instrument",
+        "",
+        f"The cable model misses by {bias['raw_mean_mm']:.2f} mm on average (raw, over {bias['samples']} random moves). "
+        f"A rigid fit per yaw leaves {bias['rigid_mean_mm']:.2f} mm "
+        f"(the paper's rigid-body calibration: {paper.CALIBRATION_MEAN_MM['RBT']:.2f} mm); "
+        f"a smooth model {bias['smooth_mean_mm']:.2f} mm (the paper's DNN+RF: {paper.CALIBRATION_MEAN_MM['DNN+RF']:.2f} mm). "
+        "Hysteresis: approaching a command "
+        f"from either side changes the tip by {bias['hysteresis_gap_mm']:.2f} mm on average.",
+        "",
+    ]
+    lines += _table(
+        ["yaw (deg)"] + yaws,
+        [
+            ["rigid residual, random moves (mm)"] + [f"{v:.2f}" for v in bias["rigid_by_yaw_mm"]],
+            ["rigid residual, 35-point grid (mm)"] + [f"{v:.2f}" for v in bias["grid_rigid_by_yaw_mm"]],
+        ],
+    )
     return lines + [""] + _image(data, "bias_field", "tip error after a rigid fit, per yaw")
 
 
 def _phase1_section(data: dict[str, Any]) -> list[str]:
     p = data["phase1"]
-    paper = p["paper"]
-    rows = [["raw samples", f"{p['raw']:,}", f"{paper['raw']:,}", _percent(p["raw"], paper["raw"])],
-            ["kept (both cameras agree)", f"{p['kept']:,}", f"{paper['kept']:,}", _percent(p["kept"], paper["kept"])],
-            ["kept fraction", f"{100 * p['kept_fraction']:.0f}%", f"{100 * paper['kept'] / paper['raw']:.0f}%", ""]]
+    reference = p["paper"]
+    rows = [
+        ["raw samples", f"{p['raw']:,}", f"{reference['raw']:,}", _percent(p["raw"], reference["raw"])],
+        ["kept (both cameras agree)", f"{p['kept']:,}", f"{reference['kept']:,}", _percent(p["kept"], reference["kept"])],
+        ["kept fraction", f"{100 * p['kept_fraction']:.0f}%", f"{100 * reference['kept'] / reference['raw']:.0f}%", ""],
+    ]
     return ["## Phase I data", ""] + _table(["", "simulation", "paper", "difference"], rows) + [""]
 
 
 def _search_section(data: dict[str, Any]) -> list[str]:
     if not data["search"]:
         return []
-    paper = data["search_paper_mm2"]
+    references = data["search_paper_mm2"]
     rows = []
     for r in sorted(data["search"], key=lambda r: r["mean_mm2"]):
-        reference = paper.get(r["name"])
-        rows.append([r["name"], f"{r['mean_mm2']:.2f} +- {r['std_mm2']:.2f}", f"{len(r['fold_mm2'])}/{r['split_folds']}",
-                     "-" if r["epochs"] is None else str(r["epochs"]), f"{reference:.2f}" if reference else "", _percent(r["mean_mm2"], reference)])
-    lines = ["## Model search (Phase I)", "",
-             "Cross-validated mean squared L2 error of each model on this run's cleaned Phase I data, best first. "
-             "The paper's figures are on its real data (the authors' own re-run of it: linear 3.76, forest 5.03, 3 x 300 ReLU 1.74 mm^2).", ""]
-    return lines + _table(["model", "mm^2 (mean +- sd)", "folds", "epochs", "paper mm^2", "difference"], rows) + [""] + _image(data, "model_search", "model search")
+        reference = references.get(r["name"])
+        rows.append(
+            [
+                r["name"],
+                f"{r['mean_mm2']:.2f} +- {r['std_mm2']:.2f}",
+                f"{len(r['fold_mm2'])}/{r['split_folds']}",
+                "-" if r["epochs"] is None else str(r["epochs"]),
+                f"{reference:.2f}" if reference else "",
+                _percent(r["mean_mm2"], reference),
+            ]
+        )
+    authors = ", ".join(f"{name} {mm2:.2f}" for name, mm2 in paper.AUTHORS_CV_MM2.items())
+    lines = [
+        "## Model search (Phase I)",
+        "",
+        "Cross-validated mean squared L2 error of each model on this run's cleaned Phase I data, best first. "
+        f"The paper's figures are on its real data (the authors' own re-run of it: {authors} mm^2).",
+        "",
+    ]
+    return (
+        lines
+        + _table(["model", "mm^2 (mean +- sd)", "folds", "epochs", "paper mm^2", "difference"], rows)
+        + [""]
+        + _image(data, "model_search", "model search")
+    )
 
 
 def _calibration_section(data: dict[str, Any]) -> list[str]:
@@ -197,13 +237,31 @@ def _calibration_section(data: dict[str, Any]) -> list[str]:
         rows.append([f"{method}", *(f"{m['per_setting_px'][label]:.1f}" for label in labels), f"{m['mean_mm']:.2f}"])
         if m["paper_per_setting_px"]:
             rows.append([f"{method}, paper", *(f"{m['paper_per_setting_px'][label]:.1f}" for label in labels), f"{m['paper_mean_mm']:.2f}"])
-            rows.append([f"{method}, difference", *(_percent(m["per_setting_px"][label], m["paper_per_setting_px"][label]) for label in labels),
-                         _percent(m["mean_mm"], m["paper_mean_mm"])])
-    lines = ["## Calibration error (the paper's table)", "",
-             "Mean error over the 35 circles, in pixels of the left image (1 mm is about 11.3 px), for each yaw setting; last column the mean over all settings in mm.", ""]
+            rows.append(
+                [
+                    f"{method}, difference",
+                    *(_percent(m["per_setting_px"][label], m["paper_per_setting_px"][label]) for label in labels),
+                    _percent(m["mean_mm"], m["paper_mean_mm"]),
+                ]
+            )
+    lines = [
+        "## Calibration error (the paper's table)",
+        "",
+        f"Mean error over the 35 circles, in pixels of the left image (1 mm is about {paper.PX_PER_MM} px), for each yaw setting; "
+        "last column the mean over all settings in mm.",
+        "",
+    ]
     lines += _table(["method", *labels, "mean mm"], rows) + [""]
-    moves = [[method, f"{m['robot_moves']:,}", f"{m['mean_mm']:.2f}", f"{m['paper_mean_mm']:.2f}" if m["paper_mean_mm"] else "", _percent(m["mean_mm"], m["paper_mean_mm"])]
-             for method, m in data["calibration"].items()]
+    moves = [
+        [
+            method,
+            f"{m['robot_moves']:,}",
+            f"{m['mean_mm']:.2f}",
+            f"{m['paper_mean_mm']:.2f}" if m["paper_mean_mm"] else "",
+            _percent(m["mean_mm"], m["paper_mean_mm"]),
+        ]
+        for method, m in data["calibration"].items()
+    ]
     lines += _table(["method", "robot moves", "sim mm", "paper mm", "difference"], moves) + [""]
     return lines + _image(data, "calibration_error_maps", "per-circle error maps")
 
@@ -213,22 +271,38 @@ def _debridement_section(data: dict[str, Any]) -> list[str]:
     if not cells:
         return []
     rows = []
+    n = paper.DEBRIDEMENT_PICKS_PER_CELL
     for cell in cells:
-        paper = cell["paper"]
+        reference = cell["paper"]
         picks = max(cell["picks"], 1)
         sim = f"{cell['success']}/{cell['picks']} ({100 * cell['success'] / picks:.0f}%)"
-        paper_text = f"{paper['success']}/120 ({100 * paper['success'] / 120:.0f}%)" if paper else "-"
-        difference = f"{100 * (cell['success'] / picks - paper['success'] / 120):+.0f} points" if paper else "-"
+        paper_text = f"{reference['success']}/{n} ({100 * reference['success'] / n:.0f}%)" if reference else "-"
+        difference = f"{100 * (cell['success'] / picks - reference['success'] / n):+.0f} points" if reference else "-"
         outcomes = f"A {cell['A']}, B {cell['B']}, C {cell['C']}"
-        paper_outcomes = f"A {paper['A']}, B {paper['B']}, C {paper['C']}" if paper else "-"
-        rows.append([cell["fragment"].replace("_", " "), cell["method"], sim, paper_text, difference, outcomes, paper_outcomes,
-                     f"{cell['time_per_fragment_s']:.2f}"])
+        paper_outcomes = f"A {reference['A']}, B {reference['B']}, C {reference['C']}" if reference else "-"
+        rows.append(
+            [
+                cell["fragment"].replace("_", " "),
+                cell["method"],
+                sim,
+                paper_text,
+                difference,
+                outcomes,
+                paper_outcomes,
+                f"{cell['time_per_fragment_s']:.2f}",
+            ]
+        )
     low, high = data["paper_time_per_fragment_s"]
-    lines = ["## Debridement", "",
-             f"Each cell: {cells[0]['trials']} trials x {data['settings']['profile']['debridement_picks']} fragments (the paper: 15 x 8). "
-             "Outcomes: A missed (calibration), B slipped though the grip was placed well, C a raisin pulled out by one tip. "
-             f"Seconds per fragment are simulated time (the paper: {low}-{high} s). Rows marked (RL) aim the picks with "
-             "the RL agent trained on GridTouch-v0 below, fed the same target as the calibrators (the paper has no such row).", ""]
+    lines = [
+        "## Debridement",
+        "",
+        f"Each cell: {cells[0]['trials']} trials x {data['settings']['profile']['debridement_picks']} fragments "
+        f"(the paper: {paper.DEBRIDEMENT_TRIALS} x {paper.FRAGMENTS_PER_TRIAL}). "
+        "Outcomes: A missed (calibration), B slipped though the grip was placed well, C a raisin pulled out by one tip. "
+        f"Seconds per fragment are simulated time (the paper: {low}-{high} s). Rows marked (RL) aim the picks with "
+        "the RL agent trained on GridTouch-v0 below, fed the same target as the calibrators (the paper has no such row).",
+        "",
+    ]
     lines += _table(["fragment", "method", "success", "paper", "difference", "failures", "paper failures", "s/fragment"], rows) + [""]
     phases = list(data["debridement_paper_phase_s"])
     phase_rows = [[f"{c['fragment'].replace('_', ' ')}, {c['method']}", *(f"{c['phase_s'][p]:.2f}" for p in phases)] for c in cells]
@@ -246,9 +320,13 @@ def _rl_section(data: dict[str, Any]) -> list[str]:
     rows += [[agent["label"], f"{agent['env_steps']:,}", f"{agent['mean_mm']:.2f}", f"{agent['mean_px']:.1f}"] for agent in data["rl"]]
     labels = [label for label, _ in YAW_SETTINGS]
     per_yaw = [[agent["label"], *(f"{agent['summary'][label]['pixel']['mean']:.1f}" for label in labels)] for agent in data["rl"]]
-    lines = ["## Reinforcement-learning baseline", "",
-             "Agents trained on GridTouch-v0 (one touch per episode, rewarded by the touch's distance from the circle), "
-             "then benchmarked exactly as the calibrators (35 circles x 6 yaw settings, same seeds). The paper has no RL baseline.", ""]
+    lines = [
+        "## Reinforcement-learning baseline",
+        "",
+        "Agents trained on GridTouch-v0 (one touch per episode, rewarded by the touch's distance from the circle), "
+        "then benchmarked exactly as the calibrators (35 circles x 6 yaw settings, same seeds). The paper has no RL baseline.",
+        "",
+    ]
     lines += _table(["method", "robot moves", "mean mm", "mean px"], rows) + ["", "Per yaw setting, pixels:", ""]
     lines += _table(["agent", *labels], per_yaw) + [""]
     rates = ", ".join(f"{a['label']} {a['steps_per_second']:.1f}" for a in data["rl"])

@@ -12,19 +12,29 @@ import dataclasses
 import json
 import shutil
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from dvrk_gym import paper
+from dvrk_gym.baselines.budgets import resolve_budget
+from dvrk_gym.calibration.pipeline import BENCHMARK_SEED_OFFSET
+from dvrk_gym.calibration.search import CHOSEN_NET, SWEEP_FOLDS
+from dvrk_gym.evaluation.trials import cell_name
 from dvrk_gym.reproduce import tasks
 from dvrk_gym.reproduce.profiles import QUICK, Profile
+from dvrk_gym.reproduce.report import collect_results, write_figures, write_report
 from dvrk_gym.reproduce.scheduler import Task, run_tasks
+from dvrk_gym.sim.robot.bias import resolve_bias
+from dvrk_gym.utils.run_folder import RunFolder
 
-CALIBRATORS = ("dnn", "dnn+rf")
-"""The calibrators of the paper's debridement table."""
-FRAGMENTS = ("pumpkin_seed", "raisin")
-BENCHMARK_SEED_OFFSET = 1000
-"""The grid benchmark's seed is the run's seed plus this (as in the calibration pipeline)."""
+CALIBRATORS = tuple(dict.fromkeys(method for method, _ in paper.DEBRIDEMENT_RESULTS))
+"""The calibrators of the paper's debridement table: "dnn", "dnn+rf"."""
+FRAGMENTS = tuple(paper.FRAGMENT_LABELS)
+"""The fragments of the paper's debridement table: "pumpkin_seed", "raisin"."""
+SETTINGS_STAMP = "reproduce_config.json"
+"""The file of a run folder that holds its settings (:meth:`ReproduceConfig.settings`)."""
 
 
 @dataclass(frozen=True)
@@ -53,8 +63,6 @@ class ReproduceConfig:
         object.__setattr__(self, "out", Path(self.out))
         if self.workers < 1:
             raise ValueError(f"workers must be >= 1, got {self.workers}")
-        from dvrk_gym.sim.robot.bias import resolve_bias
-
         resolve_bias(self.bias)  # a clear error for an unknown preset, before any work
 
     def settings(self) -> dict[str, Any]:
@@ -62,75 +70,86 @@ class ReproduceConfig:
         return {"profile": self.profile.to_dict(), "seed": self.seed, "bias": self.bias, "bias_seed": self.bias_seed}
 
 
-def _stamp_folder(config: ReproduceConfig) -> None:
-    config.out.mkdir(parents=True, exist_ok=True)
-    stamp = config.out / "reproduce_config.json"
-    wanted = json.loads(json.dumps(config.settings()))
-    if stamp.exists() and json.loads(stamp.read_text()) != wanted:
-        raise ValueError(f"{config.out} holds a run with other settings (see {stamp}); use another --out or delete it")
-    stamp.write_text(json.dumps(wanted, indent=1))
-
-
 def _search_cost(model: str, search: str) -> float:
     """Rough seconds to cross-validate one model of the search (measured on 2 busy cores)."""
-    from dvrk_gym.calibration.search import CHOSEN_NET, SWEEP_FOLDS
-
     if not model.startswith("DNN"):
         return 5.0
     if search == "quick":
         return 3.0
     units, layers = (int(part[1:]) for part in model.split("_")[1:3])
     per_fold = 5.0 if units < 300 or layers == 1 else 20.0 * (layers - 1)
-    return per_fold * (10 if model == CHOSEN_NET else SWEEP_FOLDS)
+    return per_fold * (paper.SEARCH_FOLDS if model == CHOSEN_NET else SWEEP_FOLDS)
+
+
+def _debridement_task(
+    config: ReproduceConfig, name: str, function: Callable[..., dict[str, Any]], kwargs: dict[str, Any], need: str
+) -> Task:
+    """One cell of the debridement table: ``function(**kwargs)`` with the profile's trials, picks and camera."""
+    profile = config.profile
+    cell = {
+        "trials": profile.debridement_trials,
+        "picks": profile.debridement_picks,
+        "seed": config.seed,
+        "resolution": profile.camera_resolution,
+        "out": str(config.out / "debridement" / name),
+    }
+    return Task(name, function, {**kwargs, **cell}, needs=(need,), cost_s=0.6 * profile.debridement_picks * profile.debridement_trials)
+
+
+def _calibration_tasks(config: ReproduceConfig) -> list[Task]:
+    """The cable model's statistics, the two-phase calibration, the model search and the calibrators' debridement cells."""
+    profile, calibration_folder = config.profile, str(config.out / "calibration")
+    pipeline = {
+        "n_trajectories": profile.n_trajectories,
+        "steps_per_trajectory": profile.steps_per_trajectory,
+        "dnn_epochs": profile.dnn_epochs,
+        "bias": config.bias,
+        "bias_seed": config.bias_seed,
+        "camera_resolution": profile.camera_resolution,
+        "seed": config.seed,
+    }
+    phase1_s = 0.9 * profile.n_trajectories * profile.steps_per_trajectory / paper.PHASE1_POSES_PER_TRAJECTORY
+    world = {"bias": config.bias, "bias_seed": config.bias_seed, "seed": config.seed}
+    graph = [
+        Task("bias_field", tasks.bias_field, {"figure": str(config.out / "figures" / "bias_field.png"), **world}, cost_s=15),
+        Task(
+            "calibration",
+            tasks.calibration,
+            {"folder": calibration_folder, "pipeline": pipeline, "progress": config.progress and config.workers == 1},
+            cost_s=phase1_s + 0.03 * profile.dnn_epochs + 15,
+        ),
+    ]
+    for model in tasks.search_models(profile.search):
+        kwargs = {"calibration_folder": calibration_folder, "model": model, "search": profile.search, "seed": config.seed}
+        graph.append(
+            Task(f"search_{model}", tasks.search_model, kwargs, needs=("calibration",), cost_s=_search_cost(model, profile.search))
+        )
+    for calibrator in CALIBRATORS:
+        for fragment in FRAGMENTS:
+            kwargs = {"calibration_folder": calibration_folder, "calibrator": calibrator, "fragment": fragment}
+            graph.append(_debridement_task(config, cell_name(calibrator, fragment), tasks.debridement, kwargs, "calibration"))
+    return graph
+
+
+def _rl_tasks(config: ReproduceConfig) -> list[Task]:
+    """Each RL agent's training and benchmark, and its debridement cells."""
+    profile, graph = config.profile, []
+    steps = resolve_budget("calibrator", profile.rl_steps)
+    world = {"bias": config.bias, "bias_seed": config.bias_seed, "resolution": profile.camera_resolution}
+    for agent in profile.rl_agents:
+        folder = config.out / "baselines" / agent
+        training = {"agent": agent, "steps": steps, "seed": config.seed, "eval_points": profile.rl_eval_points, **world}
+        benchmark = {"benchmark_seed": config.seed + BENCHMARK_SEED_OFFSET, "out": str(folder)}
+        graph.append(Task(f"rl_{agent}", tasks.rl_agent, {**training, **benchmark}, cost_s=steps / 10.0 + 10))
+        for fragment in FRAGMENTS:
+            kwargs = {"model": str(folder / "model.zip"), "fragment": fragment, "bias": config.bias, "bias_seed": config.bias_seed}
+            graph.append(_debridement_task(config, cell_name(agent, fragment), tasks.rl_debridement, kwargs, f"rl_{agent}"))
+    return graph
 
 
 def build_tasks(config: ReproduceConfig) -> list[Task]:
     """The task graph of a reproduction."""
-    from dvrk_gym.baselines.budgets import resolve_budget
-    from dvrk_gym.cli.debridement import cell_name
-
-    profile, out = config.profile, config.out
-    figures = out / "figures"
-    calibration_folder = out / "calibration"
-    resolution = profile.camera_resolution
-    pipeline = {
-        "n_trajectories": profile.n_trajectories, "steps_per_trajectory": profile.steps_per_trajectory,
-        "dnn_epochs": profile.dnn_epochs, "bias": config.bias, "bias_seed": config.bias_seed,
-        "camera_resolution": resolution, "seed": config.seed,
-    }
-    phase1_s = 0.9 * profile.n_trajectories * profile.steps_per_trajectory / 93
-    graph = [
-        Task("bias_field", tasks.bias_field, {"figure": str(figures / "bias_field.png"), "bias": config.bias, "bias_seed": config.bias_seed, "seed": config.seed}, cost_s=15),
-        Task("calibration", tasks.calibration, {"folder": str(calibration_folder), "pipeline": pipeline, "progress": config.progress and config.workers == 1},
-             cost_s=phase1_s + 0.03 * profile.dnn_epochs + 15),
-    ]
-    for model in tasks.search_models(profile.search):
-        cost = _search_cost(model, profile.search)
-        graph.append(Task(f"search_{model}", tasks.search_model, {"calibration_folder": str(calibration_folder), "model": model, "search": profile.search, "seed": config.seed},
-                          needs=("calibration",), cost_s=cost))
-    for calibrator in CALIBRATORS:
-        for fragment in FRAGMENTS:
-            name = cell_name(calibrator, fragment)
-            graph.append(Task(name, tasks.debridement, {
-                "calibration_folder": str(calibration_folder), "calibrator": calibrator, "fragment": fragment,
-                "trials": profile.debridement_trials, "picks": profile.debridement_picks, "seed": config.seed,
-                "resolution": resolution, "out": str(out / "debridement" / name),
-            }, needs=("calibration",), cost_s=0.6 * profile.debridement_picks * profile.debridement_trials))
-    steps = resolve_budget("calibrator", profile.rl_steps)
-    for agent in profile.rl_agents:
-        graph.append(Task(f"rl_{agent}", tasks.rl_agent, {
-            "agent": agent, "steps": steps, "seed": config.seed, "eval_points": profile.rl_eval_points, "bias": config.bias,
-            "bias_seed": config.bias_seed, "resolution": resolution, "benchmark_seed": config.seed + BENCHMARK_SEED_OFFSET,
-            "out": str(out / "baselines" / agent),
-        }, cost_s=steps / 10.0 + 10))
-        for fragment in FRAGMENTS:
-            name = cell_name(agent, fragment)
-            graph.append(Task(name, tasks.rl_debridement, {
-                "model": str(out / "baselines" / agent / "model.zip"), "fragment": fragment, "trials": profile.debridement_trials,
-                "picks": profile.debridement_picks, "seed": config.seed, "bias": config.bias, "bias_seed": config.bias_seed,
-                "resolution": resolution, "out": str(out / "debridement" / name),
-            }, needs=(f"rl_{agent}",), cost_s=0.6 * profile.debridement_picks * profile.debridement_trials))
-    return graph
+    return _calibration_tasks(config) + _rl_tasks(config)
 
 
 @dataclass
@@ -151,11 +170,13 @@ class Reproduction:
 
 
 def run_reproduce(config: ReproduceConfig) -> Reproduction:
-    """Run (or resume) a reproduction and write its report, results and figures."""
-    from dvrk_gym.reproduce.report import collect_results, write_figures, write_report
+    """Run (or resume) a reproduction and write its report, results and figures.
 
+    Raises:
+        ValueError: ``config.out`` holds a run made with other settings.
+    """
     start = time.perf_counter()
-    _stamp_folder(config)
+    RunFolder(config.out, config.settings(), stamp=SETTINGS_STAMP)
     (config.out / "figures").mkdir(parents=True, exist_ok=True)
     task_results = run_tasks(build_tasks(config), config.out / "tasks", workers=config.workers, progress=config.progress)
     error_maps = Path(task_results["calibration"]["figure"])
@@ -166,7 +187,11 @@ def run_reproduce(config: ReproduceConfig) -> Reproduction:
     wall = time.perf_counter() - start
     calls = _log_call(config, wall, tasks_run=sum(not result["cached"] for result in task_results.values()))
     data["calls"] = calls
-    data["wall_s"] = {"this_call": wall, "all_calls": sum(call["wall_s"] for call in calls), "tasks_total": sum(r["wall_s"] for r in task_results.values())}
+    data["wall_s"] = {
+        "this_call": wall,
+        "all_calls": sum(call["wall_s"] for call in calls),
+        "tasks_total": sum(r["wall_s"] for r in task_results.values()),
+    }
     results_path = config.out / "results.json"
     results_path.write_text(json.dumps(data, indent=1, default=_json_default))
     report_path = write_report(config.out / "report.md", data)

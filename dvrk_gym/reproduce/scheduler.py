@@ -2,25 +2,27 @@
 
 A task is a top-level function (so a worker process can import it) with keyword
 arguments, the names of the tasks it needs, and a rough cost. Its result, a JSON-able
-dict, is cached in ``cache_dir/<name>.json`` with the wall time it took; a re-run loads
-the cached results and runs only the rest, so an interrupted run resumes. Results do not
+dict, is cached in ``cache_dir/<name>.json`` (a :class:`~dvrk_gym.utils.run_folder.RunFolder`)
+with the wall time it took; a re-run loads the cached results and runs only the rest, so
+an interrupted run resumes. Results do not
 depend on the number of workers: every task seeds itself and runs with one torch thread.
 """
 
 from __future__ import annotations
 
 import contextlib
-import json
 import logging
 import multiprocessing
 import time
+from collections.abc import Callable, Iterator
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Iterator
+from typing import Any
 
 from tqdm.auto import tqdm
 
+from dvrk_gym.utils.run_folder import RunFolder
 from dvrk_gym.utils.torch_threads import torch_threads
 
 logger = logging.getLogger(__name__)
@@ -111,20 +113,18 @@ def run_tasks(tasks: list[Task], cache_dir: Path, workers: int = 1, progress: bo
     if workers < 1:
         raise ValueError(f"workers must be >= 1, got {workers}")
     _check_graph(tasks)
-    cache_dir = Path(cache_dir)
-    cache_dir.mkdir(parents=True, exist_ok=True)
+    cache = RunFolder(cache_dir)
     results: dict[str, dict[str, Any]] = {}
     for task in tasks:
-        path = cache_dir / f"{task.name}.json"
-        if path.exists():
-            results[task.name] = {**json.loads(path.read_text()), "cached": True}
+        if cache.has(f"{task.name}.json"):
+            results[task.name] = {**cache.read_json(f"{task.name}.json"), "cached": True}
     priority = _priorities(tasks)
     pending = sorted((task for task in tasks if task.name not in results), key=lambda task: -priority[task.name])
     bar = tqdm(total=len(tasks), initial=len(results), desc="reproduce", unit="task", disable=not progress)
 
     def finish(task: Task, result: dict[str, Any], seconds: float) -> None:
         result = {**result, "wall_s": seconds}
-        (cache_dir / f"{task.name}.json").write_text(json.dumps(result, indent=1))
+        cache.write_json(f"{task.name}.json", result)
         results[task.name] = {**result, "cached": False}
         bar.update(1)
         message = f"{task.name}: {seconds:.0f} s"
@@ -163,7 +163,9 @@ def _stop_workers_on_interrupt() -> Iterator[None]:
         raise
 
 
-def _run_in_pool(pending: list[Task], workers: int, ready: Callable[[], list[Task]], finish: Callable[[Task, dict, float], None], bar: Any) -> None:
+def _run_in_pool(
+    pending: list[Task], workers: int, ready: Callable[[], list[Task]], finish: Callable[[Task, dict, float], None], bar: Any
+) -> None:
     running: dict[Future, Task] = {}
     failure: TaskError | None = None
     context = multiprocessing.get_context("spawn")  # no forked torch or pybullet state

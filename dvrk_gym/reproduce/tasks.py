@@ -11,18 +11,35 @@ import time
 from pathlib import Path
 from typing import Any
 
+import gymnasium as gym
 import numpy as np
+
+from dvrk_gym import paper
+from dvrk_gym.baselines.checkpoints import load_agent, save_agent
+from dvrk_gym.baselines.comparison import agent_row, benchmark_agent
+from dvrk_gym.baselines.curves import save_curve
+from dvrk_gym.baselines.training import TrainConfig, train
+from dvrk_gym.baselines.transfer import pick_policy
+from dvrk_gym.calibration.benchmark import table_summary
+from dvrk_gym.calibration.loading import load_calibrator
+from dvrk_gym.calibration.phase1 import Phase1Data
+from dvrk_gym.calibration.pipeline import PipelineConfig, run_calibration
+from dvrk_gym.calibration.policy import CalibratedPolicy
+from dvrk_gym.calibration.search import paper_models, run_search
+from dvrk_gym.envs.debridement import fragment_target
+from dvrk_gym.evaluation.trials import cell_label, run_trials, save_cell, totals
+from dvrk_gym.sim.robot.bias import resolve_bias
+from dvrk_gym.sim.robot.bias_field import grid_rigid_means, plot_field
+from dvrk_gym.sim.robot.bias_statistics import bias_statistics
+from dvrk_gym.sim.robot.cables import CableModel
 
 MM_PER_M = 1e3
 
 
 def bias_field(figure: str, bias: str, bias_seed: int, seed: int, samples: int = 2000) -> dict[str, Any]:
     """The cable model's error statistics and its rigid-residual field figure."""
-    from dvrk_gym.sim.robot import bias as cable
-    from dvrk_gym.sim.robot.bias_field import grid_rigid_means, plot_field
-
-    model = cable.CableModel(cable.resolve_bias(bias), bias_seed=bias_seed)
-    stats = cable.bias_statistics(model, np.random.default_rng(seed + 1), samples)
+    model = CableModel(resolve_bias(bias), bias_seed=bias_seed)
+    stats = bias_statistics(model, np.random.default_rng(seed + 1), samples)
     plot_field(model, Path(figure), "rigid")
     return {
         "figure": str(figure),
@@ -39,8 +56,6 @@ def bias_field(figure: str, bias: str, bias_seed: int, seed: int, samples: int =
 
 def calibration(folder: str, pipeline: dict[str, Any], progress: bool = False) -> dict[str, Any]:
     """The two-phase calibration and its benchmark (:func:`~dvrk_gym.calibration.pipeline.run_calibration`)."""
-    from dvrk_gym.calibration.pipeline import PipelineConfig, run_calibration
-
     result = run_calibration(Path(folder), PipelineConfig(**pipeline), progress=progress)
     phase1 = result["phase1"]
     return {
@@ -55,9 +70,6 @@ def calibration(folder: str, pipeline: dict[str, Any], progress: bool = False) -
 
 def search_model(calibration_folder: str, model: str, search: str, seed: int) -> dict[str, Any]:
     """Cross-validate one model of the paper's search on the run's cleaned Phase I data."""
-    from dvrk_gym.calibration.phase1 import Phase1Data
-    from dvrk_gym.calibration.search import paper_models, run_search
-
     quick = search == "quick"
     specs = {spec.name: spec for spec in paper_models(quick=quick)}
     if model not in specs:
@@ -69,64 +81,64 @@ def search_model(calibration_folder: str, model: str, search: str, seed: int) ->
 
 def search_models(search: str) -> list[str]:
     """The names of the models a search of that kind scores, in the paper's order."""
-    from dvrk_gym.calibration.search import paper_models
-
     return [spec.name for spec in paper_models(quick=search == "quick")]
 
 
-def debridement(calibration_folder: str, calibrator: str, fragment: str, trials: int, picks: int, seed: int,
-                resolution: tuple[int, int], out: str) -> dict[str, Any]:
+def debridement(
+    calibration_folder: str, calibrator: str, fragment: str, trials: int, picks: int, seed: int, resolution: tuple[int, int], out: str
+) -> dict[str, Any]:
     """One cell of the paper's debridement table: ``trials`` trials with a calibrator."""
-    import gymnasium as gym
-
-    import dvrk_gym  # noqa: F401  (registers the environments)
-    from dvrk_gym.calibration.policy import CalibratedPolicy
-    from dvrk_gym.cli.debridement import CALIBRATOR_LABELS, FRAGMENT_LABELS, load_calibrator
-    from dvrk_gym.envs.debridement import fragment_target
-
     model, settings = load_calibrator(Path(calibration_folder), calibrator)
     env = gym.make(
-        "dvrk_gym/Debridement-v0", fragment=fragment, max_picks=picks, bias=settings["bias"],
-        bias_seed=int(settings["bias_seed"]), camera_resolution=tuple(resolution),
+        "dvrk_gym/Debridement-v0",
+        fragment=fragment,
+        max_picks=picks,
+        bias=settings["bias"],
+        bias_seed=int(settings["bias_seed"]),
+        camera_resolution=tuple(resolution),
     )
-    title = f"{CALIBRATOR_LABELS[calibrator]}, {FRAGMENT_LABELS[fragment]}"
-    return _debridement_cell(env, CalibratedPolicy(model, target=fragment_target), title, trials, seed, out,
-                             {"method": CALIBRATOR_LABELS[calibrator], "calibrator": calibrator, "fragment": fragment})
+    method = paper.METHOD_LABELS[calibrator]
+    return _debridement_cell(
+        env,
+        CalibratedPolicy(model, target=fragment_target),
+        cell_label(calibrator, fragment),
+        trials,
+        seed,
+        out,
+        {"method": method, "calibrator": calibrator, "fragment": fragment},
+    )
 
 
-def rl_debridement(model: str, fragment: str, trials: int, picks: int, seed: int, bias: str, bias_seed: int,
-                   resolution: tuple[int, int], out: str) -> dict[str, Any]:
+def rl_debridement(
+    model: str, fragment: str, trials: int, picks: int, seed: int, bias: str, bias_seed: int, resolution: tuple[int, int], out: str
+) -> dict[str, Any]:
     """One debridement cell with a trained GridTouch agent aiming the picks
     (:func:`~dvrk_gym.baselines.transfer.pick_policy`), as the calibrators aim theirs."""
-    import gymnasium as gym
-
-    import dvrk_gym  # noqa: F401  (registers the environments)
-    from dvrk_gym.baselines.checkpoints import load_agent
-    from dvrk_gym.baselines.transfer import pick_policy
-    from dvrk_gym.cli.debridement import FRAGMENT_LABELS
-
     agent = load_agent(Path(model))
-    env = gym.make("dvrk_gym/Debridement-v0", fragment=fragment, max_picks=picks, bias=bias, bias_seed=bias_seed,
-                   camera_resolution=tuple(resolution))
+    env = gym.make(
+        "dvrk_gym/Debridement-v0", fragment=fragment, max_picks=picks, bias=bias, bias_seed=bias_seed, camera_resolution=tuple(resolution)
+    )
     method = f"{agent.config.agent} (RL)"
-    return _debridement_cell(env, pick_policy(agent), f"{agent.label}, {FRAGMENT_LABELS[fragment]}", trials, seed, out,
-                             {"method": method, "calibrator": None, "agent": agent.label, "fragment": fragment})
+    return _debridement_cell(
+        env,
+        pick_policy(agent),
+        cell_label(agent.label, fragment),
+        trials,
+        seed,
+        out,
+        {"method": method, "calibrator": None, "agent": agent.label, "fragment": fragment},
+    )
 
 
 def _debridement_cell(env: Any, policy: Any, title: str, trials: int, seed: int, out: str, meta: dict[str, Any]) -> dict[str, Any]:
     """Run the trials of one cell, write its JSON and outcome grid, return its totals."""
-    from dvrk_gym.cli.debridement import plot_outcome_grid, run_trials, save_trials, totals
-
     try:
         start = time.perf_counter()
         results = run_trials(env, policy, trials, seed=seed, progress=False)
         wall = time.perf_counter() - start
     finally:
         env.close()
-    out_path = Path(out)
-    out_path.parent.mkdir(parents=True, exist_ok=True)
-    save_trials(results, out_path.with_suffix(".json"), {**meta, "seed": seed})
-    figure = plot_outcome_grid(results, out_path.with_suffix(".png"), f"Debridement outcomes: {title} ({len(results)} trials)")
+    figure = save_cell(results, out, {**meta, "seed": seed}, title)["png"]
     return {
         **meta,
         **totals(results),
@@ -137,17 +149,21 @@ def _debridement_cell(env: Any, policy: Any, title: str, trials: int, seed: int,
     }
 
 
-def rl_agent(agent: str, steps: int, seed: int, eval_points: int, bias: str, bias_seed: int,
-             resolution: tuple[int, int], benchmark_seed: int, out: str) -> dict[str, Any]:
+def rl_agent(
+    agent: str,
+    steps: int,
+    seed: int,
+    eval_points: int,
+    bias: str,
+    bias_seed: int,
+    resolution: tuple[int, int],
+    benchmark_seed: int,
+    out: str,
+) -> dict[str, Any]:
     """Train an RL agent on GridTouch-v0 and benchmark it like the calibrators."""
-    from dvrk_gym.baselines.checkpoints import load_agent, save_agent
-    from dvrk_gym.baselines.comparison import agent_row, benchmark_agent
-    from dvrk_gym.baselines.curves import save_curve
-    from dvrk_gym.baselines.training import TrainConfig, train
-    from dvrk_gym.calibration.benchmark import table_summary
-
-    config = TrainConfig(agent=agent, steps=steps, seed=seed, bias=bias, bias_seed=bias_seed,
-                         camera_resolution=tuple(resolution), eval_points=eval_points)
+    config = TrainConfig(
+        agent=agent, steps=steps, seed=seed, bias=bias, bias_seed=bias_seed, camera_resolution=tuple(resolution), eval_points=eval_points
+    )
     result = train(config, progress=False)
     folder = Path(out)
     path = save_agent(result, folder / "model.zip")

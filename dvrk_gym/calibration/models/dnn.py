@@ -11,13 +11,15 @@ from __future__ import annotations
 
 import logging
 import math
-from typing import Any, Mapping
+from collections.abc import Mapping
+from typing import Any
 
 import numpy as np
 import torch
 from torch import nn
 from tqdm import tqdm
 
+from dvrk_gym import paper
 from dvrk_gym.calibration.models.features import check_inputs, check_targets, encode_euler
 from dvrk_gym.calibration.models.serialization import SavableModel, require_array, require_names
 
@@ -81,12 +83,18 @@ class DNNCalibrator(SavableModel):
 
     KIND = "dnn_calibrator"
 
-    def __init__(self, hidden_layers: int = 3, units: int = 300, activation: str = "relu",
-                 epochs: int = 1000, batch_size: int = DEFAULT_BATCH_SIZE,
-                 learning_rate: float = DEFAULT_LEARNING_RATE, seed: int = 0,
-                 progress: bool = True) -> None:
-        for name, value in (("hidden_layers", hidden_layers), ("units", units),
-                            ("epochs", epochs), ("batch_size", batch_size)):
+    def __init__(
+        self,
+        hidden_layers: int = paper.DNN_HIDDEN_LAYERS,
+        units: int = paper.DNN_UNITS,
+        activation: str = paper.DNN_ACTIVATION,
+        epochs: int = paper.DNN_EPOCHS,
+        batch_size: int = DEFAULT_BATCH_SIZE,
+        learning_rate: float = DEFAULT_LEARNING_RATE,
+        seed: int = 0,
+        progress: bool = True,
+    ) -> None:
+        for name, value in (("hidden_layers", hidden_layers), ("units", units), ("epochs", epochs), ("batch_size", batch_size)):
             if isinstance(value, bool) or int(value) != value or value < 1:
                 raise ValueError(f"{name} is {value!r}; expected a positive integer")
         if activation not in ACTIVATIONS:
@@ -109,12 +117,17 @@ class DNNCalibrator(SavableModel):
         self.loss_history_: np.ndarray | None = None  # (epochs,) mean scaled training loss
 
     def _params(self) -> dict[str, Any]:
-        return {"hidden_layers": self.hidden_layers, "units": self.units,
-                "activation": self.activation, "epochs": self.epochs,
-                "batch_size": self.batch_size, "learning_rate": self.learning_rate,
-                "seed": self.seed}
+        return {
+            "hidden_layers": self.hidden_layers,
+            "units": self.units,
+            "activation": self.activation,
+            "epochs": self.epochs,
+            "batch_size": self.batch_size,
+            "learning_rate": self.learning_rate,
+            "seed": self.seed,
+        }
 
-    def fit(self, X: np.ndarray, y: np.ndarray) -> "DNNCalibrator":
+    def fit(self, X: np.ndarray, y: np.ndarray) -> DNNCalibrator:
         """Train on inputs X (N, 6: metres, radians) and base positions y (N, 3, metres)."""
         X = check_inputs(X)
         y = check_targets(y, X.shape[0])
@@ -130,20 +143,24 @@ class DNNCalibrator(SavableModel):
         inputs = torch.from_numpy(((features - self.x_mean_) / self.x_scale_).astype(np.float32))
         targets = torch.from_numpy(((y - self.y_mean_) / self.y_scale_).astype(np.float32))
         generator = torch.Generator().manual_seed(self.seed)
-        self.network_ = _build_network(self.hidden_layers, self.units, self.activation)
-        _initialise(self.network_, generator)
-        self.loss_history_ = self._train(inputs, targets, generator)
+        network = _build_network(self.hidden_layers, self.units, self.activation)
+        _initialise(network, generator)
+        self.network_ = network
+        self.loss_history_ = self._train(network, inputs, targets, generator)
         return self
 
-    def _train(self, inputs: torch.Tensor, targets: torch.Tensor,
-               generator: torch.Generator) -> np.ndarray:
-        network = self.network_
+    def _train(self, network: nn.Sequential, inputs: torch.Tensor, targets: torch.Tensor, generator: torch.Generator) -> np.ndarray:
         optimizer = torch.optim.Adam(network.parameters(), lr=self.learning_rate)
         rows = inputs.shape[0]
         history = np.empty(self.epochs)
         network.train()
-        bar = tqdm(range(self.epochs), desc=f"DNN {self.hidden_layers}x{self.units} "
-                   f"{self.activation}", unit="epoch", disable=not self.progress, leave=False)
+        bar = tqdm(
+            range(self.epochs),
+            desc=f"DNN {self.hidden_layers}x{self.units} {self.activation}",
+            unit="epoch",
+            disable=not self.progress,
+            leave=False,
+        )
         for epoch in bar:
             order = torch.randperm(rows, generator=generator)
             shuffled_inputs, shuffled_targets = inputs[order], targets[order]
@@ -177,23 +194,20 @@ class DNNCalibrator(SavableModel):
         return [f"layer{i}" for i in range(self.hidden_layers + 1)]
 
     def _export(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
-        if self.network_ is None:
+        if self.network_ is None or self.x_mean_ is None or self.x_scale_ is None or self.y_mean_ is None or self.y_scale_ is None:
             raise ValueError("DNNCalibrator.save called before fit")
         linears = [layer for layer in self.network_ if isinstance(layer, nn.Linear)]
-        arrays = {"x_mean": self.x_mean_, "x_scale": self.x_scale_,
-                  "y_mean": self.y_mean_, "y_scale": self.y_scale_}
+        arrays = {"x_mean": self.x_mean_, "x_scale": self.x_scale_, "y_mean": self.y_mean_, "y_scale": self.y_scale_}
         for name, layer in zip(self._layer_names(), linears):
             arrays[f"{name}_weight"] = layer.weight.detach().numpy().copy()
             arrays[f"{name}_bias"] = layer.bias.detach().numpy().copy()
         return self._params(), arrays
 
     @classmethod
-    def _restore(cls, params: Mapping[str, Any],
-                 arrays: Mapping[str, np.ndarray]) -> "DNNCalibrator":
+    def _restore(cls, params: Mapping[str, Any], arrays: Mapping[str, np.ndarray]) -> DNNCalibrator:
         model = cls(**params, progress=False)
         names = model._layer_names()
-        require_names(arrays, {"x_mean", "x_scale", "y_mean", "y_scale"}
-                      | {f"{n}_{part}" for n in names for part in ("weight", "bias")})
+        require_names(arrays, {"x_mean", "x_scale", "y_mean", "y_scale"} | {f"{n}_{part}" for n in names for part in ("weight", "bias")})
         model.x_mean_ = require_array(arrays, "x_mean", (_INPUT_FEATURES,), np.float64)
         model.x_scale_ = require_array(arrays, "x_scale", (_INPUT_FEATURES,), np.float64)
         model.y_mean_ = require_array(arrays, "y_mean", (_OUTPUTS,), np.float64)
@@ -205,10 +219,8 @@ class DNNCalibrator(SavableModel):
         state = {}
         for index, (name, layer) in enumerate(zip(names, linears)):
             shape = (layer.out_features, layer.in_features)
-            state[f"{2 * index}.weight"] = torch.from_numpy(
-                require_array(arrays, f"{name}_weight", shape, np.float32).copy())
-            state[f"{2 * index}.bias"] = torch.from_numpy(
-                require_array(arrays, f"{name}_bias", shape[:1], np.float32).copy())
+            state[f"{2 * index}.weight"] = torch.from_numpy(require_array(arrays, f"{name}_weight", shape, np.float32).copy())
+            state[f"{2 * index}.bias"] = torch.from_numpy(require_array(arrays, f"{name}_bias", shape[:1], np.float32).copy())
         network.load_state_dict(state)
         network.eval()
         model.network_ = network

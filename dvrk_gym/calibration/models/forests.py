@@ -12,12 +12,18 @@ and a loaded model run the same code and agree bit for bit.
 
 from __future__ import annotations
 
-from typing import Any, Mapping
+from collections.abc import Mapping
+from typing import Any
 
 import numpy as np
 
+from dvrk_gym import paper
 from dvrk_gym.calibration.models.features import (
-    PAPER_YAWS_RAD, check_inputs, check_targets, encode_euler, nearest_yaw_index,
+    PAPER_YAWS_RAD,
+    check_inputs,
+    check_targets,
+    encode_euler,
+    nearest_yaw_index,
 )
 from dvrk_gym.calibration.models.serialization import SavableModel, require_names
 from dvrk_gym.calibration.models.tree_ensemble import TreeEnsemble, fit_forest
@@ -56,7 +62,7 @@ class ForestCalibrator(SavableModel):
         self.seed = int(seed)
         self.ensemble_: TreeEnsemble | None = None
 
-    def fit(self, X: np.ndarray, y: np.ndarray) -> "ForestCalibrator":
+    def fit(self, X: np.ndarray, y: np.ndarray) -> ForestCalibrator:
         """Fit on inputs X (N, 6: metres, radians) and base positions y (N, 3, metres)."""
         X = check_inputs(X)
         y = check_targets(y, X.shape[0])
@@ -76,8 +82,7 @@ class ForestCalibrator(SavableModel):
         return params, self.ensemble_.to_arrays()
 
     @classmethod
-    def _restore(cls, params: Mapping[str, Any],
-                 arrays: Mapping[str, np.ndarray]) -> "ForestCalibrator":
+    def _restore(cls, params: Mapping[str, Any], arrays: Mapping[str, np.ndarray]) -> ForestCalibrator:
         model = cls(trees=params["trees"], max_depth=params["max_depth"], seed=params["seed"])
         require_names(arrays, TreeEnsemble.array_names())
         model.ensemble_ = TreeEnsemble.from_arrays(arrays, "", _EULER_FEATURES, 3)
@@ -100,15 +105,14 @@ class ResidualForests(SavableModel):
 
     KIND = "residual_forests"
 
-    def __init__(self, trees: int = 100, max_depth: int | None = None, seed: int = 0) -> None:
+    def __init__(self, trees: int = paper.RESIDUAL_FOREST_TREES, max_depth: int | None = None, seed: int = 0) -> None:
         _check_forest_params(trees, max_depth)
         self.trees = int(trees)
         self.max_depth = None if max_depth is None else int(max_depth)
         self.seed = int(seed)
         self.forests_: list[TreeEnsemble | None] | None = None
 
-    def fit(self, predicted_base: np.ndarray, yaw: np.ndarray,
-            residual: np.ndarray) -> "ResidualForests":
+    def fit(self, predicted_base: np.ndarray, yaw: np.ndarray, residual: np.ndarray) -> ResidualForests:
         """Fit one forest per yaw group.
 
         Args:
@@ -122,8 +126,9 @@ class ResidualForests(SavableModel):
         predicted_base, groups = self._check(predicted_base, yaw)
         residual = check_targets(residual, predicted_base.shape[0], name="residual")
         self.forests_ = [
-            fit_forest(predicted_base[groups == g], residual[groups == g], self.trees,
-                       self.max_depth, self.seed) if np.any(groups == g) else None
+            fit_forest(predicted_base[groups == g], residual[groups == g], self.trees, self.max_depth, self.seed)
+            if np.any(groups == g)
+            else None
             for g in range(len(PAPER_YAWS_RAD))
         ]
         return self
@@ -145,32 +150,28 @@ class ResidualForests(SavableModel):
         predicted_base = check_inputs(predicted_base, name="predicted_base", columns=3)
         yaw = check_inputs(np.reshape(np.asarray(yaw, dtype=np.float64), (-1, 1)), "yaw", 1)[:, 0]
         if yaw.shape[0] != predicted_base.shape[0]:
-            raise ValueError(f"yaw has {yaw.shape[0]} values but predicted_base has "
-                             f"{predicted_base.shape[0]} rows")
+            raise ValueError(f"yaw has {yaw.shape[0]} values but predicted_base has {predicted_base.shape[0]} rows")
         return predicted_base, nearest_yaw_index(yaw)
 
     def _export(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
         if self.forests_ is None:
             raise ValueError("ResidualForests.save called before fit")
-        groups = [g for g, forest in enumerate(self.forests_) if forest is not None]
-        params = {"trees": self.trees, "max_depth": self.max_depth, "seed": self.seed,
-                  "groups": groups}
+        fitted = {g: forest for g, forest in enumerate(self.forests_) if forest is not None}
+        params = {"trees": self.trees, "max_depth": self.max_depth, "seed": self.seed, "groups": list(fitted)}
         arrays: dict[str, np.ndarray] = {}
-        for g in groups:
-            arrays.update(self.forests_[g].to_arrays(f"yaw{g}_"))
+        for g, forest in fitted.items():
+            arrays.update(forest.to_arrays(f"yaw{g}_"))
         return params, arrays
 
     @classmethod
-    def _restore(cls, params: Mapping[str, Any],
-                 arrays: Mapping[str, np.ndarray]) -> "ResidualForests":
+    def _restore(cls, params: Mapping[str, Any], arrays: Mapping[str, np.ndarray]) -> ResidualForests:
         model = cls(trees=params["trees"], max_depth=params["max_depth"], seed=params["seed"])
         groups = params["groups"]
         if not isinstance(groups, list) or not set(groups) <= set(range(len(PAPER_YAWS_RAD))):
             raise ValueError(f"groups {groups!r}; expected a list of indices 0..4")
         require_names(arrays, set().union(*(TreeEnsemble.array_names(f"yaw{g}_") for g in groups)))
         model.forests_ = [
-            TreeEnsemble.from_arrays(arrays, f"yaw{g}_", _POSITION_FEATURES, 3) if g in groups
-            else None for g in range(len(PAPER_YAWS_RAD))
+            TreeEnsemble.from_arrays(arrays, f"yaw{g}_", _POSITION_FEATURES, 3) if g in groups else None for g in range(len(PAPER_YAWS_RAD))
         ]
         for g, forest in enumerate(model.forests_):
             if forest is not None and forest.n_trees != model.trees:

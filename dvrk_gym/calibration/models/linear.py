@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-from typing import Any, Callable, Mapping
+from collections.abc import Callable, Mapping
+from typing import Any
 
 import numpy as np
 from sklearn.linear_model import LinearRegression
@@ -39,7 +40,7 @@ class LinearCalibrator(SavableModel):
     def _encode(self, X: np.ndarray) -> np.ndarray:
         return _ENCODINGS[self.angles][0](X)
 
-    def fit(self, X: np.ndarray, y: np.ndarray) -> "LinearCalibrator":
+    def fit(self, X: np.ndarray, y: np.ndarray) -> LinearCalibrator:
         """Fit on inputs X (N, 6: metres, radians) and base positions y (N, 3, metres)."""
         X = check_inputs(X)
         y = check_targets(y, X.shape[0])
@@ -60,8 +61,7 @@ class LinearCalibrator(SavableModel):
         return {"angles": self.angles}, {"coef": self.coef_, "intercept": self.intercept_}
 
     @classmethod
-    def _restore(cls, params: Mapping[str, Any],
-                 arrays: Mapping[str, np.ndarray]) -> "LinearCalibrator":
+    def _restore(cls, params: Mapping[str, Any], arrays: Mapping[str, np.ndarray]) -> LinearCalibrator:
         model = cls(angles=params["angles"])
         require_names(arrays, {"coef", "intercept"})
         features = _ENCODINGS[model.angles][1]

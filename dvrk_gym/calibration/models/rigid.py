@@ -9,7 +9,8 @@ roll are not used, as in the paper.
 from __future__ import annotations
 
 import logging
-from typing import Any, Mapping
+from collections.abc import Mapping
+from typing import Any
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -53,7 +54,7 @@ class RigidBodyCalibrator(SavableModel):
         self.translations_: np.ndarray | None = None  # (5, 3), metres
         self.group_rows_: np.ndarray | None = None  # (5,) training rows per group
 
-    def fit(self, X: np.ndarray, y: np.ndarray) -> "RigidBodyCalibrator":
+    def fit(self, X: np.ndarray, y: np.ndarray) -> RigidBodyCalibrator:
         """Fit on inputs X (N, 6: metres, radians) and base positions y (N, 3, metres).
 
         Raises:
@@ -71,8 +72,7 @@ class RigidBodyCalibrator(SavableModel):
             if np.count_nonzero(rows) >= MIN_GROUP_ROWS:
                 rotation, translation = fit_rigid_transform(X[rows, :3], y[rows])
             else:
-                _LOGGER.info("yaw group %d has %d rows; using the all-data rigid transform",
-                             g, np.count_nonzero(rows))
+                _LOGGER.info("yaw group %d has %d rows; using the all-data rigid transform", g, np.count_nonzero(rows))
                 rotation, translation = fallback
             rotations.append(rotation)
             translations.append(translation)
@@ -91,14 +91,12 @@ class RigidBodyCalibrator(SavableModel):
         return rotated + self.translations_[groups]
 
     def _export(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
-        if self.rotations_ is None:
+        if self.rotations_ is None or self.translations_ is None or self.group_rows_ is None:
             raise ValueError("RigidBodyCalibrator.save called before fit")
-        return {}, {"rotations": self.rotations_, "translations": self.translations_,
-                    "group_rows": self.group_rows_}
+        return {}, {"rotations": self.rotations_, "translations": self.translations_, "group_rows": self.group_rows_}
 
     @classmethod
-    def _restore(cls, params: Mapping[str, Any],
-                 arrays: Mapping[str, np.ndarray]) -> "RigidBodyCalibrator":
+    def _restore(cls, params: Mapping[str, Any], arrays: Mapping[str, np.ndarray]) -> RigidBodyCalibrator:
         groups = len(PAPER_YAWS_RAD)
         require_names(arrays, {"rotations", "translations", "group_rows"})
         rotations = require_array(arrays, "rotations", (groups, 3, 3), np.float64)

@@ -19,7 +19,8 @@ import hashlib
 import json
 import os
 import zipfile
-from typing import Any, ClassVar, Mapping, TypeVar
+from collections.abc import Mapping
+from typing import Any, ClassVar, TypeVar
 
 import numpy as np
 
@@ -64,8 +65,7 @@ def _digest(metadata_json: str, arrays: Mapping[str, np.ndarray]) -> str:
     return sha.hexdigest()
 
 
-def write_model_file(path: PathLike, kind: str, params: Mapping[str, Any],
-                     arrays: Mapping[str, np.ndarray]) -> None:
+def write_model_file(path: PathLike, kind: str, params: Mapping[str, Any], arrays: Mapping[str, np.ndarray]) -> None:
     """Write a model file.
 
     Args:
@@ -80,19 +80,19 @@ def write_model_file(path: PathLike, kind: str, params: Mapping[str, Any],
     arrays = {name: np.ascontiguousarray(value) for name, value in arrays.items()}
     for name, value in arrays.items():
         if name.startswith("__") or value.dtype.kind not in _ALLOWED_KINDS:
-            raise ValueError(f"array {name!r} ({value.dtype}) cannot be saved: names must not "
-                             f"start with '__' and dtypes must be numeric or bool")
+            raise ValueError(
+                f"array {name!r} ({value.dtype}) cannot be saved: names must not start with '__' and dtypes must be numeric or bool"
+            )
     metadata = {
         "kind": kind,
         "format_version": FORMAT_VERSION,
         "params": dict(params),
-        "arrays": {name: {"shape": list(value.shape), "dtype": value.dtype.str}
-                   for name, value in sorted(arrays.items())},
+        "arrays": {name: {"shape": list(value.shape), "dtype": value.dtype.str} for name, value in sorted(arrays.items())},
     }
     metadata_json = json.dumps(metadata, sort_keys=True)
     with open(path, "wb") as stream:  # a handle, so np.savez adds no ".npz" to the name
-        np.savez(stream, **arrays, **{_METADATA: np.array(metadata_json),
-                                      _DIGEST: np.array(_digest(metadata_json, arrays))})
+        entries: dict[str, Any] = {**arrays, _METADATA: np.array(metadata_json), _DIGEST: np.array(_digest(metadata_json, arrays))}
+        np.savez(stream, **entries)
 
 
 def _read_all(path: PathLike) -> dict[str, np.ndarray]:
@@ -117,24 +117,21 @@ def _string(arrays: Mapping[str, np.ndarray], name: str, path: PathLike) -> str:
     return str(value)
 
 
-def _check_declared(path: PathLike, declared: Mapping[str, Any],
-                    arrays: Mapping[str, np.ndarray]) -> None:
+def _check_declared(path: PathLike, declared: Mapping[str, Any], arrays: Mapping[str, np.ndarray]) -> None:
     missing = sorted(set(declared) - set(arrays))
     extra = sorted(set(arrays) - set(declared))
     if missing or extra:
-        raise ModelFileError(f"{path}: arrays do not match the metadata: "
-                             f"missing {missing}, unexpected {extra}")
+        raise ModelFileError(f"{path}: arrays do not match the metadata: missing {missing}, unexpected {extra}")
     for name, spec in declared.items():
         if not isinstance(spec, dict):
             raise ModelFileError(f"{path}: metadata for array {name!r} is not an object")
         array = arrays[name]
         if list(array.shape) != spec.get("shape") or array.dtype.str != spec.get("dtype"):
             raise ModelFileError(
-                f"{path}: array {name!r} is {array.dtype.str} {list(array.shape)}; "
-                f"metadata says {spec.get('dtype')} {spec.get('shape')}")
+                f"{path}: array {name!r} is {array.dtype.str} {list(array.shape)}; metadata says {spec.get('dtype')} {spec.get('shape')}"
+            )
         if array.dtype.kind not in _ALLOWED_KINDS:
-            raise ModelFileError(f"{path}: array {name!r} has dtype {array.dtype}; "
-                                 f"expected numeric or bool")
+            raise ModelFileError(f"{path}: array {name!r} has dtype {array.dtype}; expected numeric or bool")
         if array.dtype.kind == "f" and not np.all(np.isfinite(array)):
             raise ModelFileError(f"{path}: array {name!r} holds non-finite values")
 
@@ -162,29 +159,25 @@ def read_model_file(path: PathLike, kind: str) -> tuple[dict[str, Any], dict[str
         metadata = json.loads(metadata_json)
     except json.JSONDecodeError as error:
         raise ModelFileError(f"{path}: metadata is not valid JSON: {error}") from None
-    if not isinstance(metadata, dict) or not isinstance(metadata.get("arrays"), dict) \
-            or not isinstance(metadata.get("params"), dict):
+    if not isinstance(metadata, dict) or not isinstance(metadata.get("arrays"), dict) or not isinstance(metadata.get("params"), dict):
         raise ModelFileError(f"{path}: metadata lacks 'params' and 'arrays' objects")
     if metadata.get("kind") != kind:
         raise ModelFileError(f"{path}: holds a {metadata.get('kind')!r} model; expected {kind!r}")
     if metadata.get("format_version") != FORMAT_VERSION:
-        raise ModelFileError(f"{path}: format version {metadata.get('format_version')!r}; "
-                             f"this dvrk_gym reads version {FORMAT_VERSION}")
+        raise ModelFileError(f"{path}: format version {metadata.get('format_version')!r}; this dvrk_gym reads version {FORMAT_VERSION}")
     _check_declared(path, metadata["arrays"], data)
     if _digest(metadata_json, data) != digest:
         raise ModelFileError(f"{path}: SHA-256 digest mismatch: the file is corrupt or was edited")
     return metadata["params"], data
 
 
-def require_array(arrays: Mapping[str, np.ndarray], name: str, shape: tuple[int, ...],
-                  dtype: np.dtype | type) -> np.ndarray:
+def require_array(arrays: Mapping[str, np.ndarray], name: str, shape: tuple[int, ...], dtype: np.dtype | type) -> np.ndarray:
     """An array of a model file with an exact shape and dtype, else ``ValueError``."""
     if name not in arrays:
         raise ValueError(f"missing array {name!r}")
     array = arrays[name]
     if array.shape != tuple(shape) or array.dtype != np.dtype(dtype):
-        raise ValueError(f"array {name!r} is {array.dtype} {array.shape}; "
-                         f"expected {np.dtype(dtype)} {tuple(shape)}")
+        raise ValueError(f"array {name!r} is {array.dtype} {array.shape}; expected {np.dtype(dtype)} {tuple(shape)}")
     return array
 
 
@@ -209,8 +202,7 @@ class SavableModel:
         raise NotImplementedError
 
     @classmethod
-    def _restore(cls: type[_Model], params: Mapping[str, Any],
-                 arrays: Mapping[str, np.ndarray]) -> _Model:
+    def _restore(cls: type[_Model], params: Mapping[str, Any], arrays: Mapping[str, np.ndarray]) -> _Model:
         raise NotImplementedError
 
     def save(self, path: PathLike) -> None:

@@ -8,8 +8,8 @@ feature and threshold, leaf values), so a forest can be saved to and loaded from
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Mapping
 
 import numpy as np
 from sklearn.ensemble import RandomForestRegressor
@@ -23,8 +23,7 @@ _LEAF = -1
 _ROWS_PER_CHUNK = 4096  # bounds the (trees x rows) traversal state to a few MB
 
 
-def fit_forest(X: np.ndarray, y: np.ndarray, trees: int, max_depth: int | None,
-               seed: int) -> "TreeEnsemble":
+def fit_forest(X: np.ndarray, y: np.ndarray, trees: int, max_depth: int | None, seed: int) -> TreeEnsemble:
     """Fit a seeded ``RandomForestRegressor`` and export it.
 
     Args:
@@ -63,7 +62,7 @@ class TreeEnsemble:
     value: np.ndarray
 
     @classmethod
-    def from_sklearn(cls, forest: RandomForestRegressor) -> "TreeEnsemble":
+    def from_sklearn(cls, forest: RandomForestRegressor) -> TreeEnsemble:
         """Export a fitted sklearn forest (regression, any number of outputs)."""
         trees = [estimator.tree_ for estimator in forest.estimators_]
         sizes = [tree.node_count for tree in trees]
@@ -97,8 +96,7 @@ class TreeEnsemble:
         """
         # sklearn compares float32 inputs with float64 thresholds; do the same.
         X = np.asarray(X, dtype=np.float32).astype(np.float64)
-        chunks = [self._predict_rows(X[start:start + _ROWS_PER_CHUNK])
-                  for start in range(0, X.shape[0], _ROWS_PER_CHUNK)]
+        chunks = [self._predict_rows(X[start : start + _ROWS_PER_CHUNK]) for start in range(0, X.shape[0], _ROWS_PER_CHUNK)]
         return np.concatenate(chunks, axis=0) if chunks else np.zeros((0, self.n_outputs))
 
     def _predict_rows(self, X: np.ndarray) -> np.ndarray:
@@ -128,8 +126,7 @@ class TreeEnsemble:
         return {prefix + name for name in _ARRAY_NAMES}
 
     @classmethod
-    def from_arrays(cls, arrays: Mapping[str, np.ndarray], prefix: str, n_features: int,
-                    n_outputs: int) -> "TreeEnsemble":
+    def from_arrays(cls, arrays: Mapping[str, np.ndarray], prefix: str, n_features: int, n_outputs: int) -> TreeEnsemble:
         """Rebuild a forest from a model file's arrays, checking it is a valid forest.
 
         Raises:
@@ -167,10 +164,8 @@ class TreeEnsemble:
             bad = internal & ((child <= local) | (child >= size))
             if np.any(bad):
                 node = int(np.argmax(bad))
-                raise ValueError(f"{prefix}{name}[{node}] = {child[node]} is out of range "
-                                 f"(expected a later node of the same tree or -1)")
+                raise ValueError(f"{prefix}{name}[{node}] = {child[node]} is out of range (expected a later node of the same tree or -1)")
         bad_feature = internal & ((self.feature < 0) | (self.feature >= n_features))
         if np.any(bad_feature):
             node = int(np.argmax(bad_feature))
-            raise ValueError(f"{prefix}feature[{node}] = {self.feature[node]}; "
-                             f"expected 0..{n_features - 1}")
+            raise ValueError(f"{prefix}feature[{node}] = {self.feature[node]}; expected 0..{n_features - 1}")

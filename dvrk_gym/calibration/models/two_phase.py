@@ -9,7 +9,8 @@ forest per yaw to the residual between that corrected position and the network's
 
 from __future__ import annotations
 
-from typing import Any, Mapping
+from collections.abc import Mapping
+from typing import Any
 
 import numpy as np
 
@@ -35,13 +36,12 @@ class TwoPhaseCalibrator(SavableModel):
 
     KIND = "two_phase_calibrator"
 
-    def __init__(self, dnn: DNNCalibrator | None = None, forests: ResidualForests | None = None,
-                 seed: int = 0) -> None:
+    def __init__(self, dnn: DNNCalibrator | None = None, forests: ResidualForests | None = None, seed: int = 0) -> None:
         self.dnn = dnn if dnn is not None else DNNCalibrator(seed=seed)
         self.forests = forests if forests is not None else ResidualForests(seed=seed)
         self.phase2_fitted_ = False
 
-    def fit_phase1(self, X: np.ndarray, y: np.ndarray) -> "TwoPhaseCalibrator":
+    def fit_phase1(self, X: np.ndarray, y: np.ndarray) -> TwoPhaseCalibrator:
         """Fit the network on Phase I inputs X (N, 6: m, rad) and base positions y (N, 3, m).
 
         Any Phase II fit is discarded, since its residuals were relative to the old network.
@@ -52,7 +52,7 @@ class TwoPhaseCalibrator(SavableModel):
 
     fit = fit_phase1
 
-    def fit_phase2(self, X_c_phase2: np.ndarray, y_corrected: np.ndarray) -> "TwoPhaseCalibrator":
+    def fit_phase2(self, X_c_phase2: np.ndarray, y_corrected: np.ndarray) -> TwoPhaseCalibrator:
         """Fit the residual forests on Phase II data.
 
         Args:
@@ -95,23 +95,19 @@ class TwoPhaseCalibrator(SavableModel):
         return params, arrays
 
     @classmethod
-    def _restore(cls, params: Mapping[str, Any],
-                 arrays: Mapping[str, np.ndarray]) -> "TwoPhaseCalibrator":
-        unknown = sorted(name for name in arrays
-                         if not name.startswith((_DNN_PREFIX, _FORESTS_PREFIX)))
+    def _restore(cls, params: Mapping[str, Any], arrays: Mapping[str, np.ndarray]) -> TwoPhaseCalibrator:
+        unknown = sorted(name for name in arrays if not name.startswith((_DNN_PREFIX, _FORESTS_PREFIX)))
         if unknown:
             raise ValueError(f"unexpected arrays {unknown}")
 
         def part(prefix: str) -> dict[str, np.ndarray]:
-            return {name[len(prefix):]: value for name, value in arrays.items()
-                    if name.startswith(prefix)}
+            return {name[len(prefix) :]: value for name, value in arrays.items() if name.startswith(prefix)}
 
         dnn = DNNCalibrator._restore(params["dnn"], part(_DNN_PREFIX))
         if params["forests"] is None:
             if part(_FORESTS_PREFIX):
                 raise ValueError("forest arrays present but params say Phase II is not fitted")
             return cls(dnn=dnn)
-        model = cls(dnn=dnn, forests=ResidualForests._restore(params["forests"],
-                                                              part(_FORESTS_PREFIX)))
+        model = cls(dnn=dnn, forests=ResidualForests._restore(params["forests"], part(_FORESTS_PREFIX)))
         model.phase2_fitted_ = True
         return model

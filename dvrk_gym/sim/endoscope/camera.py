@@ -22,12 +22,14 @@ from typing import TYPE_CHECKING
 import numpy as np
 import pybullet
 
+from dvrk_gym import paper
+
 if TYPE_CHECKING:
     from pybullet_utils.bullet_client import BulletClient
 
-PAPER_BASELINE_M = 0.0062
+PAPER_BASELINE_M = paper.ENDOSCOPE_BASELINE_M
 WORKSPACE_CENTER_M = (0.040, 0.042, -0.164)
-CAMERA_DISTANCE_M = 0.19
+CAMERA_DISTANCE_M = paper.ENDOSCOPE_HEIGHT_M
 # Camera -> base rotation fitted to the paper authors' data (columns = camera
 # x, y, z axes expressed in the base frame); orthonormalised in default_camera_pose.
 _PAPER_ROTATION_BASE_CAM = (
@@ -87,12 +89,16 @@ class CameraIntrinsics:
         sx = probe.width / self.width
         sy = probe.height / self.height
         return CameraIntrinsics(
-            width, height, self.fx * sx, self.fy * sy,
-            (self.cx + 0.5) * sx - 0.5, (self.cy + 0.5) * sy - 0.5,
+            width,
+            height,
+            self.fx * sx,
+            self.fy * sy,
+            (self.cx + 0.5) * sx - 0.5,
+            (self.cy + 0.5) * sy - 0.5,
         )
 
 
-PAPER_INTRINSICS = CameraIntrinsics(1920, 1080, 2144.0, 2144.0, 959.5, 539.5)
+PAPER_INTRINSICS = CameraIntrinsics(*paper.ENDOSCOPE_RESOLUTION_PX, paper.ENDOSCOPE_FOCAL_PX, paper.ENDOSCOPE_FOCAL_PX, 959.5, 539.5)
 
 
 @dataclass(frozen=True)
@@ -166,8 +172,11 @@ class StereoCamera:
         if pose.shape != (4, 4) or not np.isfinite(pose).all():
             raise ValueError(f"pose must be a finite 4x4 matrix, got shape {pose.shape}")
         rotation = pose[:3, :3]
-        if (not np.allclose(rotation.T @ rotation, np.eye(3), atol=1e-6)
-                or np.linalg.det(rotation) <= 0 or not np.allclose(pose[3], [0, 0, 0, 1])):
+        if (
+            not np.allclose(rotation.T @ rotation, np.eye(3), atol=1e-6)
+            or np.linalg.det(rotation) <= 0
+            or not np.allclose(pose[3], [0, 0, 0, 1])
+        ):
             raise ValueError("pose must be a rigid transform (orthonormal rotation, det +1)")
         self.intrinsics = intrinsics
         self.baseline_m = float(baseline_m)
@@ -290,8 +299,13 @@ class StereoCamera:
         k = self.intrinsics
         w, h = (k.width, k.height) if window is None else (window.width, window.height)
         result = client.getCameraImage(
-            w, h, viewMatrix=self.view_matrix(side), projectionMatrix=self.projection_matrix(window),
-            renderer=pybullet.ER_TINY_RENDERER, shadow=0, flags=pybullet.ER_NO_SEGMENTATION_MASK,
+            w,
+            h,
+            viewMatrix=self.view_matrix(side),
+            projectionMatrix=self.projection_matrix(window),
+            renderer=pybullet.ER_TINY_RENDERER,
+            shadow=0,
+            flags=pybullet.ER_NO_SEGMENTATION_MASK,
         )
         rgba = np.asarray(result[2], dtype=np.uint8).reshape(h, w, 4)
         return np.ascontiguousarray(rgba[:, :, :3])
@@ -319,6 +333,5 @@ class StereoCamera:
     def _check_window(self, window: PixelWindow) -> None:
         """Raise ValueError unless ``window`` lies fully inside the image."""
         k = self.intrinsics
-        if (window.u0 < 0 or window.v0 < 0 or window.u0 + window.width > k.width
-                or window.v0 + window.height > k.height):
+        if window.u0 < 0 or window.v0 < 0 or window.u0 + window.width > k.width or window.v0 + window.height > k.height:
             raise ValueError(f"{window} is not inside the {k.width}x{k.height} image; clip it first (window_around)")

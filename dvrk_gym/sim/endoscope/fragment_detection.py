@@ -30,8 +30,9 @@ from typing import TYPE_CHECKING
 import cv2
 import numpy as np
 
-from dvrk_gym.sim.endoscope.camera import PAPER_INTRINSICS, PixelWindow, StereoCamera
+from dvrk_gym.sim.endoscope.camera import PixelWindow, StereoCamera
 from dvrk_gym.sim.endoscope.detection import RED_HUE_MAX
+from dvrk_gym.sim.endoscope.noise import PixelNoise
 from dvrk_gym.sim.physics.scene import PHANTOM_SIZE_M, WORKSPACE_CENTER_M
 
 if TYPE_CHECKING:
@@ -171,9 +172,12 @@ class FragmentObserver:
         self.scale = int(coarse_scale)
         self.coarse = StereoCamera(
             k.scaled(max(16, k.width // self.scale), max(16, k.height // self.scale)),
-            baseline_m=camera.baseline_m, pose=camera.pose, near_m=camera.near_m, far_m=camera.far_m,
+            baseline_m=camera.baseline_m,
+            pose=camera.pose,
+            near_m=camera.near_m,
+            far_m=camera.far_m,
         )
-        self.noise_px = pixel_noise_px * k.width / PAPER_INTRINSICS.width
+        self.pixel_noise = PixelNoise(pixel_noise_px, k.width)
         px_per_m = k.fx / float(np.mean(DEPTH_RANGE_M[1]))
         self.min_area_px = MIN_FRAGMENT_AREA_M2 * px_per_m**2
         outline = paper_corners()
@@ -224,7 +228,9 @@ class FragmentObserver:
             best = min(blobs, key=lambda b: float(np.linalg.norm(b.centroid + offset - expected)))
             at_image_edge = window.u0 == 0 or window.v0 == 0 or high[0] == k.width - 1 or high[1] == k.height - 1
             if not best.touches_border or at_image_edge:
-                return FragmentBlob(best.centroid + offset, best.angle_rad, best.axes_px, best.area_px, best.touches_border and at_image_edge)
+                return FragmentBlob(
+                    best.centroid + offset, best.angle_rad, best.axes_px, best.area_px, best.touches_border and at_image_edge
+                )
             margin *= 3  # cut off by the window: look wider once
         return FragmentBlob(best.centroid + offset, best.angle_rad, best.axes_px, best.area_px, True)
 
@@ -272,10 +278,8 @@ class FragmentObserver:
             fine_right = self._fine_blob(client, "right", right[j][1], (right[j][0].centroid + 0.5) * self.scale - 0.5)
             if fine_left is None or fine_right is None or not self.on_paper(fine_left.centroid, "left"):
                 continue
-            uv_left, uv_right = fine_left.centroid, fine_right.centroid
-            if noise_rng is not None and self.noise_px > 0.0:
-                uv_left = uv_left + noise_rng.normal(0.0, self.noise_px, 2)
-                uv_right = uv_right + noise_rng.normal(0.0, self.noise_px, 2)
+            uv_left = self.pixel_noise.apply(fine_left.centroid, noise_rng)
+            uv_right = self.pixel_noise.apply(fine_right.centroid, noise_rng)
             if uv_left[0] - uv_right[0] <= 0.0:
                 continue
             position = self.camera.triangulate(uv_left, uv_right)[0]

@@ -10,7 +10,7 @@ import contextlib
 import logging
 import os
 import sys
-from typing import Iterator
+from collections.abc import Iterator
 
 import pybullet
 from pybullet_utils import bullet_client
@@ -94,9 +94,7 @@ class Physics:
         try:
             return self._bodies[name]
         except KeyError:
-            raise PhysicsError(
-                f"no body named {name!r}; bodies are {sorted(self._bodies)}"
-            ) from None
+            raise PhysicsError(f"no body named {name!r}; bodies are {sorted(self._bodies)}") from None
 
     @property
     def body_names(self) -> tuple[str, ...]:

@@ -22,7 +22,9 @@ class Mesh:
     indices: np.ndarray
     normals: np.ndarray
 
-    def visual_shape(self, client, rgba: tuple[float, float, float, float], position=(0.0, 0.0, 0.0), orientation=(0.0, 0.0, 0.0, 1.0)) -> int:
+    def visual_shape(
+        self, client, rgba: tuple[float, float, float, float], position=(0.0, 0.0, 0.0), orientation=(0.0, 0.0, 0.0, 1.0)
+    ) -> int:
         """Create this mesh as a PyBullet visual shape and return its id."""
         return client.createVisualShape(
             client.GEOM_MESH,
@@ -70,9 +72,11 @@ def cylinder(radius_m: float, length_m: float, segments: int = DEFAULT_SEGMENTS)
     top_faces = np.stack([np.full(segments, top_center), top_ring, top_center + 1 + nxt], axis=1)
     bottom_faces = np.stack([np.full(segments, bottom_center), bottom_center + 1 + nxt, bottom_ring], axis=1)
     vertices = np.vstack([bottom, top, [[0, 0, half]], top, [[0, 0, -half]], bottom])
-    normals = np.vstack([
-        side_normals,
-        np.tile([0.0, 0.0, 1.0], (segments + 1, 1)),
-        np.tile([0.0, 0.0, -1.0], (segments + 1, 1)),
-    ])
+    normals = np.vstack(
+        [
+            side_normals,
+            np.tile([0.0, 0.0, 1.0], (segments + 1, 1)),
+            np.tile([0.0, 0.0, -1.0], (segments + 1, 1)),
+        ]
+    )
     return Mesh(vertices, np.vstack([side, top_faces, bottom_faces]), normals)

@@ -177,9 +177,7 @@ def _receptacle(physics: Physics) -> int:
         [0.0, (inner_y + t) / 2, h / 2],
     ]
     n = len(half_extents)
-    col = c.createCollisionShapeArray(
-        shapeTypes=[c.GEOM_BOX] * n, halfExtents=half_extents, collisionFramePositions=positions
-    )
+    col = c.createCollisionShapeArray(shapeTypes=[c.GEOM_BOX] * n, halfExtents=half_extents, collisionFramePositions=positions)
     vis = c.createVisualShapeArray(
         shapeTypes=[c.GEOM_BOX] * n,
         halfExtents=half_extents,

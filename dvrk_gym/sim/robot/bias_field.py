@@ -13,8 +13,11 @@ from pathlib import Path
 
 import numpy as np
 
-from dvrk_gym.sim.robot import bias
+from dvrk_gym.sim.robot import ik
 from dvrk_gym.sim.robot import kinematics as kin
+from dvrk_gym.sim.robot.bias import BIAS_PRESETS
+from dvrk_gym.sim.robot.bias_statistics import WORKSPACE_X_M, WORKSPACE_Y_M, rigid_fit_residuals
+from dvrk_gym.sim.robot.cables import CableModel
 
 GRID_SHAPE = (7, 5)
 """Points along base x and y: the paper's 35 circles."""
@@ -24,16 +27,16 @@ FIELDS = ("rigid", "raw")
 MM_PER_M = 1e3
 
 
-def grid_errors(model: bias.CableModel, yaw_rad: float) -> tuple[np.ndarray, np.ndarray]:
+def grid_errors(model: CableModel, yaw_rad: float) -> tuple[np.ndarray, np.ndarray]:
     """Reported touch points and raw tip errors (both (35, 3), metres) on the grid at one yaw."""
     pitch, roll = kin.paper_pitch_roll(yaw_rad)
-    xs = np.linspace(*bias.WORKSPACE_X_M, GRID_SHAPE[0])
-    ys = np.linspace(*bias.WORKSPACE_Y_M, GRID_SHAPE[1])
+    xs = np.linspace(*WORKSPACE_X_M, GRID_SHAPE[0])
+    ys = np.linspace(*WORKSPACE_Y_M, GRID_SHAPE[1])
     reported, errors = [], []
     for x in xs:
         for y in ys:
             pose = kin.pose_from_euler(np.array([x, y, GRID_Z_M]), yaw_rad, pitch, roll)
-            q_cmd = kin.inverse_kinematics(pose)
+            q_cmd = ik.inverse_kinematics(pose)
             model.reset(q_cmd)
             true = kin.touch_point(model.true_joints(q_cmd), model.true_dh)
             reported.append(kin.touch_point(q_cmd))
@@ -41,27 +44,27 @@ def grid_errors(model: bias.CableModel, yaw_rad: float) -> tuple[np.ndarray, np.
     return np.array(reported), np.array(errors)
 
 
-def grid_field(model: bias.CableModel, yaw_rad: float, field: str = "rigid") -> tuple[np.ndarray, np.ndarray]:
+def grid_field(model: CableModel, yaw_rad: float, field: str = "rigid") -> tuple[np.ndarray, np.ndarray]:
     """Reported touch points and the ``field`` ("rigid" residual or "raw" error), metres."""
     if field not in FIELDS:
         raise ValueError(f"field must be one of {FIELDS}, got {field!r}")
     reported, errors = grid_errors(model, yaw_rad)
     if field == "rigid":
-        errors = bias.rigid_fit_residuals(reported, reported + errors)
+        errors = rigid_fit_residuals(reported, reported + errors)
     return reported, errors
 
 
-def grid_rigid_means(model: bias.CableModel) -> list[float]:
+def grid_rigid_means(model: CableModel) -> list[float]:
     """Per-yaw mean residual (m) of a rigid fit on the grid: the paper's RBT row, noiseless."""
     return [float(np.linalg.norm(grid_field(model, yaw)[1], axis=1).mean()) for yaw in kin.PAPER_YAWS_RAD]
 
 
-def model_name(model: bias.CableModel) -> str:
+def model_name(model: CableModel) -> str:
     """The preset name of the model's configuration, or 'custom'."""
-    return next((name for name, config in bias.BIAS_PRESETS.items() if config == model.config), "custom")
+    return next((name for name, config in BIAS_PRESETS.items() if config == model.config), "custom")
 
 
-def plot_field(model: bias.CableModel, path: Path, field: str = "rigid") -> Path:
+def plot_field(model: CableModel, path: Path, field: str = "rigid") -> Path:
     """Write the figure of the raw or rigid-fit-residual field (PNG), one subplot per yaw."""
     from matplotlib.figure import Figure
 
@@ -72,8 +75,19 @@ def plot_field(model: bias.CableModel, path: Path, field: str = "rigid") -> Path
     axes = figure.subplots(1, len(kin.PAPER_YAWS_RAD))
     for ax, yaw, (reported, errors), norm_mm in zip(axes, kin.PAPER_YAWS_RAD, fields, norms_mm):
         tails, arrows = reported[:, :2] * MM_PER_M, errors[:, :2] * MM_PER_M
-        quiver = ax.quiver(tails[:, 0], tails[:, 1], arrows[:, 0], arrows[:, 1], norm_mm, cmap="viridis",
-                           clim=(0.0, vmax), angles="xy", scale_units="xy", scale=1.0, width=0.006)
+        quiver = ax.quiver(
+            tails[:, 0],
+            tails[:, 1],
+            arrows[:, 0],
+            arrows[:, 1],
+            norm_mm,
+            cmap="viridis",
+            clim=(0.0, vmax),
+            angles="xy",
+            scale_units="xy",
+            scale=1.0,
+            width=0.006,
+        )
         ends = np.vstack([tails, tails + arrows])
         pad_mm = 3.0  # room for the arrow heads
         ax.set_xlim(ends[:, 0].min() - pad_mm, ends[:, 0].max() + pad_mm)
@@ -84,8 +98,10 @@ def plot_field(model: bias.CableModel, path: Path, field: str = "rigid") -> Path
     axes[0].set_ylabel("base y (mm)")
     label = "after a rigid fit per yaw" if field == "rigid" else "raw"
     figure.colorbar(quiver, ax=axes, label="3-D norm (mm)")
-    figure.suptitle(f"Cable model '{model_name(model)}', bias seed {model.bias_seed}: tip error {label} "
-                    "(arrows: its x-y part, 1:1 in mm; paper's pitch and roll for each yaw; noiseless)")
+    figure.suptitle(
+        f"Cable model '{model_name(model)}', bias seed {model.bias_seed}: tip error {label} "
+        "(arrows: its x-y part, 1:1 in mm; paper's pitch and roll for each yaw; noiseless)"
+    )
     path = Path(path)
     figure.savefig(path, dpi=110)
     return path

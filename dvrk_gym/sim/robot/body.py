@@ -15,9 +15,9 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from dvrk_gym.sim.robot import kinematics as kin
 from dvrk_gym.sim.physics import meshes
 from dvrk_gym.sim.physics.client import Physics
+from dvrk_gym.sim.robot import kinematics as kin
 
 SHAFT_RADIUS_M = 0.0042
 SHAFT_LENGTH_M = 0.25
@@ -285,13 +285,7 @@ class PSMBody:
         c = self.physics.client
         for j, value in enumerate(targets):
             c.resetJointState(self.body_id, j, float(value))
-        c.setJointMotorControlArray(
-            self.body_id,
-            list(range(len(targets))),
-            c.POSITION_CONTROL,
-            targetPositions=[float(v) for v in targets],
-            forces=[MOTOR_FORCE_N] * len(targets),
-        )
+        self._drive_motors(c.POSITION_CONTROL, len(targets), targetPositions=[float(v) for v in targets])
         self.joints = q.copy()
 
     def drive(
@@ -322,12 +316,14 @@ class PSMBody:
         c = self.physics.client
         for j, (p, v) in enumerate(zip(positions, velocities)):
             c.resetJointState(self.body_id, j, float(p), float(v))
-        c.setJointMotorControlArray(
-            self.body_id, list(range(len(positions))), c.VELOCITY_CONTROL,
-            targetVelocities=[float(v) for v in velocities], forces=[MOTOR_FORCE_N] * len(positions),
-        )
+        self._drive_motors(c.VELOCITY_CONTROL, len(positions), targetVelocities=[float(v) for v in velocities])
         self.joints = q.copy()
         self.jaw_angle = float(jaw_half_angles[0] + jaw_half_angles[1])
+
+    def _drive_motors(self, mode: int, n_joints: int, **targets: list[float]) -> None:
+        """Motors of MOTOR_FORCE_N on joints 0..n_joints-1 in PyBullet control mode ``mode``, toward ``targets``."""
+        joints = list(range(n_joints))
+        self.physics.client.setJointMotorControlArray(self.body_id, joints, mode, forces=[MOTOR_FORCE_N] * n_joints, **targets)
 
     def link_pose(self, link_index: int) -> np.ndarray:
         """The world pose (4x4, metres) of a link's frame as PyBullet has it now."""

@@ -15,6 +15,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
 
+from dvrk_gym import paper
+
 
 @dataclass(frozen=True)
 class MotionLimits:
@@ -28,7 +30,7 @@ class MotionLimits:
         settle_time_s: pause at the end of every move (controller settling), s.
     """
 
-    max_speed_m_s: float = 0.06
+    max_speed_m_s: float = paper.MAX_TOOL_SPEED_M_S
     max_accel_m_s2: float = 0.30
     max_angular_speed_rad_s: float = math.radians(120.0)
     max_angular_accel_rad_s2: float = math.radians(600.0)
@@ -100,7 +102,7 @@ class CartesianMove:
     ramp_s: float
 
     @classmethod
-    def plan(cls, start: np.ndarray, end: np.ndarray, limits: MotionLimits) -> "CartesianMove":
+    def plan(cls, start: np.ndarray, end: np.ndarray, limits: MotionLimits) -> CartesianMove:
         """Plan a move whose duration respects both the linear and the angular limits."""
         distance = float(np.linalg.norm(end[:3, 3] - start[:3, 3]))
         angle = float(Rotation.from_matrix(start[:3, :3].T @ end[:3, :3]).magnitude())

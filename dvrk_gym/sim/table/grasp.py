@@ -1,5 +1,9 @@
 """How the jaws act on fragments: pushing, grasping (with a squeeze), piercing.
 
+:class:`Gripper` drives the arm and the jaws through physics steps and decides what they
+hold; the contact tests and the constraints it holds with are in
+:mod:`dvrk_gym.sim.table.holding`.
+
 The arm and the jaws are moved kinematically, one physics step at a time: every step
 each joint is set where it should be, with the velocity it moves at (so contacts see a
 moving jaw), and a strong velocity motor keeps that velocity through the step.
@@ -38,15 +42,18 @@ between a jaw and the paper sink into the paper.
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
-from typing import Iterable, Sequence
 
 import numpy as np
 
-from dvrk_gym.sim.robot import kinematics as kin
-from dvrk_gym.sim.table.fragments import Fragment
 from dvrk_gym.sim.physics.client import Physics
-from dvrk_gym.sim.robot.body import JAW_A_INDEX, JAW_B_INDEX, WRIST_YAW_INDEX, PSMBody
+from dvrk_gym.sim.robot import ik
+from dvrk_gym.sim.robot import kinematics as kin
+from dvrk_gym.sim.robot.body import PSMBody
+from dvrk_gym.sim.table import holding
+from dvrk_gym.sim.table.fragments import Fragment
+from dvrk_gym.sim.table.holding import JAW_LINKS, Hold, Touch
 
 GRASP_TIP_CLEARANCE_M = 0.0007
 """Where to stop the closed jaw tip above the paper before closing, m. With the paper's
@@ -55,7 +62,6 @@ lower jaw dips about 0.5 mm below the closed tip; 0.7 mm clears the paper and st
 pinches a 2.4 mm seed below its middle."""
 
 ARM_JOINTS = 6
-JAW_LINKS = (JAW_A_INDEX, JAW_B_INDEX)
 _STILL_RAD = 1e-7
 _INTO_COS = 0.3
 """A contact blocks a closing jaw only if the jaw moves into it within about 73 degrees of its normal."""
@@ -101,40 +107,6 @@ class GripperConfig:
             raise ValueError(f"GripperConfig.grasp_steps must be >= 1, got {self.grasp_steps}")
 
 
-@dataclass(frozen=True)
-class _Touch:
-    """The deepest contact of one jaw with one body (world frame, metres)."""
-
-    depth_m: float  # > 0 when pressing in
-    point: np.ndarray  # on the other body
-    jaw_point: np.ndarray  # on the jaw
-    normal: np.ndarray  # from the other body towards the jaw
-
-
-@dataclass
-class Hold:
-    """How the jaws hold one fragment.
-
-    Attributes:
-        mode: "grasp" (squeezed between both jaws) or "pierce" (on one tip).
-        constraint: the PyBullet constraint id.
-        link: the robot link the fragment is attached to.
-        contact_half_angles: (grasp) each jaw's half-angle when it first held the
-            fragment, rad; opening past either lets go.
-        levers_m: (grasp) distance from the pivot to each jaw's contact, m.
-        anchor_link: (pierce) attachment point in the link's frame, m.
-        anchor_fragment: (pierce) attachment point in the fragment's frame, m.
-    """
-
-    mode: str
-    constraint: int
-    link: int
-    contact_half_angles: np.ndarray
-    levers_m: np.ndarray
-    anchor_link: np.ndarray
-    anchor_fragment: np.ndarray
-
-
 class Gripper:
     """Drives a PSMBody's arm and jaws through physics steps and decides what they hold.
 
@@ -157,7 +129,7 @@ class Gripper:
         self.q = np.array(robot.joints, dtype=float)
         self.half_angles = np.full(2, max(robot.jaw_angle, 0.0) / 2)
         self.jaw_target = float(robot.jaw_angle)
-        self._touches: list[dict[int, _Touch]] = [{}, {}]
+        self._touches: list[dict[int, Touch]] = [{}, {}]
         for link in JAW_LINKS:
             physics.client.changeDynamics(robot.body_id, link, lateralFriction=self.config.jaw_friction)
 
@@ -242,7 +214,7 @@ class Gripper:
         for i in range(1, n + 1):
             waypoint = np.array(pose, dtype=float)
             waypoint[:3, 3] = start[:3, 3] + (pose[:3, 3] - start[:3, 3]) * i / n
-            q_ref = kin.inverse_kinematics(waypoint, q_ref=q_ref)
+            q_ref = ik.inverse_kinematics(waypoint, q_ref=q_ref)
             path.append(q_ref)
         return self.follow(path)
 
@@ -324,15 +296,8 @@ class Gripper:
 
     # ------------------------------------------------------------------ sensing
     def _sense(self) -> None:
-        c = self.physics.client
-        robot = self.robot.body_id
         for i, link in enumerate(JAW_LINKS):
-            touches: dict[int, _Touch] = {}
-            for cp in c.getContactPoints(bodyA=robot, linkIndexA=link):
-                body, depth = cp[2], -cp[8]
-                if body != robot and (body not in touches or depth > touches[body].depth_m):
-                    touches[body] = _Touch(depth, np.array(cp[6]), np.array(cp[5]), np.array(cp[7]))
-            self._touches[i] = touches
+            self._touches[i] = holding.sense_touches(self.physics.client, self.robot.body_id, link)
 
     def _limit_free_speeds(self) -> None:
         c = self.physics.client
@@ -350,41 +315,17 @@ class Gripper:
     def _update_holds(self) -> None:
         for name in list(self.holds):
             self._check_release(name)
-        for body, fragment in self.fragments.items():
+        for fragment in self.fragments.values():
             if fragment.name in self.holds:
                 continue
             if fragment.kind.pierceable and self._try_pierce(fragment):
                 continue
             self._try_grasp(fragment)
 
-    def _antipodal(self, fragment: Fragment) -> bool:
-        """Whether the jaws pinch the fragment's outline inside both friction cones.
-
-        Tested in the fragment's own plane: the line between the two contacts must lie
-        within atan(friction) of the inward normal of the outline (the ellipse of length
-        and width) at each. This is what makes a seed squeezed near one end squirt out
-        along its length, or one squeezed across at an angle turn out of the jaws. Out of
-        that plane the test is left out: with the paper's 10 degree roll the upper jaw
-        lands on a flat seed's top face, and a real seed tilts on the soft phantom until
-        both jaws hold its rim, which a rigid paper cannot reproduce.
-        """
-        pose = fragment.pose()
-        a, b = (self._touches[i][fragment.body_id] for i in range(2))
-        points = ((np.stack([a.point, b.point]) - pose[:3, 3]) @ pose[:3, :3])[:, :2]
-        normals = points / fragment.semi_axes_m[:2] ** 2
-        line = points[1] - points[0]
-        lengths = np.linalg.norm(normals, axis=1)
-        if np.linalg.norm(line) == 0.0 or np.any(lengths == 0.0):
-            return False
-        line /= np.linalg.norm(line)
-        inward = -normals / lengths[:, None]
-        cos_limit = math.cos(math.atan(fragment.kind.friction * self.config.jaw_friction))
-        # Jaw A pushes along +line into the outline at its contact, jaw B along -line.
-        return bool(line @ inward[0] >= cos_limit and -line @ inward[1] >= cos_limit)
-
     def _try_grasp(self, fragment: Fragment) -> None:
-        name = fragment.name
-        touching = all(fragment.body_id in self._touches[i] and self._touches[i][fragment.body_id].depth_m >= 0.0 for i in range(2))
+        """Hold ``fragment`` once both jaws have squeezed it antipodally for ``grasp_steps`` steps in a row."""
+        name, body = fragment.name, fragment.body_id
+        touching = all(body in self._touches[i] and self._touches[i][body].depth_m >= 0.0 for i in range(2))
         ok = touching and self.jaw_target < self.jaw_angle and self._antipodal(fragment)
         self._streak[name] = self._streak.get(name, 0) + 1 if ok else 0
         if self._streak[name] == 1:  # the squeeze is measured from where both jaws first touched
@@ -392,49 +333,27 @@ class Gripper:
         if self._streak[name] < self.config.grasp_steps:
             return
         self._streak[name] = 0
-        c = self.physics.client
-        levers = []
-        for i, link in enumerate(JAW_LINKS):
-            pivot = self.robot.link_pose(link)[:3, 3]
-            levers.append(max(float(np.linalg.norm(self._touches[i][fragment.body_id].jaw_point - pivot)), 1e-3))
-            c.setCollisionFilterPair(self.robot.body_id, fragment.body_id, link, -1, 0)
-        constraint = self._fix_to_link(fragment, WRIST_YAW_INDEX)
+        jaw_points = [self._touches[i][body].jaw_point for i in range(2)]
         capacity = fragment.kind.friction * self.config.jaw_friction * 2.0 * self.config.grip_force_n
-        c.changeConstraint(constraint, maxForce=capacity)
         first_touch = np.maximum(self._first_touch.pop(name), self.half_angles)
-        self.holds[name] = Hold("grasp", constraint, WRIST_YAW_INDEX, first_touch, np.array(levers), np.zeros(3), np.zeros(3))
+        self.holds[name] = holding.grasp_hold(self.physics.client, self.robot, fragment, jaw_points, first_touch, capacity)
+
+    def _antipodal(self, fragment: Fragment) -> bool:
+        a, b = (self._touches[i][fragment.body_id] for i in range(2))
+        return holding.antipodal(fragment, a, b, self.config.jaw_friction)
 
     def _try_pierce(self, fragment: Fragment) -> bool:
-        cos_limit = math.cos(self.config.pierce_max_angle_rad)
+        """Pierce ``fragment`` with a jaw tip pressing end-on into it with its pierce force."""
         depth = fragment.kind.pierce_force_n / fragment.kind.stiffness_n_m
         for i, link in enumerate(JAW_LINKS):
             touch = self._touches[i].get(fragment.body_id)
             if touch is None or touch.depth_m < depth:
                 continue
             jaw_pose = self.robot.link_pose(link)
-            along = jaw_pose[:3, :3].T @ (touch.jaw_point - jaw_pose[:3, 3])
-            if along[1] < kin.JAW_LENGTH_M - self.config.pierce_tip_zone_m:
-                continue  # pressing with the jaw's face, not its tip
-            if jaw_pose[:3, 1] @ -fragment.outward_normal(touch.point) < cos_limit:
-                continue  # the tip meets the surface too obliquely: it slides off
-            self._pierce(fragment, link, touch)
-            return True
+            if holding.tip_presses_end_on(jaw_pose, touch, fragment, self.config.pierce_tip_zone_m, self.config.pierce_max_angle_rad):
+                self.holds[fragment.name] = holding.pierce_hold(self.physics.client, self.robot.body_id, link, fragment, touch.jaw_point)
+                return True
         return False
-
-    def _pierce(self, fragment: Fragment, link: int, touch: _Touch) -> None:
-        c = self.physics.client
-        position, orientation = self._link_com(link)
-        inverse = c.invertTransform(position, orientation)
-        anchor_link = np.array(c.multiplyTransforms(*inverse, touch.jaw_point.tolist(), [0, 0, 0, 1])[0])
-        pose = fragment.pose()
-        anchor_fragment = pose[:3, :3].T @ (touch.jaw_point - pose[:3, 3])
-        constraint = c.createConstraint(
-            self.robot.body_id, link, fragment.body_id, -1, c.JOINT_POINT2POINT, [0, 0, 0],
-            anchor_link.tolist(), anchor_fragment.tolist(),
-        )
-        c.changeConstraint(constraint, maxForce=fragment.kind.pierce_hold_n)
-        c.setCollisionFilterPair(self.robot.body_id, fragment.body_id, link, -1, 0)  # the tip is inside it
-        self.holds[fragment.name] = Hold("pierce", constraint, link, np.zeros(2), np.zeros(2), anchor_link, anchor_fragment)
 
     def _check_release(self, name: str) -> None:
         hold = self.holds[name]
@@ -442,46 +361,16 @@ class Gripper:
             if np.any(self.half_angles >= hold.contact_half_angles):
                 self._release(name)
             return
-        c = self.physics.client
-        position, orientation = self._link_com(hold.link)
-        tip = np.array(c.multiplyTransforms(position, orientation, hold.anchor_link.tolist(), [0, 0, 0, 1])[0])
-        pose = self._by_name[name].pose()
-        hole = pose[:3, :3] @ hold.anchor_fragment + pose[:3, 3]
-        if np.linalg.norm(tip - hole) > self.config.pierce_tear_m:
+        if holding.pierce_stretch_m(self.physics.client, self.robot.body_id, hold, self._by_name[name]) > self.config.pierce_tear_m:
             self._release(name)
 
     def _release(self, name: str) -> None:
         hold = self.holds.pop(name)
-        c = self.physics.client
-        c.removeConstraint(hold.constraint)
-        links = JAW_LINKS if hold.mode == "grasp" else (hold.link,)
-        for link in links:
-            c.setCollisionFilterPair(self.robot.body_id, self._by_name[name].body_id, link, -1, 1)
+        holding.release_hold(self.physics.client, self.robot.body_id, self._by_name[name].body_id, hold)
 
     # ------------------------------------------------------------------ frames
-    def _link_com(self, link: int) -> tuple[list[float], list[float]]:
-        state = self.physics.client.getLinkState(self.robot.body_id, link, computeForwardKinematics=True)
-        return list(state[0]), list(state[1])
+    def _pose_in_link(self, name: str) -> holding.Transform:
+        return holding.pose_in_link(self.physics.client, self.robot.body_id, self.holds[name].link, self._by_name[name].body_id)
 
-    def _fix_to_link(self, fragment: Fragment, link: int) -> int:
-        c = self.physics.client
-        position, orientation = self._link_com(link)
-        relative = c.multiplyTransforms(*c.invertTransform(position, orientation), *c.getBasePositionAndOrientation(fragment.body_id))
-        return c.createConstraint(
-            self.robot.body_id, link, fragment.body_id, -1, c.JOINT_FIXED, [0, 0, 0],
-            relative[0], [0, 0, 0], relative[1], [0, 0, 0, 1],
-        )
-
-    def _pose_in_link(self, name: str):
-        c = self.physics.client
-        position, orientation = self._link_com(self.holds[name].link)
-        body = self._by_name[name].body_id
-        return c.multiplyTransforms(*c.invertTransform(position, orientation), *c.getBasePositionAndOrientation(body))
-
-    def _restore_pose_in_link(self, name: str, relative) -> None:
-        c = self.physics.client
-        position, orientation = self._link_com(self.holds[name].link)
-        world = c.multiplyTransforms(position, orientation, *relative)
-        body = self._by_name[name].body_id
-        c.resetBasePositionAndOrientation(body, world[0], world[1])
-        c.resetBaseVelocity(body, [0, 0, 0], [0, 0, 0])
+    def _restore_pose_in_link(self, name: str, relative: holding.Transform) -> None:
+        holding.restore_pose_in_link(self.physics.client, self.robot.body_id, self.holds[name].link, self._by_name[name].body_id, relative)

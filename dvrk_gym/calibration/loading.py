@@ -1,0 +1,52 @@
+"""Load a calibrator by name from a calibration run folder, running the pipeline there first if it has none.
+
+A calibration run folder (``dvrk-gym calibrate`` or ``evaluate``, or
+:func:`~dvrk_gym.calibration.pipeline.run_calibration`) holds the three calibrators of the
+paper as pickle-free model files (:data:`~dvrk_gym.calibration.pipeline.CALIBRATOR_FILES`)
+and the settings it was made with.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+from pathlib import Path
+from typing import Any
+
+from dvrk_gym.calibration.models.dnn import DNNCalibrator
+from dvrk_gym.calibration.models.rigid import RigidBodyCalibrator
+from dvrk_gym.calibration.models.two_phase import TwoPhaseCalibrator
+from dvrk_gym.calibration.pipeline import CALIBRATOR_FILES, PipelineConfig, read_pipeline_settings, run_calibration
+
+logger = logging.getLogger(__name__)
+
+CALIBRATOR_LOADERS = {"rbt": RigidBodyCalibrator, "dnn": DNNCalibrator, "dnn+rf": TwoPhaseCalibrator}
+"""The class that reads each calibrator's model file, by the calibrator's name."""
+
+
+def load_calibrator(folder: str | os.PathLike, name: str, bias: str = "paper", bias_seed: int = 0) -> tuple[Any, dict[str, Any]]:
+    """A calibrator from a calibration run folder, and the run's settings.
+
+    Runs the calibration pipeline in ``folder`` first if the model file is missing (its
+    stages are cached, so an interrupted run resumes). The settings come from the
+    folder's stamp when it has one, else from ``bias``/``bias_seed``.
+
+    Args:
+        folder: a folder written by ``dvrk-gym calibrate`` or ``evaluate``.
+        name: "rbt", "dnn" or "dnn+rf".
+        bias: the cable bias preset, for a folder without settings.
+        bias_seed: which instrument, for a folder without settings.
+
+    Raises:
+        ValueError: an unknown calibrator name.
+    """
+    if name not in CALIBRATOR_FILES:
+        raise ValueError(f"unknown calibrator {name!r}; expected one of {sorted(CALIBRATOR_FILES)}")
+    folder = Path(folder)
+    settings = read_pipeline_settings(folder) or {"bias": bias, "bias_seed": bias_seed}
+    path = folder / CALIBRATOR_FILES[name]
+    if not path.exists():
+        logger.warning("%s has no %s: running the calibration pipeline there (cached stages)", folder, path.name)
+        run_calibration(folder, PipelineConfig.from_settings(settings), benchmark=False)
+        settings = read_pipeline_settings(folder) or settings
+    return CALIBRATOR_LOADERS[name].load(path), settings

@@ -1,0 +1,183 @@
+"""The pick primitive of Debridement-v0: the paper's six phases, from a commanded target to the drop.
+
+One pick starts from a base-frame target ``(bx, by, bz)`` and a yaw: the commanded
+(reported) position that should put the closed jaw tip on a fragment. It moves to above
+the target in free space with the jaws open (``to_seed``), lowers them stepping physics
+onto a floor just above the paper (``lower``), closes them (``grip``), lifts (``raise``),
+carries what it holds to the receptacle (``to_receptacle``), opens the jaws and turns the
+tool back to yaw 0 (``drop_and_rotate``). :class:`PickTiming` sets its heights, speeds
+and dwells; :class:`PickPrimitive` runs it on a world and its table and returns what the
+judge (:mod:`dvrk_gym.sim.table.judge`) needs.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from dvrk_gym import paper
+from dvrk_gym.envs.grid_touch import tool_pose
+from dvrk_gym.sim.physics.scene import RECEPTACLE_CENTER_M
+from dvrk_gym.sim.robot import ik
+from dvrk_gym.sim.robot import kinematics as kin
+from dvrk_gym.sim.robot.motion import MotionLimits
+from dvrk_gym.sim.table import judge
+from dvrk_gym.sim.table.grasp import GRASP_TIP_CLEARANCE_M
+from dvrk_gym.sim.table.table import DebridementTable
+from dvrk_gym.sim.world import DvrkWorld
+
+PHASES: tuple[str, ...] = tuple(paper.DEBRIDEMENT_PHASE_FRAMES)
+"""The paper's six phases of a pick, in order."""
+CLOSED_JAW_RAD = kin.JAW_LOWER_RAD
+"""The jaw command that closes the jaws as far as what they hold allows."""
+DROP_OFFSETS_M = np.array([[x, y] for y in (-0.007, 0.0, 0.007) for x in (-0.006, 0.0, 0.006)])
+"""Where in the receptacle successive picks drop the jaw tip (about its centre, metres):
+eight raisins dropped at one point pile over the rim."""
+TEACH_ITERATIONS = 4
+"""Fixed-point iterations that find the command putting the true jaw tip on a drop point."""
+
+
+@dataclass(frozen=True)
+class PickTiming:
+    """How a pick moves: heights (m), speed limits and dwell times (s).
+
+    Tuned so that over a trial the phases last as the paper's (mean frames at 25 fps: to
+    seed 26.0, lower 16.1, grip 37.5, raise 24.0, to receptacle 42.1, drop and rotate
+    38.5; 7.37 s a fragment) under the paper's bias. Free moves go at 6.5 cm/s (10 cm in
+    1.64 s; the authors' "fast" setting took 1.49 s); the robot carries a fragment at
+    3.8 cm/s, and lowers and lifts it at 3 cm/s.
+
+    Attributes:
+        approach_height_m: the free move ends this far above the target, m.
+        grip_depth_m: the jaws are lowered to this far below the target (the floor,
+            GRASP_TIP_CLEARANCE_M above the paper, stops them first), m.
+        raise_height_m: how far the jaws lift the fragment, m.
+        drop_height_m: the closed jaw tip's height above the receptacle's floor when the
+            jaws open (its walls are 14 mm high), m.
+        travel: limits of the free move to the fragment (and the rotation after a drop).
+        descend: limits of lowering and raising.
+        carry: limits of the move to the receptacle with a fragment.
+        grip_dwell_s: the grip phase lasts at least this long (the jaws close and the
+            grasp settles), s.
+        drop_fall_s: physics time the fragment gets to fall once the jaws open, s.
+        drop_dwell_s: the drop-and-rotate phase lasts at least this long, s.
+    """
+
+    approach_height_m: float = 0.012
+    grip_depth_m: float = 0.002
+    raise_height_m: float = 0.025
+    drop_height_m: float = 0.012
+    travel: MotionLimits = field(default_factory=lambda: MotionLimits(max_speed_m_s=0.065, max_accel_m_s2=0.65))
+    descend: MotionLimits = field(default_factory=lambda: MotionLimits(max_speed_m_s=0.03, max_accel_m_s2=0.3))
+    carry: MotionLimits = field(default_factory=lambda: MotionLimits(max_speed_m_s=0.038, max_accel_m_s2=0.3))
+    grip_dwell_s: float = 1.5
+    drop_fall_s: float = 0.35
+    drop_dwell_s: float = 1.54
+
+    def __post_init__(self) -> None:
+        for name in ("approach_height_m", "grip_depth_m", "raise_height_m", "drop_height_m", "grip_dwell_s", "drop_fall_s", "drop_dwell_s"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0):
+                raise ValueError(f"PickTiming.{name} must be finite and >= 0, got {value}")
+
+
+@dataclass(frozen=True)
+class PickRun:
+    """What one pick did, for the judge.
+
+    Attributes:
+        record: where the jaws were when they began to close, against the fragments on
+            the paper before the pick (None: none was on the paper).
+        pierced: indices of the fragments a jaw tip held pierced at the end of a phase.
+        phase_s: how long each of PHASES took, s, (6,).
+        joints_clamped: which joints a move had to clamp into their limits, bool (6,).
+    """
+
+    record: judge.GripRecord | None
+    pierced: set[int]
+    phase_s: np.ndarray
+    joints_clamped: np.ndarray
+
+
+class PickPrimitive:
+    """The paper's pick on a world and the table beside it.
+
+    Args:
+        world: the arm, its cables and the clock.
+        table: the fragments and the gripper beside it.
+        timing: heights, speeds and dwell times of a pick.
+    """
+
+    def __init__(self, world: DvrkWorld, table: DebridementTable, timing: PickTiming) -> None:
+        self.world = world
+        self.table = table
+        self.timing = timing
+
+    def drop_point(self, pick: int) -> np.ndarray:
+        """Where the closed jaw tip should be when pick number ``pick`` drops, base frame, m."""
+        offset = DROP_OFFSETS_M[pick % len(DROP_OFFSETS_M)]
+        return RECEPTACLE_CENTER_M + [offset[0], offset[1], self.timing.drop_height_m]
+
+    def drop_command(self, pick: int, yaw: float) -> np.ndarray:
+        """The commanded position (base frame, m) that puts the true jaw tip on the drop
+        point of pick number ``pick`` with tool yaw ``yaw`` (rad), as taught.
+
+        The receptacle lies outside the calibrated workspace, where the uncalibrated
+        robot misses by about 9 mm; on the real robot the drop pose is taught once by
+        hand. Here the teaching is a fixed-point search on the cable model at rest (no
+        noise), which leaves its state as it was.
+        """
+        cable = self.world.cable
+        state = cable.get_state()
+        tip = self.drop_point(pick)
+        command = tip.copy()
+        for _ in range(TEACH_ITERATIONS):
+            q, _ = ik.inverse_kinematics_clamped(tool_pose(command, yaw), q_ref=self.world.q_cmd)
+            cable.reset(q)
+            command = command + tip - kin.jaw_tip_positions(cable.true_joints(q), 0.0, cable.true_dh)[0]
+        cable.set_state(state)
+        return command
+
+    def run(self, target: np.ndarray, yaw: float, rng: np.random.Generator, pick: int, sizes: np.ndarray, candidates: list[int]) -> PickRun:
+        """Pick at ``target`` (commanded position, base frame, m) with tool yaw ``yaw`` (rad).
+
+        Args:
+            rng: draws every move's repeatability noise.
+            pick: the pick's number in the episode (which drop point it uses).
+            sizes: (n, 3) sizes of the table's fragments, m.
+            candidates: indices of the fragments on the paper before the pick.
+        """
+        world, table, timing = self.world, self.table, self.timing
+        poses_before = [f.pose() for f in table.fragments]
+        pierced: set[int] = set()
+        marks = [world.clock.time_s]
+        joints_clamped = np.zeros(6, dtype=bool)
+
+        def phase_done() -> None:
+            marks.append(world.clock.time_s)
+            pierced.update(i for i, mode in table.held().items() if mode == "pierce")
+
+        above = tool_pose(target + [0.0, 0.0, timing.approach_height_m], yaw)
+        move = world.move_to(above, kin.JAW_FULLY_OPEN_RAD, rng, True, timing.travel)
+        joints_clamped |= move.joints_clamped
+        phase_done()
+        move = table.move_stepped(tool_pose(target - [0.0, 0.0, timing.grip_depth_m], yaw), rng, GRASP_TIP_CLEARANCE_M, timing.descend)
+        joints_clamped |= move.joints_clamped
+        record = judge.grip_record(world.true_touch_point(), poses_before, sizes, candidates)
+        phase_done()
+        spent = table.actuate_jaws(CLOSED_JAW_RAD)
+        table.dwell(timing.grip_dwell_s - spent, step_physics=False)
+        phase_done()
+        lifted = world.reported_pose()[:3, 3] + [0.0, 0.0, timing.raise_height_m]
+        table.move_stepped(tool_pose(lifted, yaw), rng, limits=timing.descend)
+        phase_done()
+        drop = self.drop_command(pick, yaw)
+        world.move_to(tool_pose(drop, yaw), None, rng, True, timing.carry)
+        phase_done()
+        spent = table.actuate_jaws(kin.JAW_FULLY_OPEN_RAD, timing.drop_fall_s)
+        spent += world.move_to(tool_pose(drop, 0.0), None, rng, True, timing.travel).duration_s
+        table.dwell(timing.drop_dwell_s - spent, step_physics=False)
+        marks.append(world.clock.time_s)
+        return PickRun(record, pierced, np.diff(marks), joints_clamped)

@@ -1,0 +1,259 @@
+"""Why the dVRK misses: the cable model between joint commands and true joint angles.
+
+The dVRK controller turns a commanded tool pose into joint commands with the *nominal*
+inverse kinematics, and its encoders (at the motors) report those commands, so the
+reported pose is ``forward_kinematics(q_cmd, PSM_DH)``. Between the motors and the joints
+run cables that stretch, slip and stick; the instrument itself is machined to a
+tolerance. :class:`CableModel` turns the commands, and their history, into the joint
+angles the arm really takes, ``q_true``; with the instrument's real DH table
+(:attr:`CableModel.true_dh`) these give the pose the cameras see:
+``forward_kinematics(q_true, model.true_dh)``.
+
+The error terms (magnitudes from :class:`~dvrk_gym.sim.robot.bias.BiasConfig`):
+
+- homing offsets (per instrument): constant joint offsets;
+- tool kinematic error (per instrument): the true DH table;
+- outer-joint cable stretch: outer yaw / pitch errors that grow, and saturate, with the
+  joint's distance from the pose where its cables are unloaded;
+- wrist cable stretch: coupled roll / wrist-pitch / wrist-yaw errors from the wrist
+  deflection, so the tip error depends on orientation and not only on position;
+- gravity sag of the shaft, growing with insertion and with the shaft's tilt;
+- hysteresis: a Prandtl-Ishlinskii sum of play operators per joint (state!);
+- repeatability noise: a fresh draw per move.
+
+The per-instrument terms are drawn in :func:`~dvrk_gym.sim.robot.bias.draw_instrument`;
+the per-move ones are the functions below. Joint vectors follow
+:data:`dvrk_gym.sim.robot.kinematics.JOINT_NAMES` (rad, insertion in m).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from dvrk_gym.sim.robot import kinematics as kin
+from dvrk_gym.sim.robot.bias import BiasConfig, draw_instrument
+
+__all__ = [
+    "CableModel",
+    "outer_stretch",
+    "wrist_stretch",
+    "gravity_sag",
+    "play_update",
+    "hysteresis_output",
+    "repeatability_std",
+    "play_radii",
+]
+
+_N_JOINTS = 6
+_OUTER = slice(0, 2)  # outer yaw, outer pitch
+_WRIST = slice(3, 6)  # roll, wrist pitch, wrist yaw
+_DEG = np.pi / 180.0
+
+
+def _frozen(values: object) -> np.ndarray:
+    array = np.array(values, dtype=float)
+    array.flags.writeable = False  # module constants are shared by every model
+    return array
+
+
+# Cable stretch saturates: wire rope is soft while its strands bed in and stiffer under
+# load, so stretch ~ scale * tanh(deflection / scale). These scales (rad) are where the
+# stretch curve bends over.
+OUTER_STRETCH_SCALE_RAD = 8.0 * _DEG
+# Outer (yaw, pitch) pose where the arm, as mounted, loads its outer cables least, rad.
+# Where it lies on a real arm depends on its mounting and balance; here it is near one
+# corner of the paper's workspace (which spans about 1-27 deg of outer yaw and -28-0 deg
+# of outer pitch), so the stretch grows across the workspace, and differently for each
+# tool yaw (the wrist, and with it the shaft, sits on a different side of the jaw tip
+# for each), which makes the rigid-fit residual differ between the paper's yaws.
+OUTER_UNLOADED_RAD = _frozen(np.array([5.0, -22.0]) * _DEG)
+WRIST_STRETCH_SCALE_RAD = 30.0 * _DEG
+INSERTION_MAX_M = float(kin.JOINT_UPPER[2])
+# Lever arms (m) from each joint's motion to the jaw tip in the paper's workspace, used
+# to express tip repeatability as joint noise: RCM to tissue for the outer joints, the
+# jaw's distance off the shaft axis for roll, wrist offset + jaw for wrist pitch, the jaw
+# for wrist yaw.
+TIP_LEVER_ARMS_M = _frozen([0.17, 0.17, 1.0, 0.010, 0.019, 0.010])
+# Hysteresis: each joint's loop is a sum of equally weighted play operators whose
+# half-widths are these fractions of the largest; a sum of plays gives the rounded loops
+# and minor loops of friction-loaded cables instead of one hard dead band.
+PLAY_FRACTIONS = _frozen([0.25, 0.5, 0.75, 1.0])
+
+
+# --- the per-move error terms ------------------------------------------------------------
+
+
+def outer_stretch(q: np.ndarray, config: BiasConfig, gains: np.ndarray) -> np.ndarray:
+    """Outer yaw / pitch errors from the stretch of their drive cables, (2,) rad.
+
+    The outer joints are driven by capstans and cables loaded by the arm's imperfectly
+    balanced weight. The load, and so the stretch, is zero at OUTER_UNLOADED_RAD and
+    grows either side of it; the cable stiffens under load, so the error grows and then
+    saturates: gain * A * tanh((q - q_unloaded) / s). A smooth, position-dependent
+    distortion of the workspace: most of the error a rigid fit cannot remove. (At the
+    ``paper`` magnitude it is larger than cable stretch alone would be: see the notes
+    above ``_PAPER`` in :mod:`dvrk_gym.sim.robot.bias`.)
+
+    Args:
+        q: (6,) joint values, rad / m.
+        config: Supplies A = outer_stretch_rad.
+        gains: (2,) per-instrument factors near 1.
+    """
+    deflection = (q[_OUTER] - OUTER_UNLOADED_RAD) / OUTER_STRETCH_SCALE_RAD
+    return gains * config.outer_stretch_rad * np.tanh(deflection)
+
+
+def wrist_stretch(q: np.ndarray, config: BiasConfig, coupling: np.ndarray) -> np.ndarray:
+    """Coupled roll / wrist-pitch / wrist-yaw errors from wrist-cable stretch, (3,) rad.
+
+    Each of the wrist-pitch and wrist-yaw cable pairs stretches by
+    k * s * tanh(deflection / s) (compliance k = wrist_stretch, saturation s =
+    WRIST_STRETCH_SCALE_RAD); the coupling matrix spreads the stretch over the three
+    wrist joints, since the yaw cables run over the pitch pulleys and all cables twist
+    the shaft. Roll's own angle drives no stretch: its drive carries almost no load (the
+    tool is nearly symmetric about the shaft), and leaving it out keeps the error
+    continuous where the inverse kinematics wraps roll at +-pi.
+    """
+    scale = WRIST_STRETCH_SCALE_RAD
+    stretch = config.wrist_stretch * scale * np.tanh(q[4:6] / scale)
+    return coupling @ stretch
+
+
+def gravity_sag(q: np.ndarray, config: BiasConfig) -> np.ndarray:
+    """Outer yaw / pitch errors (2,) rad equivalent to the shaft sagging under gravity.
+
+    The shaft hangs from the RCM like a cantilever: it turns toward the vertical by an
+    angle proportional to insertion^2 and to the sine of its tilt from the vertical (zero
+    when it hangs straight down); sag_m is the tip drop of a horizontal shaft at full
+    insertion. The rotation is expressed as outer yaw / pitch changes by least squares
+    through the Jacobian of the shaft direction.
+    """
+    yaw, pitch, insertion = q[0], q[1], q[2]
+    cy, sy, cp, sp = np.cos(yaw), np.sin(yaw), np.cos(pitch), np.sin(pitch)
+    shaft = np.array([sy * cp, -sp, -cy * cp])  # unit, from the RCM toward the tip
+    down = np.array([0.0, 0.0, -1.0])
+    toward_down = down - (down @ shaft) * shaft  # |.| = sin(tilt from the vertical)
+    full_insertion_angle_rad = config.sag_m / INSERTION_MAX_M
+    rotation = full_insertion_angle_rad * (insertion / INSERTION_MAX_M) ** 2 * toward_down
+    jacobian = np.array([[cy * cp, 0.0, sy * cp], [-sy * sp, -cp, cy * sp]]).T
+    return np.linalg.lstsq(jacobian, rotation, rcond=None)[0]
+
+
+def play_update(plays: np.ndarray, q_cmd: np.ndarray, radii: np.ndarray) -> np.ndarray:
+    """Advance play operators (backlash elements) to a new command.
+
+    Each play's output stays put until the command is more than its radius away, then
+    is dragged along at that distance: approaching one command from opposite sides
+    leaves the output on opposite sides of it.
+
+    Args:
+        plays: (n_plays, 6) previous outputs.
+        q_cmd: (6,) new command.
+        radii: (n_plays, 6) half-widths, >= 0 (zero: the output follows exactly).
+
+    Returns:
+        (n_plays, 6) new outputs.
+    """
+    return np.clip(plays, q_cmd - radii, q_cmd + radii)
+
+
+def hysteresis_output(plays: np.ndarray, q_cmd: np.ndarray) -> np.ndarray:
+    """The Prandtl-Ishlinskii joint value: the mean of the play outputs, (6,).
+
+    Written as q_cmd minus the mean lag so that zero-width plays give q_cmd bit for bit.
+    """
+    return q_cmd - np.mean(q_cmd - plays, axis=0)
+
+
+def repeatability_std(config: BiasConfig) -> np.ndarray:
+    """Per-joint sd (6,) rad / m of the per-move noise.
+
+    Each joint's share moves the tip by repeatability_m / sqrt(6) (RMS) through its lever
+    arm, so the six together scatter the tip by about repeatability_m.
+    """
+    return config.repeatability_m / np.sqrt(_N_JOINTS) / TIP_LEVER_ARMS_M
+
+
+def play_radii(config: BiasConfig) -> np.ndarray:
+    """(n_plays, 6) play half-widths whose loop gap equals the configured backlash."""
+    gaps = np.array([config.backlash_outer_rad] * 2 + [config.backlash_insertion_m] + [config.backlash_wrist_rad] * 3)
+    # A large reversal opens a gap of 2 * mean(radii); scale so it equals the gap.
+    return np.outer(PLAY_FRACTIONS / PLAY_FRACTIONS.mean(), gaps / 2.0)
+
+
+def _checked_joints(values: np.ndarray, name: str) -> np.ndarray:
+    array = np.asarray(values, dtype=float)
+    if array.shape != (_N_JOINTS,):
+        raise ValueError(f"{name} must have shape ({_N_JOINTS},), got {array.shape}")
+    for i, value in enumerate(array):
+        if not np.isfinite(value):
+            raise ValueError(f"{name}[{i}] ({kin.JOINT_NAMES[i]}) is {value}; expected a finite value")
+    return array
+
+
+class CableModel:
+    """One instrument on one arm: maps joint commands (and their history) to true joints.
+
+    Args:
+        config: Error magnitudes.
+        bias_seed: Seed of the instrument: the same seed draws the same offsets, DH
+            table and coupling.
+
+    Attributes:
+        config: The BiasConfig in use.
+        bias_seed: The seed the instrument was drawn from.
+        instrument: The instrument drawn from bias_seed.
+        true_dh: The instrument's true DH table (PSM_DH under the ``none`` preset).
+    """
+
+    def __init__(self, config: BiasConfig, bias_seed: int = 0) -> None:
+        self.config = config
+        self.bias_seed = bias_seed
+        self.instrument = draw_instrument(config, bias_seed)
+        self.true_dh = self.instrument.true_dh
+        self._radii = play_radii(config)
+        self._noise_std = repeatability_std(config)
+        # NaN = no history yet: the first command finds the cables at rest there.
+        self._plays = np.full((len(PLAY_FRACTIONS), _N_JOINTS), np.nan)
+
+    def reset(self, q_cmd: np.ndarray) -> None:
+        """Put the cables at rest at q_cmd (6,): no hysteresis gap."""
+        q_cmd = _checked_joints(q_cmd, "q_cmd")
+        self._plays = np.tile(q_cmd, (len(PLAY_FRACTIONS), 1))
+
+    def true_joints(self, q_cmd: np.ndarray, noise_rng: np.random.Generator | None = None) -> np.ndarray:
+        """Move to a joint command and return the joints the arm really takes.
+
+        Args:
+            q_cmd: (6,) commanded (= reported) joints, rad / m.
+            noise_rng: Source of this move's repeatability noise (one draw per call);
+                None for a noiseless move.
+
+        Returns:
+            (6,) true joint values, rad / m.
+        """
+        q_cmd = _checked_joints(q_cmd, "q_cmd")
+        if np.isnan(self._plays).any():
+            self.reset(q_cmd)
+        self._plays = play_update(self._plays, q_cmd, self._radii)
+        q = hysteresis_output(self._plays, q_cmd)
+        error = np.zeros(_N_JOINTS)
+        error[_OUTER] = outer_stretch(q, self.config, self.instrument.outer_gains) + gravity_sag(q, self.config)
+        error[_WRIST] = wrist_stretch(q, self.config, self.instrument.wrist_coupling)
+        q_true = q + self.instrument.homing_offsets + error
+        if noise_rng is not None:
+            q_true = q_true + noise_rng.normal(0.0, 1.0, _N_JOINTS) * self._noise_std
+        return q_true
+
+    def get_state(self) -> np.ndarray:
+        """A copy of the hysteresis state, (n_plays, 6); NaN before the first move."""
+        return self._plays.copy()
+
+    def set_state(self, state: np.ndarray) -> None:
+        """Restore a state from get_state (all finite, or all NaN for 'no history')."""
+        state = np.array(state, dtype=float)
+        if state.shape != self._plays.shape:
+            raise ValueError(f"state must have shape {self._plays.shape}, got {state.shape}")
+        if not (np.isfinite(state).all() or np.isnan(state).all()):
+            raise ValueError("state must be all finite, or all NaN (no history)")
+        self._plays = state

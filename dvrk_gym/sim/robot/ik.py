@@ -1,0 +1,169 @@
+"""Closed-form inverse kinematics of the nominal dVRK PSM (:data:`~dvrk_gym.sim.robot.kinematics.PSM_DH`).
+
+The dVRK controller turns a commanded tool pose into joint commands with this inverse of
+:func:`~dvrk_gym.sim.robot.kinematics.forward_kinematics`. Poses are (4, 4) transforms in
+the base (RCM) frame, metres; joint vectors follow
+:data:`~dvrk_gym.sim.robot.kinematics.JOINT_NAMES` (rad, insertion in m).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from dvrk_gym.sim.robot.kinematics import (
+    JOINT_LIMIT_TOLERANCE,
+    JOINT_LOWER,
+    JOINT_UPPER,
+    PSM_DH,
+    TOOL_TIP_ROTATION,
+    clamp_to_joint_limits,
+    dh_transform,
+    finite_vector,
+    joint_limit_violations,
+    rotation_x,
+)
+
+__all__ = ["UnreachablePoseError", "inverse_kinematics", "inverse_kinematics_clamped"]
+
+# The wrist-pitch point lies (insertion - 15.6 mm) past the RCM along the shaft; this
+# is that +15.6 mm (sum of the insertion and roll d offsets, negated).
+_INSERTION_TO_WRIST_M = -(PSM_DH[2].d_offset_m + PSM_DH[3].d_offset_m)
+_WRIST_OFFSET_M = PSM_DH[5].a_m
+_SINGULAR_TOL_M = 1e-6
+
+
+class UnreachablePoseError(ValueError):
+    """Raised when no joint configuration within limits reaches a requested pose."""
+
+
+def _wrap(angle_rad: float) -> float:
+    """Angle wrapped to (-pi, pi]."""
+    return float(-np.remainder(-angle_rad + np.pi, 2 * np.pi) + np.pi)
+
+
+def _zxz_outer_angles(m: np.ndarray, b: float) -> tuple[float, float]:
+    """Angles (a, c) of m = Rz(a) @ Rx(b) @ Rz(c) for a known b with sin(b) != 0."""
+    s = np.sign(np.sin(b))
+    return float(np.arctan2(s * m[0, 2], -s * m[1, 2])), float(np.arctan2(s * m[2, 0], s * m[2, 1]))
+
+
+def _nonsingular_norm(vector: np.ndarray, why_singular: str) -> np.floating:
+    """The norm of vector, m; UnreachablePoseError if it is too short to give a direction.
+
+    Args:
+        vector: (3,) metres.
+        why_singular: What a short vector means, with ``{mm:.4f}`` where its length (mm) goes.
+    """
+    norm = np.linalg.norm(vector)
+    if norm < _SINGULAR_TOL_M:
+        raise UnreachablePoseError("pose is geometrically unreachable: " + why_singular.format(mm=norm * 1e3))
+    return norm
+
+
+def _solve_branch(p6: np.ndarray, r6: np.ndarray, x5_sign: float, shaft_sign: float) -> np.ndarray:
+    """Closed-form IK for one geometric branch of the nominal PSM (roll in (-pi, pi])."""
+    n = r6[:, 2]  # wrist-yaw axis z6; in this chain z6 == y5
+    # p6 - p5 = a * x5 (x5: common normal of z5 and z6) and the shaft through the RCM
+    # and p5 lies in span(x5, n), so the part of p6 normal to n points along +-x5.
+    radial = p6 - (p6 @ n) * n
+    radial_norm = _nonsingular_norm(radial, "the wrist-yaw axis passes within {mm:.4f} mm of the RCM (target too close to the RCM?)")
+    x5 = x5_sign * radial / radial_norm
+    p5 = p6 - _WRIST_OFFSET_M * x5
+    shaft_length = _nonsingular_norm(p5, "the wrist-pitch point is {mm:.4f} mm from the RCM, so the shaft direction is undefined")
+    shaft = shaft_sign * p5 / shaft_length
+    # From FK: shaft = (sin(yaw) cos(pitch), -sin(pitch), -cos(yaw) cos(pitch)).
+    yaw = np.arctan2(shaft[0], -shaft[2])
+    pitch = -np.arctan2(shaft[1], np.hypot(shaft[0], shaft[2]))
+    insertion = _INSERTION_TO_WRIST_M + shaft_sign * shaft_length
+    # Right-handed frame 5: z5 = x5 x y5 (spelled out because np.cross is slow for 3-vectors).
+    z5 = np.array([x5[1] * n[2] - x5[2] * n[1], x5[2] * n[0] - x5[0] * n[2], x5[0] * n[1] - x5[1] * n[0]])
+    r5 = np.column_stack([x5, n, z5])
+    r3 = (dh_transform(PSM_DH[0], yaw) @ dh_transform(PSM_DH[1], pitch) @ dh_transform(PSM_DH[2], insertion))[:3, :3]
+    # R35 = Rz(q4) Rx(alpha5) Rz(q5 + offset5) because alpha4 = 0 and a4 = a5 = 0.
+    roll, wrist_pitch = _zxz_outer_angles(r3.T @ r5, PSM_DH[4].alpha_rad)
+    # R56 = Rx(alpha6) Rz(q6 + offset6).
+    r56 = rotation_x(PSM_DH[5].alpha_rad).T @ (r5.T @ r6)
+    wrist_yaw = np.arctan2(r56[1, 0], r56[0, 0]) - PSM_DH[5].theta_offset_rad
+    wrist_pitch -= PSM_DH[4].theta_offset_rad
+    return np.array([yaw, pitch, insertion, _wrap(roll), _wrap(wrist_pitch), _wrap(wrist_yaw)])
+
+
+def _choose_roll(q: np.ndarray, q_ref: np.ndarray | None) -> np.ndarray:
+    """Pick the 2*pi branch of roll: within limits and closest to q_ref[3] if given."""
+    if q_ref is None:
+        return q
+    branches = q[3] + 2 * np.pi * np.arange(-2, 3)
+    in_limits = (branches >= JOINT_LOWER[3]) & (branches <= JOINT_UPPER[3])
+    candidates = branches[in_limits] if in_limits.any() else branches
+    q = q.copy()
+    q[3] = candidates[np.argmin(np.abs(candidates - q_ref[3]))]
+    return q
+
+
+def _validate_pose(pose: np.ndarray) -> np.ndarray:
+    pose = np.asarray(pose, dtype=float)
+    if pose.shape != (4, 4):
+        raise ValueError(f"pose must have shape (4, 4), got {pose.shape}")
+    if not np.all(np.isfinite(pose)):
+        raise ValueError("pose must be finite")
+    rotation = pose[:3, :3]
+    orthonormality_error = np.abs(rotation.T @ rotation - np.eye(3)).max()
+    bottom_row_error = np.abs(pose[3] - (0.0, 0.0, 0.0, 1.0)).max()
+    if orthonormality_error > 1e-6 or bottom_row_error > 1e-9 or np.linalg.det(rotation) < 0:
+        raise ValueError("pose must be a rigid transform (orthonormal, det +1, last row 0 0 0 1)")
+    return pose
+
+
+def inverse_kinematics(pose: np.ndarray, q_ref: np.ndarray | None = None) -> np.ndarray:
+    """Closed-form inverse kinematics of the nominal PSM (PSM_DH).
+
+    Args:
+        pose: (4, 4) target tool pose in the base frame (metres), as from forward_kinematics.
+        q_ref: Optional (6,) reference configuration; only its roll (index 3) is used,
+            to choose among the 2*pi-equivalent roll solutions.
+
+    Returns:
+        (6,) joint values in JOINT_NAMES order (rad / m), within joint limits. Without
+        q_ref the roll lies in (-pi, pi].
+
+    Raises:
+        ValueError: pose or q_ref is malformed or non-finite.
+        UnreachablePoseError: the pose is singular or needs a joint outside its limits.
+    """
+    pose = _validate_pose(pose)
+    q_ref = None if q_ref is None else finite_vector(q_ref, 6, "q_ref")
+    p6, r6 = pose[:3, 3], pose[:3, :3] @ TOOL_TIP_ROTATION.T
+    first_violations: list[str] = []
+    # Branch (+1, +1) is the physical one; the others only occur with the wrist
+    # pitch point less than 15.6 mm past the RCM (insertion < 15.6 mm).
+    for x5_sign, shaft_sign in ((1.0, 1.0), (1.0, -1.0), (-1.0, -1.0)):
+        q = _choose_roll(_solve_branch(p6, r6, x5_sign, shaft_sign), q_ref)
+        violations = joint_limit_violations(q, JOINT_LIMIT_TOLERANCE)
+        if not violations:
+            return q
+        first_violations = first_violations or violations
+    raise UnreachablePoseError("pose needs joints outside their limits: " + "; ".join(first_violations))
+
+
+def inverse_kinematics_clamped(pose: np.ndarray, q_ref: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Inverse kinematics that clamps into the joint limits instead of refusing.
+
+    For a reachable pose this equals :func:`inverse_kinematics`. Otherwise the physical
+    branch's solution is clamped joint by joint, so the tool goes as near as its limits
+    allow (the pose is then not reached exactly).
+
+    Returns:
+        (q (6,) within the limits, boolean mask (6,) of the joints that were clamped).
+
+    Raises:
+        ValueError: pose or q_ref is malformed or non-finite.
+        UnreachablePoseError: the pose is singular (e.g. at the RCM).
+    """
+    try:
+        q = inverse_kinematics(pose, q_ref)
+        return q, np.zeros(6, dtype=bool)
+    except UnreachablePoseError:
+        pose = _validate_pose(pose)
+        q_ref = None if q_ref is None else finite_vector(q_ref, 6, "q_ref")
+        q = _choose_roll(_solve_branch(pose[:3, 3], pose[:3, :3] @ TOOL_TIP_ROTATION.T, 1.0, 1.0), q_ref)
+        return clamp_to_joint_limits(q)

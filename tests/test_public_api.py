@@ -1,0 +1,39 @@
+"""The public API: every name in ``dvrk_gym.__all__`` resolves, and importing the package stays light."""
+
+import subprocess
+import sys
+
+import pytest
+
+import dvrk_gym
+
+
+@pytest.mark.parametrize("name", dvrk_gym.__all__)
+def test_every_public_name_resolves(name):
+    assert getattr(dvrk_gym, name) is not None
+    assert name in dir(dvrk_gym)
+
+
+def test_an_unknown_name_is_an_attribute_error():
+    with pytest.raises(AttributeError, match="no attribute 'NoSuchThing'"):
+        dvrk_gym.NoSuchThing  # noqa: B018
+
+
+def test_importing_the_package_registers_the_envs_without_loading_torch_or_pybullet():
+    code = (
+        "import sys, gymnasium as gym, dvrk_gym\n"
+        "assert set(dvrk_gym.ENV_IDS) <= set(gym.registry), 'envs not registered'\n"
+        "heavy = sorted(m for m in ('torch', 'pybullet', 'sklearn', 'stable_baselines3') if m in sys.modules)\n"
+        "print(','.join(heavy))\n"
+    )
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert result.stdout.strip() == ""
+
+
+def test_the_public_names_are_the_modules_own_objects():
+    from dvrk_gym.calibration.policy import CalibratedPolicy
+    from dvrk_gym.envs.grid_touch import GridTouchEnv
+
+    assert dvrk_gym.CalibratedPolicy is CalibratedPolicy
+    assert dvrk_gym.GridTouchEnv is GridTouchEnv
+    assert dvrk_gym.make_calibrator("rbt").__class__ is dvrk_gym.RigidBodyCalibrator
