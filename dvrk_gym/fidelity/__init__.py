@@ -1,7 +1,10 @@
 """Fidelity: how close a simulated instrument is to the real robot, statistic by statistic.
 
 :mod:`~dvrk_gym.fidelity.statistics` computes the statistics of a Phase I data set (the
-same code for the authors' real rows and for a simulated collection).
+same code for the authors' real rows and for a simulated collection);
+:mod:`~dvrk_gym.fidelity.comparison` collects Phase I in simulation and judges each
+statistic against the real one; :mod:`~dvrk_gym.fidelity.report` prints the table and
+writes ``fidelity.json`` and ``fidelity.png``.
 
 The names below are imported lazily (PEP 562), so importing the statistics does not pull in
 matplotlib.
@@ -17,5 +20,10 @@ __all__, __getattr__, __dir__ = lazy_exports(  # PEP 562: each name imported fro
         "FidelityStatistics": "statistics",
         "fidelity_statistics": "statistics",
         "rigid_residuals_camera": "statistics",
+        "FidelityRun": "comparison",
+        "compare": "comparison",
+        "run_fidelity": "comparison",
+        "format_table": "report",
+        "write_report": "report",
     },
 )
