@@ -31,7 +31,7 @@ from __future__ import annotations
 import numpy as np
 
 from dvrk_gym.sim.robot import kinematics as kin
-from dvrk_gym.sim.robot.bias import BiasConfig, draw_instrument
+from dvrk_gym.sim.robot.bias import BiasConfig, Instrument, draw_instrument
 
 __all__ = [
     "CableModel",
@@ -198,6 +198,8 @@ class CableModel:
         config: Error magnitudes.
         bias_seed: Seed of the instrument: the same seed draws the same offsets, DH
             table and coupling.
+        instrument: This instrument instead of the one bias_seed draws (for fitting an
+            instrument to data: :mod:`dvrk_gym.fidelity.identify`).
 
     Attributes:
         config: The BiasConfig in use.
@@ -206,10 +208,10 @@ class CableModel:
         true_dh: The instrument's true DH table (PSM_DH under the ``none`` preset).
     """
 
-    def __init__(self, config: BiasConfig, bias_seed: int = 0) -> None:
+    def __init__(self, config: BiasConfig, bias_seed: int = 0, instrument: Instrument | None = None) -> None:
         self.config = config
         self.bias_seed = bias_seed
-        self.instrument = draw_instrument(config, bias_seed)
+        self.instrument = draw_instrument(config, bias_seed) if instrument is None else instrument
         self.true_dh = self.instrument.true_dh
         self._radii = play_radii(config)
         self._noise_std = repeatability_std(config)
