@@ -187,6 +187,8 @@ class DebridementEnv(DvrkEnv[DebridementConfig]):
         info["sim_error"] = error
         on_paper = len(self._on_paper()) if error is None else 0
         info["fragments_on_paper"] = on_paper
+        # Success of the trial, as SB3 and RL Zoo read it: every fragment in the receptacle.
+        info["is_success"] = error is None and len(self._delivered()) == len(self.table.fragments)
         if self.primitive:
             terminated = error is not None or on_paper == 0 or len(episode.outcomes) >= self.config.max_picks
             truncated = False

@@ -195,5 +195,7 @@ class CalibrationExplorationEnv(DvrkEnv[ExplorationConfig]):
             "sim_time_s": self.world.clock.time_s,
             "true_marker_position": self.world.true_marker_position(),
             "true_tip_position": self.world.true_touch_point(),
+            # A Phase I sample counts when both cameras saw the marker (a row the authors could use).
+            "is_success": detection.seen_both,
             **extra,
         }
