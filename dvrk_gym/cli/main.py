@@ -7,6 +7,7 @@ import logging
 import sys
 from collections.abc import Callable, Sequence
 
+from dvrk_gym import __version__
 from dvrk_gym.cli.baselines import add_commands as add_baseline_commands
 from dvrk_gym.cli.calibration import add_commands as add_calibration_commands
 from dvrk_gym.cli.debridement import add_commands as add_debridement_commands
@@ -23,6 +24,7 @@ def build_parser() -> argparse.ArgumentParser:
         description="Simulated dVRK calibration and debridement (Seita et al., ICRA 2018).",
     )
     parser.add_argument("-v", "--verbose", action="store_true", help="log progress details")
+    parser.add_argument("--version", action="version", version=f"dvrk-gym {__version__}")
     subparsers = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     add_reproduce_commands(subparsers)
     add_demo_commands(subparsers)
