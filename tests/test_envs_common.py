@@ -269,3 +269,36 @@ def test_make_vec_steps_every_env_in_sync_and_async_vector_envs(vectorization_mo
             assert rewards.shape == (2,) and terminated.shape == (2,)
         finally:
             envs.close()
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("env_id", ENV_IDS)
+def test_record_video_writes_an_episode_of_every_env(env_id, tmp_path):
+    pytest.importorskip("moviepy")
+    from gymnasium.wrappers import RecordVideo
+
+    env = RecordVideo(gym.make(env_id, camera_resolution=(160, 96), render_mode="rgb_array"), str(tmp_path), episode_trigger=lambda _: True)
+    try:
+        env.reset(seed=0)
+        done = False
+        while not done:
+            _, _, terminated, truncated, _ = env.step(env.action_space.sample())
+            done = terminated or truncated
+    finally:
+        env.close()
+    videos = list(tmp_path.glob("*.mp4"))
+    assert len(videos) == 1 and videos[0].stat().st_size > 0
+
+
+def test_debridement_renders_the_frames_of_a_pick_phase_by_phase():
+    env = gym.make("dvrk_gym/Debridement-v0", camera_resolution=(160, 96), render_mode="rgb_array_list")
+    try:
+        env.reset(seed=0)
+        assert len(env.render()) == 1  # the table as the episode starts
+        env.step(env.action_space.sample())
+        frames = env.render()
+        assert len(frames) == 6 and all(frame.shape == (96, 160, 3) for frame in frames)  # the paper's six phases
+        assert env.render() == []  # each frame is handed out once
+        assert not all(np.array_equal(frames[0], frame) for frame in frames[1:])  # the arm moved
+    finally:
+        env.close()

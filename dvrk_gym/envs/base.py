@@ -147,7 +147,7 @@ class DvrkEnv(gym.Env, Generic[ConfigT]):
             self._needs_reset = True
         return observation, reward, terminated, truncated, info
 
-    def render(self) -> np.ndarray | None:
+    def render(self) -> np.ndarray | list[Any] | None:
         if self.render_mode == "rgb_array":
             return self.world.render("left")
         return None  # "human": the PyBullet GUI shows the world live; None: nothing to draw

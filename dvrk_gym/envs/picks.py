@@ -13,6 +13,7 @@ judge (:mod:`dvrk_gym.sim.table.judge`) needs.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -108,12 +109,17 @@ class PickPrimitive:
         world: the arm, its cables and the clock.
         table: the fragments and the gripper beside it.
         timing: heights, speeds and dwell times of a pick.
+
+    Attributes:
+        on_phase: called at the end of each of the six phases (None: nothing); the env uses
+            it to render the frames of a pick.
     """
 
     def __init__(self, world: DvrkWorld, table: DebridementTable, timing: PickTiming) -> None:
         self.world = world
         self.table = table
         self.timing = timing
+        self.on_phase: Callable[[], None] | None = None
 
     def drop_point(self, pick: int) -> np.ndarray:
         """Where the closed jaw tip should be when pick number ``pick`` drops, base frame, m."""
@@ -158,6 +164,8 @@ class PickPrimitive:
         def phase_done() -> None:
             marks.append(world.clock.time_s)
             pierced.update(i for i, mode in table.held().items() if mode == "pierce")
+            if self.on_phase is not None:
+                self.on_phase()
 
         above = tool_pose(target + [0.0, 0.0, timing.approach_height_m], yaw)
         move = world.move_to(above, kin.JAW_FULLY_OPEN_RAD, rng, True, timing.travel)
@@ -180,4 +188,6 @@ class PickPrimitive:
         spent += world.move_to(tool_pose(drop, 0.0), None, rng, True, timing.travel).duration_s
         table.dwell(timing.drop_dwell_s - spent, step_physics=False)
         marks.append(world.clock.time_s)
+        if self.on_phase is not None:
+            self.on_phase()
         return PickRun(record, pierced, np.diff(marks), joints_clamped)
