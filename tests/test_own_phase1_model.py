@@ -15,14 +15,6 @@ def rows():
     position = np.column_stack([rng.uniform(-0.03, 0.03, (300, 2)), rng.uniform(0.17, 0.2, 300)])
     yaw = rng.choice(np.deg2rad([-90, -45, 0, 45, 90]), 300)
     X = np.column_stack([position, yaw, rng.uniform(-0.2, 0.4, 300), rng.uniform(-3.1, -2.6, 300)])
-        [
-            rng.uniform(-0.03, 0.03, (300, 2)),
-            rng.uniform(0.17, 0.2, 300),
-            rng.choice(np.deg2rad([-90, -45, 0, 45, 90]), 300),
-            rng.uniform(-0.2, 0.4, 300),
-            rng.uniform(-3.1, -2.6, 300),
-        ]
-    )
     bias = np.where(X[:, 3:4] > 0, 0.002, -0.001)  # a yaw-dependent offset a linear model of position misses
     y = X[:, :3] @ np.diag([1.0, -1.0, -1.0]) + bias
     return X, y
