@@ -7,7 +7,7 @@ import json
 from pathlib import Path
 
 from dvrk_gym import paper
-from dvrk_gym.cli.options import add_instrument_options
+from dvrk_gym.cli.options import add_instrument_options, add_progress_option
 
 
 def _add_world_options(parser: argparse.ArgumentParser) -> None:
@@ -37,7 +37,12 @@ def _run_collect(args: argparse.Namespace) -> int:
     from dvrk_gym.calibration.phase1 import run_paper_phase1
 
     data = run_paper_phase1(
-        args.trajectories, args.seed, bias=args.bias, bias_seed=args.bias_seed, camera_resolution=tuple(args.resolution)
+        args.trajectories,
+        args.seed,
+        bias=args.bias,
+        bias_seed=args.bias_seed,
+        camera_resolution=tuple(args.resolution),
+        progress=not args.no_progress,
     )
     args.out.mkdir(parents=True, exist_ok=True)
     path = args.out / "phase1.npz"
@@ -54,7 +59,7 @@ def _run_collect(args: argparse.Namespace) -> int:
 def _run_calibrate(args: argparse.Namespace) -> int:
     from dvrk_gym.calibration.pipeline import run_calibration
 
-    result = run_calibration(args.out, _config(args), benchmark=False)
+    result = run_calibration(args.out, _config(args), progress=not args.no_progress, benchmark=False)
     phase1 = result["phase1"]
     print(f"Phase I: {phase1.n_raw} raw, {phase1.n_kept} kept; Phase II: {len(result['phase2'].circle)} corrections")
     print(f"models in {args.out}: rbt.npz, dnn.npz, two_phase.npz (safe to load: no pickles)")
@@ -67,7 +72,7 @@ def _run_evaluate(args: argparse.Namespace) -> int:
     from dvrk_gym.calibration.benchmark import format_table
     from dvrk_gym.calibration.pipeline import run_calibration
 
-    result = run_calibration(args.out, _config(args), benchmark=True)
+    result = run_calibration(args.out, _config(args), progress=not args.no_progress, benchmark=True)
     print(format_table(result["table"]))
     print(f"wrote {args.out / 'calibration_table.json'}, {args.out / 'calibration_table.txt'}, {args.out / 'calibration_error_maps.png'}")
     return 0
@@ -79,7 +84,7 @@ def _evaluate_policy(args: argparse.Namespace) -> int:
     factory = load_policy_factory(args.policy)  # a bad name fails before any env is built
     options = json.loads(args.options) if args.options else None
     world = {"bias": args.bias, "bias_seed": args.bias_seed, "camera_resolution": tuple(args.resolution)}
-    results = evaluate_policy(factory, args.env, args.episodes, seed=args.seed, options=options, **world)
+    results = evaluate_policy(factory, args.env, args.episodes, seed=args.seed, options=options, progress=not args.no_progress, **world)
     names = sorted({name for r in results for name in r.metrics})
     print(f"{args.policy} on {args.env}, {args.episodes} episodes (seed {args.seed})")
     print(f"{'metric':<22}{'mean':>10}{'s.e.':>9}{'median':>10}{'min':>10}{'max':>10}")
@@ -134,12 +139,14 @@ def add_commands(subparsers: argparse._SubParsersAction) -> None:
     collect.add_argument("--out", type=Path, default=Path("dvrk_gym_out/calibration"), help="output folder (default: %(default)s)")
     collect.add_argument("--trajectories", type=int, default=paper.PHASE1_TRAJECTORIES, help="trajectories (the paper: %(default)s)")
     _add_world_options(collect)
+    add_progress_option(collect)
     collect.set_defaults(func=_run_collect)
 
     calibrate = subparsers.add_parser("calibrate", help="Phase I and II: fit the rigid body, DNN and DNN+RF calibrators (cached stages)")
     calibrate.add_argument("--out", type=Path, default=Path("dvrk_gym_out/calibration"), help="output folder (default: %(default)s)")
     _add_budget_options(calibrate)
     _add_world_options(calibrate)
+    add_progress_option(calibrate)
     calibrate.set_defaults(func=_run_calibrate)
 
     evaluate = subparsers.add_parser(
@@ -156,6 +163,7 @@ def add_commands(subparsers: argparse._SubParsersAction) -> None:
     evaluate.add_argument("--options", help='reset options for --policy as JSON, e.g. \'{"yaw": "random"}\'')
     _add_budget_options(evaluate)
     _add_world_options(evaluate)
+    add_progress_option(evaluate)
     evaluate.set_defaults(func=_run_evaluate)
 
     search = subparsers.add_parser("search", help="the paper's model search: 10-fold CV of 24 nets, linear and forests, with its bar chart")
