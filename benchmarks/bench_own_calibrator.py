@@ -8,6 +8,8 @@ calibration table for all four, on the same seeds (about 6 minutes on 2 busy cor
     python benchmarks/bench_own_calibrator.py
 """
 
+import argparse
+
 import gymnasium as gym
 from sklearn.ensemble import HistGradientBoostingRegressor
 from sklearn.multioutput import MultiOutputRegressor
@@ -18,7 +20,10 @@ from dvrk_gym.calibration.phase1 import run_paper_phase1
 from dvrk_gym.calibration.phase2 import collect_phase2
 
 if __name__ == "__main__":
-    phase1 = run_paper_phase1(seed=0).cleaned()  # the paper's 57 trajectories
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--trajectories", type=int, default=57, help="Phase I trajectories (the paper: %(default)s)")
+    args = parser.parse_args()
+    phase1 = run_paper_phase1(n_trajectories=args.trajectories, seed=0).cleaned()
     mine = MultiOutputRegressor(HistGradientBoostingRegressor(random_state=0)).fit(phase1.X, phase1.y)
     paper_dnn = make_calibrator("dnn", seed=0, progress=False).fit(phase1.X, phase1.y)
     grid = gym.make("dvrk_gym/GridTouch-v0")
