@@ -52,6 +52,10 @@ _EXPORTS = {
     "run_calibration": "calibration.pipeline",
     "calibration_table": "calibration.benchmark",
     "load_paper_phase1": "calibration.datasets",
+    # how close a simulated instrument is to the real robot
+    "FidelityStatistics": "fidelity.statistics",
+    "fidelity_statistics": "fidelity.statistics",
+    "run_fidelity": "fidelity.comparison",
     # evaluating any policy
     "run_episodes": "evaluation.episodes",
     "summarize": "evaluation.episodes",
@@ -88,6 +92,8 @@ if TYPE_CHECKING:  # what type checkers and editors see; at run time the names l
     from dvrk_gym.envs.picks import PickTiming
     from dvrk_gym.evaluation.episodes import run_episodes, summarize
     from dvrk_gym.evaluation.trials import run_trials
+    from dvrk_gym.fidelity.comparison import run_fidelity
+    from dvrk_gym.fidelity.statistics import FidelityStatistics, fidelity_statistics
     from dvrk_gym.reproduce.run import ReproduceConfig, run_reproduce
     from dvrk_gym.sim.robot.bias import BiasConfig
     from dvrk_gym.sim.table.table import DebridementTable

@@ -37,6 +37,7 @@ LAYER_RANKS = {
     "dvrk_gym.demo": 6,
     "dvrk_gym.evaluation": 7,
     "dvrk_gym.calibration": 8,
+    "dvrk_gym.fidelity": 8,
     "dvrk_gym.baselines": 9,
     "dvrk_gym.reproduce": 10,
     "dvrk_gym.cli": 11,

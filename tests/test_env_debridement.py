@@ -186,10 +186,10 @@ def test_oracle_episode_reports_outcomes_and_paper_like_times(make):
     assert info["sim_error"] is None and info["fragments_on_paper"] == 0
 
 
-def _rollout(env, seed: int) -> tuple[list[float], list]:
-    """Reset with ``seed`` and pick with the yaw of the fragment seen first: every observation
-    value, and the outcome, clock and grip offset."""
-    observations, outcomes = [env.reset(seed=seed)[0]], []
+def _rollout(env, seed: int, options=None) -> tuple[list[float], list]:
+    """Reset with ``seed`` (and ``options``) and pick with the yaw of the fragment seen
+    first: every observation value, and the outcome, clock and grip offset."""
+    observations, outcomes = [env.reset(seed=seed, options=options)[0]], []
     obs, _, _, _, info = env.step(fragment_target_action(observations[-1]))
     observations.append(obs)
     outcomes.append((info["outcomes"], info["sim_time_s"], info["true_grip_offset_ratio"], info["true_tip_at_grip"].tolist()))
@@ -207,6 +207,28 @@ def test_same_seed_and_actions_give_identical_observations_and_outcomes(make):
     first = _rollout(env, 7)
     _rollout(env, 8)
     assert _rollout(env, 7) == first
+
+
+def test_cable_history_carries_across_trials_unless_relaxed(make):
+    """Same seed and same history: the same trial; a seeded reset relaxes by default, as a fresh env."""
+
+    def trial(env, options=None):
+        env.reset(seed=5, options=options)
+        true_start = env.unwrapped.world.true_touch_point()
+        return true_start, _rollout(env, 5, options)
+
+    def after_history(options=None):
+        env = make(fragment="pumpkin_seed", bias="paper")
+        _rollout(env, 8)
+        return trial(env, options)
+
+    fresh_start, fresh = trial(make(fragment="pumpkin_seed", bias="paper"))
+    kept_start, kept = after_history({"relax": False})
+    again_start, again = after_history({"relax": False})
+    relaxed_start, relaxed = after_history()
+    assert np.array_equal(kept_start, again_start) and kept == again  # same seed, same history
+    assert np.linalg.norm(kept_start - fresh_start) > 1e-4  # the history moves the arm's true start
+    assert np.array_equal(relaxed_start, fresh_start) and relaxed == fresh
 
 
 @pytest.mark.slow

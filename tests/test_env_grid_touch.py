@@ -107,3 +107,57 @@ def test_bad_config_values_are_clear_errors(make_env):
         make_env("dvrk_gym/GridTouch-v0", reward_type="shaped")
     with pytest.raises(ValueError, match="approach_height_m"):
         make_env("dvrk_gym/GridTouch-v0", approach_height_m=-1.0)
+
+
+def test_reset_lifts_from_the_last_touch_and_stays_put_without_one(make_env):
+    env = make_env("dvrk_gym/GridTouch-v0")
+    obs, _ = env.reset(seed=0)
+    home = obs["observation"][:3].copy()
+    _, _, _, _, info = env.step(_nominal_action(env, 0))
+    obs, _ = env.reset()
+    lifted = info["reported_position"] + [0.0, 0.0, env.unwrapped.config.approach_height_m]
+    np.testing.assert_allclose(obs["observation"][:3], lifted, atol=1e-6)
+    again, _ = env.reset(seed=0, options={"relax": False})
+    np.testing.assert_array_equal(again["observation"][:3], obs["observation"][:3])
+    relaxed, _ = env.reset(options={"relax": True})
+    np.testing.assert_array_equal(relaxed["observation"][:3], home)
+    env.step(_nominal_action(env, 3))
+    seeded, _ = env.reset(seed=0)  # a seeded reset relaxes by default: a seed alone fixes the episode
+    np.testing.assert_array_equal(seeded["observation"][:3], home)
+
+
+def _touch_after(env, history: list[tuple[int, float]], relax: bool = False) -> np.ndarray:
+    """The true tip of a touch of circle 10 at yaw 0 (seed 0) after touching ``history``
+    (circle, yaw) pairs; ``relax`` relaxes the cables at that last reset."""
+    env.reset(seed=0)
+    for circle, yaw in history:
+        env.reset(options={"circle": circle, "yaw": yaw})
+        env.step(_nominal_action(env, circle, yaw))
+    env.reset(seed=0, options={"circle": 10, "yaw": 0.0, "relax": relax})  # relax False: keep the history
+    _, _, _, _, info = env.step(_nominal_action(env, 10))
+    return info["true_tip_position"]
+
+
+def test_cable_history_carries_from_one_touch_to_the_next_unless_relaxed(make_env):
+    fresh = _touch_after(make_env("dvrk_gym/GridTouch-v0"), [])
+    history = [(0, -np.pi / 2), (34, np.pi / 2)]
+    carried = _touch_after(make_env("dvrk_gym/GridTouch-v0"), history)
+    again = _touch_after(make_env("dvrk_gym/GridTouch-v0"), history)
+    relaxed = _touch_after(make_env("dvrk_gym/GridTouch-v0"), history, relax=True)
+    # About 10 um here: the 8 mm vertical descent drags most play operators to the same
+    # side whatever came before; over a whole tour the gap averages 0.04-0.09 mm.
+    assert np.linalg.norm(carried - fresh) > 1e-6
+    assert np.array_equal(carried, again)  # same seed, same history: the same touch
+    assert np.array_equal(relaxed, fresh)  # relaxed cables: as a fresh env
+
+
+def test_relax_option_must_be_a_bool(make_env):
+    env = make_env("dvrk_gym/GridTouch-v0")
+    with pytest.raises(ValueError, match="option 'relax' must be True or False, got 'yes'"):
+        env.reset(seed=0, options={"relax": "yes"})
+
+
+def test_no_bias_has_no_history(make_env):
+    fresh = _touch_after(make_env("dvrk_gym/GridTouch-v0", bias="none"), [])
+    carried = _touch_after(make_env("dvrk_gym/GridTouch-v0", bias="none"), [(0, -np.pi / 2), (34, np.pi / 2)])
+    assert np.array_equal(carried, fresh)

@@ -6,8 +6,11 @@ ReLU net in their code) and 2.06 mm^2 (the paper's chosen net).
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
+from sklearn.linear_model import LinearRegression
 
 from dvrk_gym.calibration.datasets import load_paper_phase1
 from dvrk_gym.calibration.models.dnn import DNNCalibrator
@@ -19,7 +22,8 @@ from dvrk_gym.calibration.search import (
     plot_search,
     run_search,
 )
-from dvrk_gym.paper import REAL_PHASE1_ROWS
+from dvrk_gym.cli.main import main
+from dvrk_gym.paper import AUTHORS_CV_MM2, REAL_PHASE1_ROWS
 from dvrk_gym.utils.torch_threads import torch_threads
 
 CHOSEN_NET_MAX_MM2 = 2.2
@@ -59,6 +63,38 @@ def test_linear_regression_cv_error_matches_the_authors(paper_data) -> None:
     assert LINEAR_RANGE_MM2[0] <= np.mean(errors) <= LINEAR_RANGE_MM2[1]
 
 
+def test_contiguous_folds_give_back_the_authors_linear_figure(paper_data) -> None:
+    """Their code: scikit-learn's LinearRegression on the six raw columns, KFold(10) unshuffled."""
+    X, y = paper_data
+    errors = cross_validate(lambda seed: LinearRegression(), X, y, folds=10, shuffle=False)
+    assert round(float(np.mean(errors)), 2) == AUTHORS_CV_MM2["linear"]
+    shuffled = cross_validate(lambda seed: LinearRegression(), X, y, folds=10, shuffle=True)
+    assert np.mean(shuffled) < np.mean(errors) - 0.1  # random folds leave neighbours on both sides
+
+
+class _RecordingModel:
+    """A model that remembers which rows it was asked to predict (by their first column)."""
+
+    tested: list[np.ndarray] = []
+
+    def fit(self, X: np.ndarray, y: np.ndarray) -> _RecordingModel:
+        return self
+
+    def predict(self, X: np.ndarray) -> np.ndarray:
+        _RecordingModel.tested.append(X[:, 0].astype(int))
+        return np.zeros((len(X), 3))
+
+
+def test_contiguous_folds_are_blocks_of_rows_in_order() -> None:
+    X = np.column_stack([np.arange(25.0), np.zeros((25, 5))])
+    _RecordingModel.tested = []
+    cross_validate(lambda seed: _RecordingModel(), X, np.zeros((25, 3)), folds=5, shuffle=False)
+    assert [list(rows) for rows in _RecordingModel.tested] == [list(range(5 * k, 5 * k + 5)) for k in range(5)]
+    _RecordingModel.tested = []
+    cross_validate(lambda seed: _RecordingModel(), X, np.zeros((25, 3)), folds=5, shuffle=True)
+    assert np.concatenate(_RecordingModel.tested).tolist() != list(range(25))
+
+
 def test_quaternion_linear_regression_is_no_worse_than_euler(paper_data) -> None:
     X, y = paper_data
     euler = np.mean(cross_validate(lambda seed: LinearCalibrator("euler"), X, y, folds=10))
@@ -80,7 +116,18 @@ def test_quick_search_cross_validates_each_model_and_plots(paper_data, tmp_path)
     names = [result.name for result in results]
     assert names == [spec.name for spec in paper_models(quick=True)]
     table = format_table(results)
-    assert "3-fold CV" in table and "Lin_EA" in table
+    assert "3-fold CV (shuffled folds)" in table and "Lin_EA" in table
     assert all(len(result.fold_mm2) == 3 for result in results)
     plot_search(results, str(tmp_path / "search.png"))
     assert (tmp_path / "search.png").stat().st_size > 10_000
+
+
+@pytest.mark.slow
+def test_search_command_uses_the_authors_contiguous_folds_on_their_data(tmp_path, capsys) -> None:
+    assert main(["search", "--quick", "--out", str(tmp_path)]) == 0
+    assert "3-fold CV (contiguous folds)" in capsys.readouterr().out
+    rows = json.loads((tmp_path / "model_search.json").read_text())
+    assert {row["split"] for row in rows} == {"contiguous"}
+    linear = next(row for row in rows if row["name"] == "Lin_EA")
+    X, y = load_paper_phase1()
+    assert linear["folds_mm2"] == cross_validate(lambda seed: LinearCalibrator("euler"), X, y, folds=3, shuffle=False)

@@ -112,7 +112,8 @@ def _run_search(args: argparse.Namespace) -> int:
         clean = Phase1Data.load(args.data).cleaned()
         X, y = clean.X, clean.y
         source = str(args.data)
-    results = run_search(X, y, folds=args.folds, seed=args.seed, quick=args.quick)
+    split = args.split or ("contiguous" if args.data == "paper" else "shuffled")
+    results = run_search(X, y, folds=args.folds, seed=args.seed, quick=args.quick, shuffle=split == "shuffled")
     caption = f"{search_caption(results)} Data: {source}, {len(X)} rows."
     print(format_table(results, caption))
     args.out.mkdir(parents=True, exist_ok=True)
@@ -125,6 +126,7 @@ def _run_search(args: argparse.Namespace) -> int:
             "std_mm2": r.std_mm2,
             "folds_mm2": list(r.fold_mm2),
             "epochs": r.epochs,
+            "split": split,
         }
         for r in results
     ]
@@ -172,6 +174,12 @@ def add_commands(subparsers: argparse._SubParsersAction) -> None:
     )
     search.add_argument("--out", type=Path, default=Path("dvrk_gym_out/search"), help="output folder (default: %(default)s)")
     search.add_argument("--folds", type=int, default=paper.SEARCH_FOLDS, help="cross-validation folds (default: %(default)s)")
-    search.add_argument("--seed", type=int, default=0, help="seeds the folds and the models (default: %(default)s)")
+    search.add_argument(
+        "--split",
+        choices=("contiguous", "shuffled"),
+        help="contiguous folds in row order, as the authors ran their search, or shuffled ones "
+        "(default: contiguous for --data paper, shuffled for a file)",
+    )
+    search.add_argument("--seed", type=int, default=0, help="seeds the models, and shuffled folds (default: %(default)s)")
     search.add_argument("--quick", action="store_true", help="a few models, few epochs, 3 folds")
     search.set_defaults(func=_run_search)

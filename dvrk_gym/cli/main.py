@@ -12,6 +12,7 @@ from dvrk_gym.cli.baselines import add_commands as add_baseline_commands
 from dvrk_gym.cli.calibration import add_commands as add_calibration_commands
 from dvrk_gym.cli.debridement import add_commands as add_debridement_commands
 from dvrk_gym.cli.demo import add_commands as add_demo_commands
+from dvrk_gym.cli.fidelity import add_commands as add_fidelity_commands
 from dvrk_gym.cli.reproduce import add_commands as add_reproduce_commands
 
 Command = Callable[[argparse.Namespace], int]
@@ -29,6 +30,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_reproduce_commands(subparsers)
     add_demo_commands(subparsers)
     add_calibration_commands(subparsers)
+    add_fidelity_commands(subparsers)
     add_debridement_commands(subparsers)
     add_baseline_commands(subparsers)
     return parser

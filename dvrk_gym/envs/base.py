@@ -83,6 +83,22 @@ def check_action(action: Any, space: gym.spaces.Box, names: tuple[str, ...]) -> 
     return clipped, clipped != array
 
 
+def relax_option(options: dict[str, Any], seeded: bool) -> bool:
+    """The ``"relax"`` reset option: True relaxes the cables at the episode's start; False
+    keeps the arm's cable history from the episodes before.
+
+    The default is True for a seeded reset, so that a seed alone fixes an episode (as
+    Gymnasium's contract and ``check_env`` want), and False otherwise.
+
+    Raises:
+        ValueError: the option is not a bool.
+    """
+    relax = options.get("relax", seeded)
+    if not isinstance(relax, (bool, np.bool_)):
+        raise ValueError(f"option 'relax' must be True or False, got {relax!r}")
+    return bool(relax)
+
+
 class DvrkEnv(gym.Env, Generic[ConfigT]):
     """Shared machinery of the dvrk_gym environments.
 
@@ -124,7 +140,13 @@ class DvrkEnv(gym.Env, Generic[ConfigT]):
             )
         )
         self._initial_physics_state = self.world.physics.client.saveState()
+        # A new arm has no cable history: its first episode starts with relaxed cables
+        # wherever the episode starts (building the world put them at rest at HOME_JOINTS,
+        # which is not where any episode starts).
+        cable = self.world.cable
+        cable.set_state(np.full(cable.get_state().shape, np.nan))
         self._needs_reset = True
+        self._seeded_reset = False  # whether the reset under way was given a seed
 
     # ------------------------------------------------------------------ gym API
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
@@ -134,6 +156,7 @@ class DvrkEnv(gym.Env, Generic[ConfigT]):
         if unknown:
             raise ValueError(f"unknown reset option(s) {unknown}; valid options: {list(self.option_names)}")
         self._restore_initial_state()
+        self._seeded_reset = seed is not None
         observation, info = self._reset_episode(options)
         self._needs_reset = False
         return observation, info

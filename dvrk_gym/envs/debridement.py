@@ -37,7 +37,7 @@ import pybullet
 from gymnasium import spaces
 
 from dvrk_gym import paper
-from dvrk_gym.envs.base import DvrkEnv, config_arguments
+from dvrk_gym.envs.base import DvrkEnv, config_arguments, relax_option
 from dvrk_gym.envs.debridement_config import (
     DEFAULT_PICK_TIMING,
     DELTA_ACTION_NAMES,
@@ -104,10 +104,19 @@ class DebridementEnv(DvrkEnv[DebridementConfig]):
 
     Reward: primitive mode 1 for a delivered fragment; delta mode the number of
     fragments that reached the receptacle during the step.
+
+    Reset options:
+        ``"relax"``: True relaxes the cables as the arm goes to its start above the
+            receptacle, as in a fresh env. False: the arm goes there through its cables,
+            which keep their history (hysteresis) from the trials before, as on the real
+            robot. Default: True for a seeded reset (a seed alone fixes the trial), False
+            otherwise; ``reset(seed=s, options={"relax": False})`` keeps the history with
+            a new random stream (the same seed and history give the same trial).
     """
 
     metadata: dict[str, Any] = {"render_modes": ["human", "rgb_array", "rgb_array_list"], "render_fps": 4}
     config_class = DebridementConfig
+    option_names = ("relax",)
 
     def __init__(
         self,
@@ -164,8 +173,18 @@ class DebridementEnv(DvrkEnv[DebridementConfig]):
 
     def _reset_episode(self, options: dict[str, Any]) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
         world, table = self.world, self.table
+        relax = relax_option(options, self._seeded_reset)
+        # Rebuilding the physics server (for a deterministic reset: body ids and contact
+        # caches carry history) relaxes the cables. Carrying the cable model's state over
+        # is enough to keep the arm's history: it is the cables' whole memory (the true
+        # joints follow from it and the next command), and the commanded joints before the
+        # reset need not be carried, since the arm is commanded to its start, replacing
+        # them, and a play operator ends a straight move where it ends a jump.
+        cable_state = world.cable.get_state()
         world.rebuild()
-        world.reset_robot(ik.inverse_kinematics(tool_pose(self.picker.drop_command(0, 0.0), 0.0)))
+        if not relax:
+            world.cable.set_state(cable_state)
+        world.reset_robot(ik.inverse_kinematics(tool_pose(self.picker.drop_command(0, 0.0), 0.0)), relax=relax)
         table.add_fragments(self.config.fragment, self.np_random)
         self._episode = _Episode(sizes=np.array([f.size_m for f in table.fragments]))
         self._jaw_target = world.jaw_angle

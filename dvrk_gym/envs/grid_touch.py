@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
-from dvrk_gym.envs.base import DvrkEnv, EnvConfig, config_arguments
+from dvrk_gym.envs.base import DvrkEnv, EnvConfig, config_arguments, relax_option
 from dvrk_gym.envs.exploration import CAMERA_BOX_HIGH_M, CAMERA_BOX_LOW_M, encode_reported
 from dvrk_gym.sim.endoscope.noise import PixelNoise
 from dvrk_gym.sim.physics.scene import GRID_COLUMNS, GRID_ROWS, WORKSPACE_CENTER_M, grid_circle_centers
@@ -38,7 +38,7 @@ CONTACT_TOLERANCE_M = 1e-7
 """How exactly the descent finds the height where the jaws meet the paper, metres."""
 REWARD_TYPES = ("dense", "sparse")
 HOME_POSITION_M = np.array([0.040, 0.042, -0.130])
-"""Where every episode starts: the reported point 34 mm above the middle of the grid, metres."""
+"""Where a fresh or relaxed episode starts: the reported point 34 mm above the middle of the grid, metres."""
 
 
 @dataclass(frozen=True)
@@ -109,11 +109,20 @@ class GridTouchEnv(DvrkEnv[GridTouchConfig]):
             the setting persists until changed.
         ``"circle"``: which circle (0-34, row-major) to touch; default: the next one of
             the tour (circle 0 after a seeded reset).
+        ``"relax"``: True starts the episode at home (``HOME_POSITION_M``, yaw 0) with
+            relaxed cables, as a fresh env does. False: the arm lifts
+            ``approach_height_m`` straight up from its last touch (or stays where it is
+            if it has not touched since the last reset) and its cables keep their
+            history, so each touch meets the hysteresis the touches before it left, as on
+            the real robot, which lifted from one circle and went on to the next.
+            Default: True for a seeded reset (a seed alone fixes the episode), False
+            otherwise; ``reset(seed=s, options={"relax": False})`` keeps the history with
+            a new random stream (the same seed and history give the same episode).
     """
 
     config_class = GridTouchConfig
     action_names = ACTION_NAMES
-    option_names = ("yaw", "circle")
+    option_names = ("yaw", "circle", "relax")
 
     def __init__(
         self,
@@ -143,6 +152,7 @@ class GridTouchEnv(DvrkEnv[GridTouchConfig]):
         self._circle = 0
         self._yaw = 0.0
         self._achieved = np.zeros(3)
+        self._touched = False  # whether the arm touched the paper since the last reset
 
     # ------------------------------------------------------------------ episode
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
@@ -162,10 +172,27 @@ class GridTouchEnv(DvrkEnv[GridTouchConfig]):
             self._yaw = float(self.np_random.uniform(-np.pi / 2, np.pi / 2))
         else:
             self._yaw = float(self._yaw_setting)
-        self.world.reset_robot(ik.inverse_kinematics(tool_pose(HOME_POSITION_M, 0.0)))
+        relax = relax_option(options, self._seeded_reset)
+        # The physics was restored to the env's start, but the cable model is not physics:
+        # its hysteresis state carries over unless the user asks for relaxed cables.
+        self.world.reset_robot(self._start_joints(relax), relax=relax)
+        self._touched = False
         self._achieved = self._seen_touch_point()
         info = {"circle_index": self._circle, "target_yaw": self._yaw, "sim_time_s": 0.0}
         return self._observation(), info
+
+    def _start_joints(self, relax: bool) -> np.ndarray:
+        """The joint command an episode starts at: home for a relaxed or fresh arm (no
+        cable history yet); else lifted by ``approach_height_m`` from the last touch, or
+        where the arm is when it has not touched since the last reset."""
+        world = self.world
+        if relax or not np.isfinite(world.cable.get_state()).all():
+            return ik.inverse_kinematics(tool_pose(HOME_POSITION_M, 0.0))
+        if not self._touched:
+            return world.q_cmd.copy()
+        lifted = world.reported_pose()
+        lifted[2, 3] += self.config.approach_height_m
+        return ik.inverse_kinematics_clamped(lifted, q_ref=world.q_cmd)[0]
 
     def _step_episode(self, action: np.ndarray, clamped: np.ndarray):
         target, yaw = action[:3], float(action[3])
@@ -176,6 +203,7 @@ class GridTouchEnv(DvrkEnv[GridTouchConfig]):
             tool_pose(np.array([target[0], target[1], touch_z]), yaw), noise_rng=self.np_random, clamp_to_limits=True
         )
         self._achieved = self._seen_touch_point()
+        self._touched = True
         info = self._touch_info(yaw, clamped, first.joints_clamped | touch.joints_clamped)
         observation = self._observation()
         reward = float(self.compute_reward(observation["achieved_goal"], observation["desired_goal"], info))

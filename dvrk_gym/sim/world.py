@@ -155,10 +155,19 @@ class DvrkWorld:
         self.reset_robot(HOME_JOINTS)
 
     # ----------------------------------------------------------------- robot state
-    def reset_robot(self, q: np.ndarray, jaw_angle_rad: float = 0.0) -> None:
-        """Put the robot at rest at joints ``q``: cables relaxed, clock at zero."""
+    def reset_robot(self, q: np.ndarray, jaw_angle_rad: float = 0.0, relax: bool = True) -> None:
+        """Put the robot at rest at joints ``q``, clock at zero.
+
+        Args:
+            q: (6,) joint command, rad / m.
+            jaw_angle_rad: the jaw opening, rad.
+            relax: True: the cables are relaxed at ``q`` (no hysteresis gap, whatever came
+                before). False: they keep their history, and the arm reaches ``q`` through
+                them as a real arm sent home does (no repeatability noise: no random draw).
+        """
         q = np.array(q, dtype=float)
-        self.cable.reset(q)
+        if relax:
+            self.cable.reset(q)
         self.q_cmd = q.copy()
         self.q_true = self.cable.true_joints(q)
         self.jaw_angle = float(jaw_angle_rad)

@@ -1,0 +1,47 @@
+"""``dvrk-gym fidelity``: a simulated Phase I against the authors' real rows, statistic by statistic."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from dvrk_gym import paper
+from dvrk_gym.cli.options import add_instrument_options, add_progress_option
+
+
+def _run_fidelity(args: argparse.Namespace) -> int:
+    from dvrk_gym.fidelity.comparison import run_fidelity
+    from dvrk_gym.fidelity.report import format_table, write_report
+
+    run = run_fidelity(
+        bias=args.bias,
+        bias_seed=args.bias_seed,
+        n_trajectories=args.trajectories,
+        seed=args.seed,
+        camera_resolution=tuple(args.resolution),
+        progress=not args.no_progress,
+    )
+    print(format_table(run))
+    json_path, png_path = write_report(run, args.out)
+    print(f"wrote {json_path}, {png_path}")
+    return 0
+
+
+def add_commands(subparsers: argparse._SubParsersAction) -> None:
+    """Register fidelity."""
+    fidelity = subparsers.add_parser(
+        "fidelity",
+        help="how close the simulated robot is to the real one: Phase I statistics side by side with the authors' rows",
+        description="Collect Phase I in simulation for an instrument (--bias, --bias-seed) and print, side by side with "
+        "the authors' 1939 real rows, the statistics that tell them apart (rigid residual and its direction, "
+        "sample-to-sample jitter, kept rows per yaw and their pitches, contiguous 10-fold CV), each against its "
+        "target; write fidelity.json and fidelity.png to --out.",
+    )
+    fidelity.add_argument("--out", type=Path, default=Path("dvrk_gym_out/fidelity"), help="output folder (default: %(default)s)")
+    fidelity.add_argument(
+        "--trajectories", type=int, default=paper.PHASE1_TRAJECTORIES, help="simulated Phase I trajectories (the paper: %(default)s)"
+    )
+    fidelity.add_argument("--seed", type=int, default=0, help="seeds the exploration and the forest (default: %(default)s)")
+    add_instrument_options(fidelity)
+    add_progress_option(fidelity)
+    fidelity.set_defaults(func=_run_fidelity)

@@ -1,0 +1,184 @@
+"""A simulated instrument against the real robot: Phase I collected in simulation, the
+statistics of both, and a verdict per statistic against the issue 15 targets.
+
+Targets: every statistic within ``RELATIVE_TOLERANCE`` (25%) of the real value, and every
+share (a fraction of rows or of residual energy) within ``SHARE_TOLERANCE`` (0.06) of it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from dvrk_gym import paper
+from dvrk_gym.calibration.datasets import load_paper_phase1
+from dvrk_gym.calibration.phase1 import run_paper_phase1
+from dvrk_gym.fidelity.statistics import PAPER_YAWS_DEG, FidelityStatistics, fidelity_statistics
+
+__all__ = [
+    "RELATIVE_TOLERANCE",
+    "SHARE_TOLERANCE",
+    "ComparisonRow",
+    "FidelityRun",
+    "compare",
+    "run_fidelity",
+]
+
+RELATIVE_TOLERANCE = 0.25
+"""A statistic passes when |sim / real - 1| is at most this."""
+SHARE_TOLERANCE = 0.06
+"""A share passes when |sim - real| is at most this (absolute)."""
+REAL_KEPT_SHARE = paper.PHASE1_KEPT_SAMPLES / paper.PHASE1_RAW_SAMPLES
+"""The real Phase I's kept share of raw rows (1939 of 5256)."""
+
+
+@dataclass(frozen=True)
+class ComparisonRow:
+    """One statistic, real against simulated.
+
+    Attributes:
+        name: the statistic, with its unit (``"rigid residual RMS (mm)"``).
+        real: its value on the authors' rows.
+        sim: its value on the simulated rows.
+        share: True when it is a share, judged by absolute difference; else by ratio.
+        difference: ``sim - real`` for a share, ``sim / real`` otherwise (nan if real is 0).
+        passed: whether ``difference`` meets the target.
+    """
+
+    name: str
+    real: float
+    sim: float
+    share: bool
+    difference: float
+    passed: bool
+
+    @property
+    def target(self) -> str:
+        """The target in words: ``"|diff| <= 0.06"`` or ``"ratio 0.75-1.25"``."""
+        if self.share:
+            return f"|diff| <= {SHARE_TOLERANCE:.2f}"
+        return f"ratio {1 - RELATIVE_TOLERANCE:.2f}-{1 + RELATIVE_TOLERANCE:.2f}"
+
+
+def _row(name: str, real: float, sim: float, share: bool) -> ComparisonRow:
+    if share:
+        difference = sim - real
+        passed = abs(difference) <= SHARE_TOLERANCE
+    else:
+        difference = sim / real if real != 0 else float("nan")
+        passed = bool(np.isfinite(difference) and abs(difference - 1.0) <= RELATIVE_TOLERANCE)
+    return ComparisonRow(name=name, real=float(real), sim=float(sim), share=share, difference=float(difference), passed=bool(passed))
+
+
+def compare(real: FidelityStatistics, sim: FidelityStatistics, real_kept_share: float, sim_kept_share: float) -> list[ComparisonRow]:
+    """Each statistic of both data sets with its verdict, in the issue's order.
+
+    Args:
+        real: the statistics of the real rows.
+        sim: the statistics of the simulated rows.
+        real_kept_share: kept rows over raw rows of the real collection.
+        sim_kept_share: the same for the simulated collection.
+    """
+    rows = [
+        _row("rigid residual RMS (mm)", real.rigid_residual_rms_mm, sim.rigid_residual_rms_mm, False),
+        _row("residual share along view axis", real.view_axis_share, sim.view_axis_share, True),
+        _row("jitter along view axis (mm)", real.view_axis_jitter_mm, sim.view_axis_jitter_mm, False),
+        _row("jitter in image plane (mm)", real.image_plane_jitter_mm, sim.image_plane_jitter_mm, False),
+    ]
+    for yaw, real_fraction, sim_fraction in zip(PAPER_YAWS_DEG, real.kept_fraction_per_yaw, sim.kept_fraction_per_yaw):
+        rows.append(_row(f"kept rows at yaw {yaw:+.0f} (share)", real_fraction, sim_fraction, True))
+    rows += [
+        _row("kept share of raw rows", real_kept_share, sim_kept_share, True),
+        _row("pitch of kept rows, 5th pct (deg)", real.pitch_p5_deg, sim.pitch_p5_deg, False),
+        _row("pitch of kept rows, 95th pct (deg)", real.pitch_p95_deg, sim.pitch_p95_deg, False),
+    ]
+    if real.cv_linear_mm2 is not None and sim.cv_linear_mm2 is not None:
+        rows.append(_row("contiguous 10-fold CV, linear (mm^2)", real.cv_linear_mm2, sim.cv_linear_mm2, False))
+    if real.cv_forest_mm2 is not None and sim.cv_forest_mm2 is not None:
+        rows.append(_row("contiguous 10-fold CV, forest (mm^2)", real.cv_forest_mm2, sim.cv_forest_mm2, False))
+    return rows
+
+
+@dataclass(frozen=True)
+class FidelityRun:
+    """The real rows, a simulated collection's kept rows, their statistics and the verdicts.
+
+    Attributes:
+        settings: how the simulation was collected (bias, bias_seed, trajectories, seed,
+            camera_resolution).
+        real_X, real_y: the authors' rows (m, rad; m).
+        sim_X, sim_y: the simulation's kept rows (m, rad; m), in collection order.
+        sim_raw_rows: the simulation's raw rows (before cleaning).
+        real: statistics of the real rows.
+        sim: statistics of the simulated rows.
+        rows: the comparison (:func:`compare`).
+    """
+
+    settings: dict[str, object]
+    real_X: np.ndarray
+    real_y: np.ndarray
+    sim_X: np.ndarray
+    sim_y: np.ndarray
+    sim_raw_rows: int
+    real: FidelityStatistics
+    sim: FidelityStatistics
+    rows: list[ComparisonRow]
+
+    @property
+    def passed(self) -> int:
+        """How many statistics meet their target."""
+        return sum(row.passed for row in self.rows)
+
+
+def run_fidelity(
+    bias: str = "paper",
+    bias_seed: int = 0,
+    n_trajectories: int = paper.PHASE1_TRAJECTORIES,
+    seed: int = 0,
+    camera_resolution: tuple[int, int] = paper.ENDOSCOPE_RESOLUTION_PX,
+    progress: bool = True,
+) -> FidelityRun:
+    """Collect Phase I in simulation and compare it, statistic by statistic, with the real rows.
+
+    Args:
+        bias: the cable bias preset of the simulated instrument.
+        bias_seed: which instrument.
+        n_trajectories: Phase I trajectories (the paper: 57; about 35-50 s at 1920 x 1080).
+        seed: seeds the exploration and the episodes, and the cross-validated forest.
+        camera_resolution: the endoscope's image size (width, height), pixels.
+        progress: show a progress bar.
+
+    Raises:
+        ValueError: when the simulation keeps too few rows for the statistics.
+    """
+    data = run_paper_phase1(
+        n_trajectories,
+        seed,
+        bias=bias,
+        bias_seed=bias_seed,
+        camera_resolution=(int(camera_resolution[0]), int(camera_resolution[1])),
+        progress=progress,
+    )
+    kept = data.cleaned()
+    real_X, real_y = load_paper_phase1()
+    real = fidelity_statistics(real_X, real_y, seed=seed)
+    sim = fidelity_statistics(kept.X, kept.y, seed=seed)
+    settings: dict[str, object] = {
+        "bias": bias,
+        "bias_seed": int(bias_seed),
+        "trajectories": int(n_trajectories),
+        "seed": int(seed),
+        "camera_resolution": [int(v) for v in camera_resolution],
+    }
+    return FidelityRun(
+        settings=settings,
+        real_X=real_X,
+        real_y=real_y,
+        sim_X=kept.X,
+        sim_y=kept.y,
+        sim_raw_rows=data.n_raw,
+        real=real,
+        sim=sim,
+        rows=compare(real, sim, REAL_KEPT_SHARE, data.n_kept / data.n_raw),
+    )

@@ -1,0 +1,137 @@
+"""The fidelity report: the side-by-side table, ``fidelity.json`` and ``fidelity.png``.
+
+Files are written atomically (:mod:`dvrk_gym.utils.atomic`): a reader sees the old file or
+the new one, never half of one.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from matplotlib.figure import Figure
+
+from dvrk_gym.fidelity.comparison import RELATIVE_TOLERANCE, SHARE_TOLERANCE, ComparisonRow, FidelityRun
+from dvrk_gym.fidelity.statistics import PAPER_YAWS_DEG, rigid_residuals_camera
+from dvrk_gym.utils.atomic import write_atomic, write_text_atomic
+
+__all__ = ["JSON_NAME", "PNG_NAME", "format_table", "plot_fidelity", "report_dict", "write_report"]
+
+JSON_NAME = "fidelity.json"
+PNG_NAME = "fidelity.png"
+_M_TO_MM = 1e3
+_COLOURS = {"real": "tab:blue", "sim": "tab:orange"}
+_BINS = 40
+
+
+def _difference(row: ComparisonRow) -> str:
+    if row.share:
+        return f"diff {row.difference:+.3f}"
+    return f"ratio {row.difference:.2f}"
+
+
+def format_table(run: FidelityRun) -> str:
+    """The statistics side by side: statistic, real, sim, ratio or difference, target, verdict."""
+    settings = run.settings
+    header = (
+        f"Fidelity: the authors' {run.real.rows} real Phase I rows against a simulated Phase I "
+        f"(bias {settings['bias']}, bias_seed {settings['bias_seed']}, {settings['trajectories']} trajectories, "
+        f"seed {settings['seed']}, {run.sim_raw_rows} raw rows, {run.sim.rows} kept)"
+    )
+    width = max(len(row.name) for row in run.rows)
+    lines = [header, f"{'statistic':<{width}}  {'real':>8}  {'sim':>8}  {'sim vs real':>12}  {'target':>15}  verdict"]
+    for row in run.rows:
+        lines.append(
+            f"{row.name:<{width}}  {row.real:>8.2f}  {row.sim:>8.2f}  "
+            f"{_difference(row):>12}  {row.target:>15}  {'pass' if row.passed else 'FAIL'}"
+        )
+    lines.append(
+        f"{run.passed} of {len(run.rows)} statistics within target "
+        f"(ratio within {RELATIVE_TOLERANCE:.0%}, shares within {SHARE_TOLERANCE:.2f} absolute)"
+    )
+    return "\n".join(lines)
+
+
+def report_dict(run: FidelityRun) -> dict[str, Any]:
+    """The report as JSON-ready data: settings, both statistics, the comparison rows."""
+    return {
+        "settings": run.settings,
+        "targets": {"relative_tolerance": RELATIVE_TOLERANCE, "share_tolerance": SHARE_TOLERANCE},
+        "real": run.real.to_dict(),
+        "sim": {**run.sim.to_dict(), "raw_rows": run.sim_raw_rows},
+        "comparison": [
+            {
+                "statistic": row.name,
+                "real": row.real,
+                "sim": row.sim,
+                "measure": "difference" if row.share else "ratio",
+                "value": row.difference,
+                "passed": row.passed,
+            }
+            for row in run.rows
+        ],
+        "passed": run.passed,
+        "statistics": len(run.rows),
+    }
+
+
+def _angle_from_view_axis_deg(residual: np.ndarray) -> np.ndarray:
+    norm = np.linalg.norm(residual, axis=1)
+    cosine = np.abs(residual[:, 2]) / np.where(norm > 0, norm, 1.0)
+    return np.rad2deg(np.arccos(np.clip(cosine, 0.0, 1.0)))
+
+
+def _histograms(axes: Any, real: np.ndarray, sim: np.ndarray, title: str, xlabel: str) -> None:
+    edges = np.histogram_bin_edges(np.concatenate([real, sim]), bins=_BINS)
+    for label, values in (("real", real), ("sim", sim)):
+        axes.hist(values, bins=edges, density=True, histtype="step", linewidth=1.5, color=_COLOURS[label], label=f"{label} ({len(values)})")
+    axes.set_title(title, fontsize=9)
+    axes.set_xlabel(xlabel)
+    axes.legend(fontsize=7)
+
+
+def plot_fidelity(run: FidelityRun, path: str | os.PathLike) -> Path:
+    """Save the figure: residual histograms per camera axis, the residual's angle from the
+    view axis, the kept rows' pitch and yaw, and each residual in the x-z plane; real against sim."""
+    residuals = {"real": rigid_residuals_camera(run.real_X, run.real_y), "sim": rigid_residuals_camera(run.sim_X, run.sim_y)}
+    figure = Figure(figsize=(13, 7.5), layout="constrained")
+    grid = figure.subplots(2, 4)
+    for column, axis in enumerate("xyz"):
+        where = "view axis" if axis == "z" else "image plane"
+        _histograms(grid[0, column], residuals["real"][:, column] * _M_TO_MM, residuals["sim"][:, column] * _M_TO_MM,
+                    f"rigid residual along camera {axis} ({where})", "mm")  # fmt: skip
+    _histograms(grid[0, 3], _angle_from_view_axis_deg(residuals["real"]), _angle_from_view_axis_deg(residuals["sim"]),
+                "residual direction: angle from the view axis", "deg (0: along the view axis)")  # fmt: skip
+    _histograms(grid[1, 0], np.rad2deg(run.real_X[:, 4]), np.rad2deg(run.sim_X[:, 4]), "pitch of kept rows", "deg")
+    _histograms(grid[1, 1], np.rad2deg(run.real_X[:, 3]), np.rad2deg(run.sim_X[:, 3]), "yaw of kept rows", "deg")
+    for yaw in PAPER_YAWS_DEG:
+        grid[1, 1].axvline(yaw, color="0.7", linewidth=0.5)
+    reach_mm = max(np.abs(residual[:, [0, 2]]).max() for residual in residuals.values()) * _M_TO_MM * 1.05
+    for column, label in ((2, "real"), (3, "sim")):
+        axes = grid[1, column]
+        axes.scatter(residuals[label][:, 0] * _M_TO_MM, residuals[label][:, 2] * _M_TO_MM, s=2, alpha=0.4, color=_COLOURS[label])
+        axes.set_title(f"{label}: residual directions, camera x-z", fontsize=9)
+        axes.set(xlabel="camera x (mm)", ylabel="camera z, view axis (mm)", xlim=(-reach_mm, reach_mm), ylim=(-reach_mm, reach_mm))
+        axes.set_aspect("equal", adjustable="box")
+    settings = run.settings
+    figure.suptitle(
+        f"Real Phase I rows against simulation (bias {settings['bias']}, bias_seed {settings['bias_seed']}, "
+        f"{settings['trajectories']} trajectories): {run.passed} of {len(run.rows)} statistics within target",
+        fontsize=10,
+    )
+    return write_atomic(path, lambda temporary: figure.savefig(temporary, dpi=120, format="png"))
+
+
+def write_report(run: FidelityRun, out: str | os.PathLike) -> tuple[Path, Path]:
+    """Write ``fidelity.json`` and ``fidelity.png`` into ``out`` (created if missing), atomically.
+
+    Returns:
+        The paths of the JSON file and the figure.
+    """
+    folder = Path(out)
+    folder.mkdir(parents=True, exist_ok=True)
+    json_path = write_text_atomic(folder / JSON_NAME, json.dumps(report_dict(run), indent=1))
+    return json_path, plot_fidelity(run, folder / PNG_NAME)

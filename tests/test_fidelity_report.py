@@ -1,0 +1,86 @@
+"""``dvrk-gym fidelity``: a tiny simulated collection against the real rows, its verdicts,
+and its files written whole."""
+
+import dataclasses
+import json
+import math
+
+import pytest
+
+from dvrk_gym.calibration.datasets import load_paper_phase1
+from dvrk_gym.cli.main import main
+from dvrk_gym.fidelity.comparison import SHARE_TOLERANCE, compare
+from dvrk_gym.fidelity.statistics import FidelityStatistics, fidelity_statistics
+from dvrk_gym.utils.atomic import write_atomic, write_text_atomic
+
+REFERENCE = FidelityStatistics(
+    rows=100,
+    rigid_residual_rms_mm=6.0,
+    view_axis_share=0.9,
+    view_axis_jitter_mm=5.0,
+    image_plane_jitter_mm=1.0,
+    jitter_pairs=90,
+    kept_fraction_per_yaw=(0.1, 0.3, 0.3, 0.2, 0.1),
+    pitch_p5_deg=-10.0,
+    pitch_p95_deg=20.0,
+    cv_linear_mm2=4.0,
+    cv_forest_mm2=5.0,
+)
+
+
+def test_ratios_within_25_percent_and_shares_within_006_pass():
+    near = dataclasses.replace(REFERENCE, rigid_residual_rms_mm=7.4, view_axis_share=0.9 - SHARE_TOLERANCE + 0.001, cv_forest_mm2=3.8)
+    far = dataclasses.replace(REFERENCE, rigid_residual_rms_mm=7.6, view_axis_share=0.9 - SHARE_TOLERANCE - 0.001, cv_forest_mm2=3.7)
+    verdicts_near = {row.name: row.passed for row in compare(REFERENCE, near, 0.37, 0.40)}
+    verdicts_far = {row.name: row.passed for row in compare(REFERENCE, far, 0.37, 0.44)}
+    for name in (
+        "rigid residual RMS (mm)",
+        "residual share along view axis",
+        "contiguous 10-fold CV, forest (mm^2)",
+        "kept share of raw rows",
+    ):
+        assert verdicts_near[name] and not verdicts_far[name], name
+    assert len(verdicts_near) == 14 and all(verdicts_near.values())
+
+
+def test_cross_validation_rows_are_left_out_when_not_run():
+    sim = dataclasses.replace(REFERENCE, cv_linear_mm2=None, cv_forest_mm2=None)
+    names = [row.name for row in compare(REFERENCE, sim, 0.37, 0.37)]
+    assert len(names) == 12 and not any("CV" in name for name in names)
+
+
+def test_atomic_write_replaces_whole_or_keeps_the_old_file(tmp_path):
+    path = tmp_path / "result.json"
+    write_text_atomic(path, "old")
+
+    class Interrupted(Exception):
+        pass
+
+    def failing(temporary):
+        temporary.write_text("half")
+        raise Interrupted
+
+    with pytest.raises(Interrupted):
+        write_atomic(path, failing)
+    assert path.read_text() == "old"
+    write_text_atomic(path, "new")
+    assert path.read_text() == "new"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["result.json"]  # no temporary file left
+
+
+@pytest.mark.slow
+def test_fidelity_command_writes_finite_numbers_with_the_real_rows_in_the_real_column(tmp_path, capsys):
+    out = tmp_path / "fidelity"
+    assert main(["fidelity", "--trajectories", "2", "--resolution", "640", "360", "--out", str(out), "--no-progress"]) == 0
+    printed = capsys.readouterr().out
+    assert "rigid residual RMS (mm)" in printed and "statistics within target" in printed
+    report = json.loads((out / "fidelity.json").read_text())
+    assert (out / "fidelity.png").stat().st_size > 10_000
+    assert sorted(p.name for p in out.iterdir()) == ["fidelity.json", "fidelity.png"]
+    assert report["settings"] == {"bias": "paper", "bias_seed": 0, "trajectories": 2, "seed": 0, "camera_resolution": [640, 360]}
+    real = fidelity_statistics(*load_paper_phase1()).to_dict()
+    assert report["real"] == real
+    assert report["sim"]["raw_rows"] == 2 * 93 and 10 <= report["sim"]["rows"] <= report["sim"]["raw_rows"]
+    for row in report["comparison"]:
+        assert math.isfinite(row["real"]) and math.isfinite(row["sim"]) and math.isfinite(row["value"]), row
+    assert report["passed"] == sum(row["passed"] for row in report["comparison"])

@@ -1,0 +1,100 @@
+"""The fidelity statistics: the issue's real-robot column on the authors' rows, and axes and
+units checked on synthetic rows whose answer is known."""
+
+import json
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from dvrk_gym.calibration.datasets import load_paper_phase1
+from dvrk_gym.fidelity.statistics import PAPER_YAWS_DEG, fidelity_statistics, rigid_residuals_camera
+
+
+@pytest.mark.slow
+def test_real_rows_give_the_issues_real_robot_column():
+    stats = fidelity_statistics(*load_paper_phase1())
+    assert stats.rows == 1939
+    assert round(stats.rigid_residual_rms_mm, 1) == 6.6
+    assert round(stats.view_axis_share, 2) == 0.89
+    assert round(stats.view_axis_jitter_mm, 1) == 5.2
+    assert round(stats.image_plane_jitter_mm, 1) == 1.0
+    assert [round(f, 2) for f in stats.kept_fraction_per_yaw] == [0.13, 0.30, 0.28, 0.20, 0.09]
+    assert (round(stats.pitch_p5_deg), round(stats.pitch_p95_deg)) == (-11, 21)
+    assert round(stats.cv_linear_mm2, 2) == 3.76
+    assert round(stats.cv_forest_mm2, 1) == 5.0
+    json.dumps(stats.to_dict())
+
+
+def _synthetic_rows(noise_camera_m: np.ndarray, rows: int = 800, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """A 1-mm random walk in the base frame, seen through one rigid transform per paper yaw,
+    with ``noise_camera_m`` (3,) the per-axis standard deviation of camera-frame noise, m."""
+    rng = np.random.default_rng(seed)
+    base = np.array([0.04, 0.04, -0.165]) + np.cumsum(rng.normal(scale=0.001, size=(rows, 3)), axis=0) * [1.0, 1.0, 0.2]
+    yaw_deg = rng.choice(PAPER_YAWS_DEG, size=rows) + rng.uniform(-20, 20, size=rows)
+    pitch_deg = rng.uniform(-15, 25, size=rows)
+    roll_deg = rng.uniform(-180, -150, size=rows)
+    # a camera tilted 35 deg from looking straight down, so camera z is not base -z
+    rotations = Rotation.from_euler("xyz", rng.normal(scale=0.05, size=(5, 3)) + [np.pi - 0.6, 0.3, 0.5]).as_matrix()
+    translations = base.mean(axis=0) - rotations @ [0.0, 0.0, 0.19] + rng.normal(scale=0.002, size=(5, 3))
+    groups = np.argmin(np.abs(yaw_deg[:, None] - np.array(PAPER_YAWS_DEG)), axis=1)
+    camera = np.einsum("nji,nj->ni", rotations[groups], base - translations[groups])
+    camera += rng.normal(size=(rows, 3)) * noise_camera_m
+    X = np.column_stack([camera, np.deg2rad(np.column_stack([yaw_deg, pitch_deg, roll_deg]))])
+    return X, base
+
+
+def test_noise_along_camera_z_only_is_all_view_axis():
+    X, y = _synthetic_rows(np.array([0.0, 0.0, 0.005]))
+    assert X[:, 2].min() > 0.15 and X[:, 2].max() < 0.25  # depth ~ 19 cm, as the real camera
+    stats = fidelity_statistics(X, y, cross_validation=False)
+    assert stats.view_axis_share > 0.99
+    assert stats.view_axis_jitter_mm == pytest.approx(5.0, rel=0.1)
+    assert stats.image_plane_jitter_mm < 0.3
+    assert stats.rigid_residual_rms_mm == pytest.approx(5.0, rel=0.1)
+
+
+def test_noise_along_camera_x_only_is_in_the_image_plane():
+    X, y = _synthetic_rows(np.array([0.002, 0.0, 0.0]))
+    stats = fidelity_statistics(X, y, cross_validation=False)
+    assert stats.view_axis_share < 0.01
+    assert stats.view_axis_jitter_mm < 0.1
+    # pooled over camera x and y, a 2 mm noise on x alone is 2 / sqrt(2) mm per axis
+    assert stats.image_plane_jitter_mm == pytest.approx(2.0 / np.sqrt(2.0), rel=0.1)
+
+
+def test_residual_is_in_the_camera_frame_with_the_cameras_sign():
+    X, y = _synthetic_rows(np.zeros(3))
+    X[7, 2] += 0.003  # the marker seen 3 mm deeper than it is
+    residual = rigid_residuals_camera(X, y)
+    assert residual[7, 2] == pytest.approx(0.003, abs=2e-4)
+    assert np.abs(residual[7, :2]).max() < 2e-4
+
+
+def test_yaw_fractions_and_pitch_percentiles_are_in_the_reports_units():
+    X, y = _synthetic_rows(np.full(3, 0.001))
+    X[:, 3] = np.deg2rad(np.repeat([-90.0, -40.0, 5.0, 50.0, 85.0], [80, 160, 240, 240, 80]))
+    X[:, 4] = np.deg2rad(np.linspace(-10.0, 20.0, len(X)))
+    stats = fidelity_statistics(X, y, cross_validation=False)
+    assert stats.kept_fraction_per_yaw == pytest.approx((0.1, 0.2, 0.3, 0.3, 0.1))
+    assert stats.pitch_p5_deg == pytest.approx(-8.5, abs=0.05)
+    assert stats.pitch_p95_deg == pytest.approx(18.5, abs=0.05)
+
+
+def test_cross_validation_of_an_exactly_linear_map_is_zero_for_the_linear_model():
+    X, _ = _synthetic_rows(np.zeros(3), rows=300)
+    y = X @ np.random.default_rng(1).normal(scale=0.01, size=(6, 3)) + [0.04, 0.04, -0.16]
+    stats = fidelity_statistics(X, y)
+    assert stats.cv_linear_mm2 < 1e-12
+    assert stats.cv_forest_mm2 > 1e-3
+
+
+@pytest.mark.parametrize(
+    ("column", "scale", "message"),
+    [(2, 1000.0, "expected metres"), (4, 180.0 / np.pi, "expected radians")],
+)
+def test_millimetres_or_degrees_are_refused(column, scale, message):
+    X, y = _synthetic_rows(np.zeros(3), rows=50)
+    X[:, column] *= scale
+    with pytest.raises(ValueError, match=message):
+        fidelity_statistics(X, y, cross_validation=False)
