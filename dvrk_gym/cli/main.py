@@ -13,6 +13,7 @@ from dvrk_gym.cli.calibration import add_commands as add_calibration_commands
 from dvrk_gym.cli.debridement import add_commands as add_debridement_commands
 from dvrk_gym.cli.demo import add_commands as add_demo_commands
 from dvrk_gym.cli.reproduce import add_commands as add_reproduce_commands
+from dvrk_gym.cli.sweep import add_commands as add_sweep_commands
 
 Command = Callable[[argparse.Namespace], int]
 
@@ -31,6 +32,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_calibration_commands(subparsers)
     add_debridement_commands(subparsers)
     add_baseline_commands(subparsers)
+    add_sweep_commands(subparsers)
     return parser
 
 
