@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 
 from dvrk_gym import paper
-from dvrk_gym.cli.options import add_progress_option
+from dvrk_gym.cli.options import add_progress_option, add_resolution_option
 
 
 def _run_sweep(args: argparse.Namespace) -> int:
@@ -61,7 +61,10 @@ def add_commands(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--calibrators", default="rbt,dnn,dnn+rf", help="calibrators in the table (default: %(default)s)")
     parser.add_argument("--seeds", default="0", help="run seeds: numbers and ranges (default: %(default)s)")
     parser.add_argument(
-        "--workers", type=int, default=min(2, os.cpu_count() or 1), help="local processes running units side by side (default: %(default)s)"
+        "--workers",
+        type=int,
+        default=min(2, os.cpu_count() or 1),
+        help="local processes running units side by side, without --scheduler (default: %(default)s)",
     )
     parser.add_argument("--scheduler", metavar="ADDRESS", help="run the units on a Dask cluster instead, e.g. tcp://host:8786")
     parser.add_argument(
@@ -70,14 +73,7 @@ def add_commands(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--out", type=Path, default=Path("dvrk_gym_out/sweep"), help="output folder (default: %(default)s)")
     parser.add_argument("--trajectories", type=int, default=paper.PHASE1_TRAJECTORIES, help="Phase I trajectories (the paper: %(default)s)")
     parser.add_argument("--epochs", type=int, default=paper.DNN_EPOCHS, help="DNN training epochs (the paper: %(default)s)")
-    parser.add_argument(
-        "--resolution",
-        type=int,
-        nargs=2,
-        default=paper.ENDOSCOPE_RESOLUTION_PX,
-        metavar=("W", "H"),
-        help="endoscope image size in pixels (default: 1920 1080)",
-    )
+    add_resolution_option(parser)
     parser.add_argument("--bias", default="paper", help="cable bias preset: none, paper or severe (default: %(default)s)")
     add_progress_option(parser)
     parser.set_defaults(func=_run_sweep)

@@ -119,7 +119,7 @@ def plot_errors(rows: Sequence[Mapping[str, Any]], path: str | os.PathLike) -> P
 
     instruments = sorted({int(row["bias_seed"]) for row in rows})
     position = {instrument: index for index, instrument in enumerate(instruments)}
-    fig, ax = plt.subplots(figsize=(max(5.0, 0.5 * len(instruments) + 3.0), 3.8))
+    fig, ax = plt.subplots(figsize=(max(6.0, 0.5 * len(instruments) + 4.0), 3.8))
     for name in _by_calibrator(rows):
         color = f"C{list(METHOD_NAMES).index(name)}"
         cells = [row for row in rows if row["calibrator"] == name]
@@ -140,7 +140,7 @@ def plot_errors(rows: Sequence[Mapping[str, Any]], path: str | os.PathLike) -> P
     ax.set_ylabel("mean touch error (mm)")
     ax.set_ylim(bottom=0.0)
     ax.set_title("Calibration error per instrument (6 settings x 35 circles; dashed: the paper)", fontsize=9)
-    ax.legend(fontsize=8)
+    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.0, 1.0))
     fig.tight_layout()
     path = Path(path)
     fig.savefig(path, dpi=110)
