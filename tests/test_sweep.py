@@ -53,6 +53,8 @@ def test_settings_refuse_an_empty_or_bad_grid_and_a_bad_budget():
         ({"bias_seeds": ()}, "bias_seeds is empty"),
         ({"seeds": (0, 0)}, "repeats"),
         ({"bias_seeds": (-1,)}, "non-negative"),
+        ({"bias_seeds": (0.5,)}, "non-negative integers"),
+        ({"seeds": (True,)}, "non-negative integers"),
         ({"calibrators": ()}, "calibrators is empty"),
         ({"calibrators": ("rbt", "svm")}, "unknown calibrators"),
         ({"pipeline": PipelineConfig(bias="wobbly")}, "unknown bias preset"),
@@ -63,7 +65,8 @@ def test_settings_refuse_an_empty_or_bad_grid_and_a_bad_budget():
 
 
 def test_units_are_instrument_and_seed_and_the_stamp_leaves_the_grid_out():
-    settings = SweepSettings(bias_seeds=(3, 1), seeds=(0, 2), pipeline=TINY)
+    settings = SweepSettings(bias_seeds=[3, np.int64(1)], seeds=range(0, 3, 2), pipeline=TINY)
+    assert settings.bias_seeds == (3, 1) and type(settings.bias_seeds[1]) is int
     assert [unit.name for unit in settings.units()] == ["bias3-seed0", "bias3-seed2", "bias1-seed0", "bias1-seed2"]
     config = settings.unit_config(Unit(bias_seed=1, seed=2))
     assert (config.bias_seed, config.seed, config.dnn_epochs) == (1, 2, 5)

@@ -105,8 +105,12 @@ class LocalExecutor:
         pool, self._pool = self._pool, None
         if pool is None:
             return
-        # The pool's own worker processes, and no other child of this process.
-        processes = list(getattr(pool, "_processes", {}).values())
+        if hasattr(pool, "terminate_workers"):  # Python >= 3.14
+            pool.terminate_workers()
+            return
+        # Before 3.14 the pool names its worker processes only in ``_processes``: those, and
+        # no other child of this process, are stopped.
+        processes = list((getattr(pool, "_processes", None) or {}).values())
         pool.shutdown(wait=False, cancel_futures=True)
         for process in processes:
             if process.is_alive():

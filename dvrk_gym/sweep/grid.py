@@ -8,6 +8,7 @@ makes all three of the paper's calibrators, so the unit of work is (instrument, 
 from __future__ import annotations
 
 import dataclasses
+import operator
 from dataclasses import dataclass
 from typing import Any
 
@@ -59,8 +60,9 @@ class SweepSettings:
     pipeline: PipelineConfig = PipelineConfig()
 
     def __post_init__(self) -> None:
-        for field in ("bias_seeds", "calibrators", "seeds"):
-            object.__setattr__(self, field, tuple(getattr(self, field)))
+        object.__setattr__(self, "calibrators", tuple(self.calibrators))
+        for field in ("bias_seeds", "seeds"):
+            object.__setattr__(self, field, _as_ints(getattr(self, field), field))
         _check_seeds(self.bias_seeds, "bias_seeds")
         _check_seeds(self.seeds, "seeds")
         if not self.calibrators:
@@ -100,10 +102,21 @@ def _check_unique(values: tuple[Any, ...], name: str) -> None:
         raise ValueError(f"{name} repeats {repeated}; give each once")
 
 
+def _as_ints(values: Any, name: str) -> tuple[int, ...]:
+    """Integers (numpy's too) as a tuple of ``int``."""
+    values = list(values)
+    try:
+        if any(isinstance(value, bool) for value in values):
+            raise TypeError(name)
+        return tuple(operator.index(value) for value in values)
+    except TypeError:
+        raise ValueError(f"{name} is {values!r}; expected non-negative integers") from None
+
+
 def _check_seeds(values: tuple[int, ...], name: str) -> None:
     if not values:
         raise ValueError(f"{name} is empty; expected at least one non-negative integer")
-    bad = [value for value in values if isinstance(value, bool) or not isinstance(value, int) or value < 0]
+    bad = [value for value in values if value < 0]
     if bad:
         raise ValueError(f"{name} has {bad}; expected non-negative integers")
     _check_unique(values, name)
