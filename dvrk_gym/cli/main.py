@@ -14,6 +14,7 @@ from dvrk_gym.cli.debridement import add_commands as add_debridement_commands
 from dvrk_gym.cli.demo import add_commands as add_demo_commands
 from dvrk_gym.cli.fidelity import add_commands as add_fidelity_commands
 from dvrk_gym.cli.reproduce import add_commands as add_reproduce_commands
+from dvrk_gym.cli.sweep import add_commands as add_sweep_commands
 
 Command = Callable[[argparse.Namespace], int]
 
@@ -33,6 +34,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_fidelity_commands(subparsers)
     add_debridement_commands(subparsers)
     add_baseline_commands(subparsers)
+    add_sweep_commands(subparsers)
     return parser
 
 

@@ -16,14 +16,19 @@ def add_instrument_options(parser: argparse.ArgumentParser, resolution: bool = T
     parser.add_argument("--bias", default="paper", help=f"cable bias preset: none, paper or severe{note} (default: %(default)s)")
     parser.add_argument("--bias-seed", type=int, default=0, help=f"which instrument to draw{note} (default: %(default)s)")
     if resolution:
-        parser.add_argument(
-            "--resolution",
-            type=int,
-            nargs=2,
-            default=(1920, 1080),
-            metavar=("W", "H"),
-            help="endoscope image size in pixels (default: 1920 1080)",
-        )
+        add_resolution_option(parser)
+
+
+def add_resolution_option(parser: argparse.ArgumentParser) -> None:
+    """``--resolution W H``: the endoscope's image size, pixels."""
+    parser.add_argument(
+        "--resolution",
+        type=int,
+        nargs=2,
+        default=(1920, 1080),
+        metavar=("W", "H"),
+        help="endoscope image size in pixels (default: 1920 1080)",
+    )
 
 
 def add_progress_option(parser: argparse.ArgumentParser) -> None:
