@@ -8,6 +8,8 @@ from typing import TypeVar
 
 import numpy as np
 
+from dvrk_gym.utils.atomic import atomic_open
+
 _Record = TypeVar("_Record", bound="ArrayRecord")
 
 
@@ -15,8 +17,9 @@ class ArrayRecord:
     """Mixin for a frozen dataclass whose fields are all numpy arrays of equal length."""
 
     def save(self, path: str | PathLike) -> None:
-        """Write every field to an ``.npz`` file."""
-        np.savez(path, **{f.name: getattr(self, f.name) for f in fields(self)})
+        """Write every field to an ``.npz`` file at exactly ``path`` (no suffix added), atomically."""
+        with atomic_open(path) as stream:
+            np.savez(stream, **{f.name: getattr(self, f.name) for f in fields(self)})
 
     @classmethod
     def load(cls: type[_Record], path: str | PathLike) -> _Record:
