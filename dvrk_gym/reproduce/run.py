@@ -27,6 +27,7 @@ from dvrk_gym.reproduce.report import collect_results, write_figures, write_repo
 from dvrk_gym.reproduce.scheduler import Task, run_tasks
 from dvrk_gym.sim.robot.bias import resolve_bias
 from dvrk_gym.utils.atomic import atomic_write_bytes, atomic_write_json
+from dvrk_gym.utils.checks import check_bool, check_int
 from dvrk_gym.utils.run_folder import RunFolder
 
 CALIBRATORS = tuple(dict.fromkeys(method for method, _ in paper.DEBRIDEMENT_RESULTS))
@@ -61,8 +62,14 @@ class ReproduceConfig:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "out", Path(self.out))
-        if self.workers < 1:
-            raise ValueError(f"workers must be >= 1, got {self.workers}")
+        if not isinstance(self.profile, Profile):
+            raise ValueError(f"profile must be a Profile, got {type(self.profile).__name__}")
+        check_int("workers", self.workers, 1, 256)
+        check_int("seed", self.seed, 0, 2**31 - 1)
+        check_int("bias_seed", self.bias_seed, 0, 2**31 - 1)
+        check_bool("progress", self.progress)
+        if not isinstance(self.bias, str):
+            raise ValueError(f"bias must be a preset name (str), got {self.bias!r}")
         resolve_bias(self.bias)  # a clear error for an unknown preset, before any work
 
     def settings(self) -> dict[str, Any]:

@@ -83,3 +83,27 @@ def check_resolution(name: str, value: Any, low: tuple[int, int] = (16, 16), hig
     except ValueError as error:
         raise ValueError(f"{error}; {name} must be {allowed}") from None
     return width, height
+
+
+Bounds = tuple[float | None, float | None, bool]
+"""A float field's (low, high, low_open) for :func:`check_float_fields`."""
+
+
+def check_float_fields(owner: str, config: Any, bounds: dict[str, Bounds], units: dict[str, str] | None = None) -> None:
+    """Check each named float field of a frozen dataclass against its bounds and store it as a float.
+
+    Args:
+        owner: the class's name, shown in errors (``"GripperConfig.jaw_friction must be ..."``).
+        config: the dataclass instance (its ``__post_init__`` calls this).
+        bounds: ``{field: (low, high, low_open)}``; None for an open end.
+        units: ``{field: unit}`` shown after the range.
+    """
+    for name, (low, high, low_open) in bounds.items():
+        value = check_float(f"{owner}.{name}", getattr(config, name), low, high, low_open, (units or {}).get(name, ""))
+        object.__setattr__(config, name, value)
+
+
+def check_int_fields(owner: str, config: Any, bounds: dict[str, tuple[int | None, int | None]]) -> None:
+    """Check each named int field of a frozen dataclass against ``{field: (low, high)}`` and store it as an int."""
+    for name, (low, high) in bounds.items():
+        object.__setattr__(config, name, check_int(f"{owner}.{name}", getattr(config, name), low, high))
