@@ -37,6 +37,7 @@ __all__ = [
     "MODEL_FILE_LIMITS",
     "ModelFileError",
     "SavableModel",
+    "read_arrays",
     "read_model_file",
     "require_array",
     "require_names",
@@ -132,7 +133,7 @@ def _npy_array(path: PathLike, name: str, data: bytes) -> np.ndarray:
     return array.reshape(shape, order="F" if fortran_order else "C").copy()
 
 
-def _read_all(path: PathLike) -> dict[str, np.ndarray]:
+def read_arrays(path: PathLike) -> dict[str, np.ndarray]:
     """Every array of an ``.npz``, read within :data:`MODEL_FILE_LIMITS` (sizes checked before anything is inflated)."""
     if not os.path.isfile(path):
         raise ModelFileError(f"{path}: no such model file")
@@ -145,7 +146,7 @@ def _read_all(path: PathLike) -> dict[str, np.ndarray]:
                 arrays[member[: -len(".npy")]] = _npy_array(path, member, read_member(archive, member, MODEL_FILE_LIMITS))
             return arrays
     except ArchiveLimitError as error:
-        raise ModelFileError(f"not an .npz model file within the size limits: {error}") from None
+        raise ModelFileError(f"not an .npz file within the size limits: {error}") from None
 
 
 def _string(arrays: Mapping[str, np.ndarray], name: str, path: PathLike) -> str:
@@ -191,7 +192,7 @@ def read_model_file(path: PathLike, kind: str) -> tuple[dict[str, Any], dict[str
             bad or missing header, the wrong kind or version, missing or extra arrays,
             shapes or dtypes unlike the header, non-finite floats, or a digest mismatch.
     """
-    arrays = _read_all(path)
+    arrays = read_arrays(path)
     metadata_json = _string(arrays, _METADATA, path)
     digest = _string(arrays, _DIGEST, path)
     data = {name: value for name, value in arrays.items() if name not in (_METADATA, _DIGEST)}

@@ -1,0 +1,73 @@
+"""Helpers of the reliability tests: the command line in a fresh process, a tiny
+reproduction profile, the parts of a run's results that do not depend on the clock."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any
+
+ROOT = Path(__file__).resolve().parents[2]
+
+TINY_PROFILE = {
+    "name": "tiny",
+    "n_trajectories": 2,
+    "steps_per_trajectory": 30,
+    "dnn_epochs": 20,
+    "search": "quick",
+    "debridement_trials": 1,
+    "debridement_picks": 2,
+    "rl_agents": ["sac"],
+    "rl_steps": 60,
+    "rl_eval_points": 1,
+    "camera_resolution": [480, 270],
+}
+"""A reproduction of about a minute on two cores (the profile of test_reproduce.py)."""
+
+CLOCK_KEYS = frozenset(
+    {"wall_s", "wall_s_per_trial", "seconds", "steps_per_second", "train_s", "eval_seconds", "task_wall_s", "stage_s", "calls"}
+)
+"""Keys of results.json whose values are wall-clock times, or the record of the calls that made them."""
+RUN_KEYS = frozenset({"task_cached", "workers"})
+"""Keys that say how a run went (which tasks were cached, how many workers), not what it found."""
+
+
+def deterministic(value: Any) -> Any:
+    """A results tree without its wall-clock times and run records: what a seed decides."""
+    if isinstance(value, dict):
+        return {key: deterministic(item) for key, item in value.items() if key not in CLOCK_KEYS | RUN_KEYS}
+    if isinstance(value, list):
+        return [deterministic(item) for item in value]
+    return value
+
+
+def cli_command(*arguments: str) -> list[str]:
+    """``dvrk-gym ARGUMENTS`` as a command for this interpreter (this worktree's package)."""
+    return [sys.executable, "-m", "dvrk_gym.cli", *arguments]
+
+
+def environment() -> dict[str, str]:
+    """The environment of a fresh process that imports this worktree's dvrk_gym."""
+    return {**os.environ, "PYTHONPATH": str(ROOT)}
+
+
+def run_cli(*arguments: str, timeout_s: float = 300.0) -> subprocess.CompletedProcess:
+    """Run ``dvrk-gym ARGUMENTS`` in a fresh process; its exit status and output."""
+    return subprocess.run(cli_command(*arguments), capture_output=True, text=True, timeout=timeout_s, env=environment(), cwd=ROOT)
+
+
+def write_profile(folder: Path, profile: dict[str, Any] = TINY_PROFILE) -> Path:
+    """A profile file for ``dvrk-gym reproduce --profile``."""
+    path = folder / f"{profile['name']}.json"
+    path.write_text(json.dumps(profile))
+    return path
+
+
+def files_in(folder: Path) -> set[str]:
+    """Every file under ``folder``, relative to it (an empty set if it does not exist)."""
+    if not folder.exists():
+        return set()
+    return {str(path.relative_to(folder)) for path in folder.rglob("*") if path.is_file()}
