@@ -224,6 +224,27 @@ def _log_call(folder: RunFolder, config: ReproduceConfig, wall_s: float, tasks_r
     return calls
 
 
+CLOCK_KEYS = frozenset(
+    {"wall_s", "wall_s_per_trial", "seconds", "steps_per_second", "train_s", "eval_seconds", "task_wall_s", "stage_s", "calls"}
+)
+"""Keys of ``results.json`` whose values are wall-clock times, or the record of the calls that made them."""
+RUN_KEYS = frozenset({"task_cached", "workers"})
+"""Keys of ``results.json`` that say how a run went (tasks loaded from the cache, workers), not what it found."""
+
+
+def seeded_results(value: Any) -> Any:
+    """A ``results.json`` tree without its wall-clock times and run records: what the seed decides.
+
+    Two runs with the same settings give equal trees, whether interrupted and resumed or
+    run with any number of workers.
+    """
+    if isinstance(value, dict):
+        return {key: seeded_results(item) for key, item in value.items() if key not in CLOCK_KEYS | RUN_KEYS}
+    if isinstance(value, list):
+        return [seeded_results(item) for item in value]
+    return value
+
+
 def _json_default(value: Any) -> Any:
     if dataclasses.is_dataclass(value):
         return dataclasses.asdict(value)

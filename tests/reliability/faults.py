@@ -10,6 +10,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from dvrk_gym.reproduce.run import seeded_results
+
 ROOT = Path(__file__).resolve().parents[2]
 
 TINY_PROFILE = {
@@ -27,21 +29,10 @@ TINY_PROFILE = {
 }
 """A reproduction of about a minute on two cores (the profile of test_reproduce.py)."""
 
-CLOCK_KEYS = frozenset(
-    {"wall_s", "wall_s_per_trial", "seconds", "steps_per_second", "train_s", "eval_seconds", "task_wall_s", "stage_s", "calls"}
-)
-"""Keys of results.json whose values are wall-clock times, or the record of the calls that made them."""
-RUN_KEYS = frozenset({"task_cached", "workers"})
-"""Keys that say how a run went (which tasks were cached, how many workers), not what it found."""
-
 
 def deterministic(value: Any) -> Any:
-    """A results tree without its wall-clock times and run records: what a seed decides."""
-    if isinstance(value, dict):
-        return {key: deterministic(item) for key, item in value.items() if key not in CLOCK_KEYS | RUN_KEYS}
-    if isinstance(value, list):
-        return [deterministic(item) for item in value]
-    return value
+    """A results tree without its wall-clock times and run records (:func:`dvrk_gym.reproduce.run.seeded_results`)."""
+    return seeded_results(value)
 
 
 def cli_command(*arguments: str) -> list[str]:
