@@ -154,6 +154,8 @@ class RunFolder:
             logger.warning(
                 "%s: taking over the stale lock of process %d, which no longer runs (it was killed or crashed)", self.path, previous
             )
+        # Written in place, not atomically: a rename would give the lock path a new inode, which another
+        # process could lock while this one holds the old one.
         lock_file.write_text(json.dumps({"pid": os.getpid(), "since": time.strftime("%Y-%m-%d %H:%M:%S")}))
 
     def close(self) -> None:
@@ -175,7 +177,8 @@ class RunFolder:
 
     def __del__(self) -> None:
         if getattr(self, "_held", False):
-            self.close()
+            with contextlib.suppress(Exception):  # at interpreter exit the kernel drops the lock anyway
+                self.close()
 
     def _check_and_stamp(self, settings: Mapping[str, Any]) -> None:
         wanted = json.loads(json.dumps(settings))  # tuples become lists, as they come back from the stamp
