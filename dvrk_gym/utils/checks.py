@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 import numbers
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -89,7 +89,7 @@ Bounds = tuple[float | None, float | None, bool]
 """A float field's (low, high, low_open) for :func:`check_float_fields`."""
 
 
-def check_float_fields(owner: str, config: Any, bounds: dict[str, Bounds], units: dict[str, str] | None = None) -> None:
+def check_float_fields(owner: str, config: Any, bounds: Mapping[str, Bounds], units: Mapping[str, str] | None = None) -> None:
     """Check each named float field of a frozen dataclass against its bounds and store it as a float.
 
     Args:
@@ -103,7 +103,7 @@ def check_float_fields(owner: str, config: Any, bounds: dict[str, Bounds], units
         object.__setattr__(config, name, value)
 
 
-def check_int_fields(owner: str, config: Any, bounds: dict[str, tuple[int | None, int | None]]) -> None:
+def check_int_fields(owner: str, config: Any, bounds: Mapping[str, tuple[int | None, int | None]]) -> None:
     """Check each named int field of a frozen dataclass against ``{field: (low, high)}`` and store it as an int."""
     for name, (low, high) in bounds.items():
         object.__setattr__(config, name, check_int(f"{owner}.{name}", getattr(config, name), low, high))
