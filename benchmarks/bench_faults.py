@@ -2,7 +2,7 @@
 
 Run: python benchmarks/bench_faults.py  [--kills 20] [--workers 2] [--seed 0] [--profile FILE] [--out DIR]
 
-First an uninterrupted run of a small profile (tests/reliability's tiny one unless
+First an uninterrupted run of a small profile (:data:`dvrk_gym.reproduce.TINY` unless
 ``--profile`` gives another) is timed and kept as the reference. Then, ``--kills`` times, a
 fresh run is started in its own folder and killed with SIGKILL at a random moment within
 the reference's wall time; the processes it started are checked to end (none may outlive
@@ -28,21 +28,9 @@ from pathlib import Path
 import numpy as np
 import psutil
 
+from dvrk_gym.reproduce import TINY
 from dvrk_gym.reproduce.run import seeded_results
 
-TINY_PROFILE = {
-    "name": "tiny",
-    "n_trajectories": 2,
-    "steps_per_trajectory": 30,
-    "dnn_epochs": 20,
-    "search": "quick",
-    "debridement_trials": 1,
-    "debridement_picks": 2,
-    "rl_agents": ["sac"],
-    "rl_steps": 60,
-    "rl_eval_points": 1,
-    "camera_resolution": [480, 270],
-}
 ORPHAN_GRACE_S = 15.0
 
 
@@ -89,14 +77,14 @@ def main() -> None:
     parser.add_argument("--kills", type=int, default=20, help="killed runs, each resumed (default: %(default)s)")
     parser.add_argument("--workers", type=int, default=2, help="worker processes of each run (default: %(default)s)")
     parser.add_argument("--seed", type=int, default=0, help="seeds the kill times (default: %(default)s)")
-    parser.add_argument("--profile", type=Path, help="a profile JSON (default: the tiny profile of tests/reliability)")
+    parser.add_argument("--profile", type=Path, help="a profile JSON (default: dvrk_gym.reproduce.TINY)")
     parser.add_argument("--out", type=Path, help="where the runs go (default: a temporary folder, removed at the end)")
     args = parser.parse_args()
     root = args.out or Path(tempfile.mkdtemp(prefix="bench_faults_"))
     root.mkdir(parents=True, exist_ok=True)
     profile = args.profile or root / "tiny.json"
     if args.profile is None:
-        profile.write_text(json.dumps(TINY_PROFILE))
+        profile.write_text(json.dumps(TINY.to_dict()))
     try:
         status, reference_s, err = run_to_end(profile, root / "reference", args.workers)
         if status != 0:

@@ -103,4 +103,20 @@ debridement cell, SAC+HER and SAC for the calibrator's number of robot moves."""
 QUICK = Profile(name="quick", search="quick", debridement_trials=3, rl_agents=("sac_her",), rl_steps=1000, rl_eval_points=5)
 """The paper's calibration budgets (the data decide the calibrators' accuracy), a five-model
 search, 3 trials per debridement cell and 1,000 moves of SAC+HER: a few minutes."""
+TINY = Profile(
+    name="tiny",
+    n_trajectories=2,
+    steps_per_trajectory=30,
+    dnn_epochs=20,
+    search="quick",
+    debridement_trials=1,
+    debridement_picks=2,
+    rl_agents=("sac",),
+    rl_steps=60,
+    rl_eval_points=1,
+    camera_resolution=(480, 270),
+)
+"""Every stage at its smallest (2 trajectories, 20 epochs, 1 trial of 2 picks per cell, 60 RL
+moves, 480 x 270): about a minute on 2 cores. Its numbers mean nothing; it is for the tests
+and the fault-injection benchmark (``dvrk-gym reproduce --profile`` takes its JSON)."""
 PROFILES = {"full": FULL, "quick": QUICK}

@@ -10,24 +10,13 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from dvrk_gym.reproduce import TINY
 from dvrk_gym.reproduce.run import seeded_results
 
 ROOT = Path(__file__).resolve().parents[2]
 
-TINY_PROFILE = {
-    "name": "tiny",
-    "n_trajectories": 2,
-    "steps_per_trajectory": 30,
-    "dnn_epochs": 20,
-    "search": "quick",
-    "debridement_trials": 1,
-    "debridement_picks": 2,
-    "rl_agents": ["sac"],
-    "rl_steps": 60,
-    "rl_eval_points": 1,
-    "camera_resolution": [480, 270],
-}
-"""A reproduction of about a minute on two cores (the profile of test_reproduce.py)."""
+TINY_PROFILE = TINY.to_dict()
+"""The tiny reproduction (:data:`dvrk_gym.reproduce.TINY`) as ``--profile`` reads it."""
 
 
 def deterministic(value: Any) -> Any:
