@@ -20,6 +20,7 @@ import os
 import time
 from collections.abc import Callable, Iterator
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -200,10 +201,15 @@ def _run_in_pool(
                 break
             bar.set_postfix_str(", ".join(sorted(task.name for task in running.values())))
             done, _ = wait(running, return_when=FIRST_COMPLETED)
+            lost = sorted(task.name for task in running.values())  # what was running, should a worker die
             for future in done:
                 task = running.pop(future)
                 try:
                     finish(task, *future.result())
+                except BrokenProcessPool as error:  # a worker was killed (or ran out of memory): no task can say which
+                    if failure is None:
+                        failure = TaskError(f"a worker process died while running {lost}: {error}")
+                        failure.__cause__ = error
                 except Exception as error:  # noqa: BLE001  (reported after the running tasks end)
                     if failure is None:
                         failure = TaskError(f"task {task.name!r} failed: {type(error).__name__}: {error}")

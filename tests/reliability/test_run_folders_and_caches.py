@@ -218,3 +218,22 @@ def test_a_kill_during_a_write_leaves_the_old_result(tmp_path):
     assert len(list(tmp_path.glob(".result.*.partial.json"))) == 1  # what the killed writer left
     with RunFolder(tmp_path):
         assert sorted(p.name for p in tmp_path.iterdir()) == sorted([LOCK_FILE, "result.json"])  # the half write is gone
+
+
+def _die_once(flag: str) -> dict:
+    """Kill this (worker) process with SIGKILL the first time; return normally once ``flag`` exists."""
+    if not Path(flag).exists():
+        Path(flag).write_text("died once")
+        os.kill(os.getpid(), 9)
+    return {"survived": True}
+
+
+def test_a_worker_killed_mid_task_fails_the_run_with_its_name_and_the_rerun_completes(tmp_path):
+    from dvrk_gym.reproduce.scheduler import TaskError
+
+    log = str(tmp_path / "log.txt")
+    graph = [Task("fine", _record, {"name": "fine", "log": log}), Task("doomed", _die_once, {"flag": str(tmp_path / "flag")}, cost_s=9)]
+    with pytest.raises(TaskError, match=r"a worker process died while running \[[^]]*'doomed'"):
+        run_tasks(graph, tmp_path / "cache", workers=2, progress=False)
+    results = run_tasks(graph, tmp_path / "cache", workers=2, progress=False)
+    assert results["doomed"] == {**results["doomed"], "survived": True, "cached": False}
