@@ -7,7 +7,6 @@ and the circle's centre, over the 35 circles, in pixels (left image) and millime
 
 from __future__ import annotations
 
-import json
 import logging
 from dataclasses import dataclass
 from pathlib import Path
@@ -21,6 +20,7 @@ from dvrk_gym.calibration.policy import CalibratedPolicy, Calibrator
 from dvrk_gym.envs.grid_touch import N_CIRCLES
 from dvrk_gym.evaluation.episodes import run_episodes, summarize
 from dvrk_gym.sim.physics.scene import GRID_COLUMNS, GRID_ROWS
+from dvrk_gym.utils.atomic import atomic_savefig, atomic_write_json
 
 logger = logging.getLogger(__name__)
 
@@ -157,10 +157,10 @@ def plot_error_maps(table: dict[str, dict[str, CircleErrors]], path: Path) -> Pa
             ax.set_title(f"{method}, {label}\nmean {np.nanmean(errors):.2f} mm", fontsize=8)
     fig.colorbar(image, ax=axes, shrink=0.8, label="touch error (mm)")
     fig.suptitle("Per-circle calibration error (grid as printed: x right, y up)")
-    path = Path(path)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    try:
+        return atomic_savefig(fig, path, dpi=110)
+    finally:
+        plt.close(fig)
 
 
 def save_table(table: dict[str, dict[str, CircleErrors]], path: Path) -> Path:
@@ -173,6 +173,4 @@ def save_table(table: dict[str, dict[str, CircleErrors]], path: Path) -> Path:
         },
         "paper": {"mean_mm": paper.CALIBRATION_MEAN_MM, "pixels": paper.CALIBRATION_PIXELS},
     }
-    path = Path(path)
-    path.write_text(json.dumps(data, indent=1))
-    return path
+    return atomic_write_json(path, data, indent=1)

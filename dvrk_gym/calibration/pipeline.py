@@ -25,6 +25,7 @@ from dvrk_gym.calibration.models.rigid import RigidBodyCalibrator
 from dvrk_gym.calibration.models.two_phase import TwoPhaseCalibrator
 from dvrk_gym.calibration.phase1 import Phase1Data, run_paper_phase1
 from dvrk_gym.calibration.phase2 import Phase2Data, collect_phase2
+from dvrk_gym.utils.atomic import atomic_write_text
 from dvrk_gym.utils.run_folder import RunFolder, read_settings
 
 logger = logging.getLogger(__name__)
@@ -89,7 +90,11 @@ def run_calibration(out: Path, config: PipelineConfig = PipelineConfig(), progre
         "summary": ..., "timings_s": {...}}`` (no table or summary without ``benchmark``).
     """
     out = Path(out)
-    folder = RunFolder(out, dataclasses.asdict(config), stamp=SETTINGS_STAMP)
+    with RunFolder(out, dataclasses.asdict(config), stamp=SETTINGS_STAMP) as folder:
+        return _run_stages(out, folder, config, progress, benchmark)
+
+
+def _run_stages(out: Path, folder: RunFolder, config: PipelineConfig, progress: bool, benchmark: bool) -> dict[str, Any]:
     grid = gym.make("dvrk_gym/GridTouch-v0", **config.env_kwargs())
     try:
         phase1 = folder.cached("phase1.npz", lambda: _run_phase1(config, progress), Phase1Data.load, _save)
@@ -121,7 +126,7 @@ def run_calibration(out: Path, config: PipelineConfig = PipelineConfig(), progre
         grid.close()
     save_table(table, out / "calibration_table.json")
     plot_error_maps(table, out / "calibration_error_maps.png")
-    (out / "calibration_table.txt").write_text(format_table(table) + "\n")
+    atomic_write_text(out / "calibration_table.txt", format_table(table) + "\n")
     return {
         "phase1": phase1,
         "phase2": phase2,

@@ -15,8 +15,15 @@ from dvrk_gym.cli.demo import add_commands as add_demo_commands
 from dvrk_gym.cli.fidelity import add_commands as add_fidelity_commands
 from dvrk_gym.cli.reproduce import add_commands as add_reproduce_commands
 from dvrk_gym.cli.sweep import add_commands as add_sweep_commands
+from dvrk_gym.utils.run_folder import RunFolderBusy
 
 Command = Callable[[argparse.Namespace], int]
+
+
+def _one_line(error: BaseException) -> str:
+    """An error's message on one line (an OSError without its own words gets its errno's)."""
+    text = str(error) or type(error).__name__
+    return " ".join(text.split())
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -44,8 +51,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
     try:
         return int(args.func(args))
-    except (ValueError, FileNotFoundError) as error:
-        print(f"dvrk-gym {args.command}: error: {error}", file=sys.stderr)
+    except (ValueError, OSError, RunFolderBusy) as error:  # bad input, unwritable output, a folder in use: one line, status 2
+        print(f"dvrk-gym {args.command}: error: {_one_line(error)}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print(f"dvrk-gym {args.command}: interrupted (cached stages are kept: the same command resumes)", file=sys.stderr)

@@ -12,7 +12,6 @@ judge (:mod:`dvrk_gym.sim.table.judge`) needs.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -28,6 +27,7 @@ from dvrk_gym.sim.table import judge
 from dvrk_gym.sim.table.grasp import GRASP_TIP_CLEARANCE_M
 from dvrk_gym.sim.table.table import DebridementTable
 from dvrk_gym.sim.world import DvrkWorld
+from dvrk_gym.utils.checks import check_float_fields
 
 PHASES: tuple[str, ...] = tuple(paper.DEBRIDEMENT_PHASE_FRAMES)
 """The paper's six phases of a pick, in order."""
@@ -78,10 +78,12 @@ class PickTiming:
     drop_dwell_s: float = 1.54
 
     def __post_init__(self) -> None:
-        for name in ("approach_height_m", "grip_depth_m", "raise_height_m", "drop_height_m", "grip_dwell_s", "drop_fall_s", "drop_dwell_s"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value >= 0):
-                raise ValueError(f"PickTiming.{name} must be finite and >= 0, got {value}")
+        heights = dict.fromkeys(("approach_height_m", "grip_depth_m", "raise_height_m", "drop_height_m"), (0.0, 0.1, False))
+        dwells = dict.fromkeys(("grip_dwell_s", "drop_fall_s", "drop_dwell_s"), (0.0, 60.0, False))
+        check_float_fields("PickTiming", self, {**heights, **dwells})
+        for name in ("travel", "descend", "carry"):
+            if not isinstance(getattr(self, name), MotionLimits):
+                raise ValueError(f"PickTiming.{name} must be a MotionLimits (or its fields as a dict), got {getattr(self, name)!r}")
 
 
 @dataclass(frozen=True)
