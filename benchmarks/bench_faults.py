@@ -35,7 +35,7 @@ ORPHAN_GRACE_S = 15.0
 
 
 def command(profile: Path, out: Path, workers: int) -> list[str]:
-    return [sys.executable, "-m", "dvrk_gym.cli", "reproduce", "--profile", str(profile), "--out", str(out)] + [
+    return [sys.executable, "-m", "dvrk_gym.cli.main", "reproduce", "--profile", str(profile), "--out", str(out)] + [
         "--workers",
         str(workers),
         "--no-progress",

@@ -26,7 +26,7 @@ def deterministic(value: Any) -> Any:
 
 def cli_command(*arguments: str) -> list[str]:
     """``dvrk-gym ARGUMENTS`` as a command for this interpreter (this worktree's package)."""
-    return [sys.executable, "-m", "dvrk_gym.cli", *arguments]
+    return [sys.executable, "-m", "dvrk_gym.cli.main", *arguments]
 
 
 def environment() -> dict[str, str]:
