@@ -24,7 +24,6 @@ from gymnasium import spaces
 
 from dvrk_gym.envs.base import DvrkEnv, EnvConfig, config_arguments, relax_option
 from dvrk_gym.envs.exploration import CAMERA_BOX_HIGH_M, CAMERA_BOX_LOW_M, encode_reported
-from dvrk_gym.sim.endoscope.noise import PixelNoise
 from dvrk_gym.sim.physics.scene import GRID_COLUMNS, GRID_ROWS, WORKSPACE_CENTER_M, grid_circle_centers
 from dvrk_gym.sim.robot import ik
 from dvrk_gym.sim.robot import kinematics as kin
@@ -267,7 +266,7 @@ class GridTouchEnv(DvrkEnv[GridTouchConfig]):
         """The jaws' touch point as the endoscope sees it (projected, with pixel noise)."""
         camera = self.world.camera
         left, right = camera.project(self.world.true_touch_point())
-        noise = PixelNoise(self.config.pixel_noise_px, camera.intrinsics.width)
+        noise = self.world.pixel_noise
         left = noise.apply(left, self.np_random)
         right = noise.apply(right, self.np_random)  # after left's: the draw order is part of the episode
         return camera.triangulate(left, right)[0]

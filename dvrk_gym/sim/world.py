@@ -151,6 +151,8 @@ class DvrkWorld:
             intrinsics=PAPER_INTRINSICS.scaled(int(width), int(height)),
             pose=default_camera_pose() if self.config.camera_pose is None else self.config.camera_pose,
         )
+        self.pixel_noise = PixelNoise(self.config.pixel_noise_px, self.camera.intrinsics.width)
+        """The detection noise of every pixel the endoscope reports (scaled to this resolution)."""
         self.physics = Physics(gui=self.config.gui)
         self.scene: SceneBodies = build_scene(self.physics)
         self.robot = PSMBody(self.physics, dh=self.cable.true_dh)
@@ -287,10 +289,9 @@ class DvrkWorld:
 
     def _with_noise(self, blob: Blob | None, noise_rng: np.random.Generator | None) -> Blob | None:
         """``blob`` with the configured pixel noise on its centroid; ``blob`` itself without noise or generator."""
-        noise = PixelNoise(self.config.pixel_noise_px, self.camera.intrinsics.width)
-        if blob is None or noise_rng is None or noise.sigma_px == 0.0:
+        if blob is None or noise_rng is None or self.pixel_noise.sigma_px == 0.0:
             return blob
-        return Blob(noise.apply(blob.centroid, noise_rng), blob.area_px, blob.touches_border)
+        return Blob(self.pixel_noise.apply(blob.centroid, noise_rng), blob.area_px, blob.touches_border)
 
     def marker_visible_fraction(self, side: str) -> float:
         """Geometric visibility of the marker from one camera, without rendering.

@@ -10,10 +10,8 @@ runs (more instruments, seeds or calibrators) and reuses what is there.
 
 from __future__ import annotations
 
-import json
 import logging
 import os
-import tempfile
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -65,30 +63,23 @@ class SweepError(RuntimeError):
     """Some units failed; the message names them (the finished ones are kept and tabled)."""
 
 
-def write_json_atomically(path: Path, value: Any) -> None:
-    """Write JSON so that the file is either absent or whole: a temporary file, then a rename."""
-    descriptor, temporary = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(descriptor, "w") as file:
-            json.dump(value, file, indent=1)
-        os.replace(temporary, path)
-    except BaseException:
-        Path(temporary).unlink(missing_ok=True)
-        raise
+def _unit_file(unit_name: str) -> str:
+    """A unit's result file, relative to the sweep folder."""
+    return f"{UNITS_FOLDER}/{unit_name}.json"
 
 
-def _load_unit(path: Path, unit: Unit) -> dict[str, Any] | None:
-    """A finished unit's result, or None when it has none (or a file that is not one)."""
-    if not path.exists():
+def _load_unit(folder: RunFolder, unit: Unit) -> dict[str, Any] | None:
+    """A finished unit's result, or None when it has none (an unreadable file is moved aside by the folder)."""
+    result = folder.read_json(_unit_file(unit.name))
+    if result is None:
         return None
     try:
-        result = json.loads(path.read_text())
         complete = result["config"] == {"bias_seed": unit.bias_seed, "seed": unit.seed} and set(result["calibrators"]) >= set(CALIBRATORS)
-    except (ValueError, KeyError, TypeError) as error:
-        logger.warning("%s is not a unit's result (%s): running the unit again", path, error)
-        return None
+    except (KeyError, TypeError) as error:
+        complete = False
+        logger.warning("%s is not a unit's result (%s)", folder.file(_unit_file(unit.name)), error)
     if not complete:
-        logger.warning("%s holds another unit or misses calibrators: running the unit again", path)
+        logger.warning("%s holds another unit or misses calibrators: running the unit again", folder.file(_unit_file(unit.name)))
         return None
     return result
 
@@ -109,21 +100,21 @@ def run_sweep(settings: SweepSettings, out: str | os.PathLike, executor: Executo
             same call retries only the failed ones.
     """
     start = time.perf_counter()
-    folder = RunFolder(out, settings.stamp(), stamp=SETTINGS_STAMP)
-    units_dir = folder.file(UNITS_FOLDER)
-    units_dir.mkdir(exist_ok=True)
-    results: dict[str, dict[str, Any]] = {}
-    for unit in settings.units():
-        found = _load_unit(units_dir / f"{unit.name}.json", unit)
-        if found is not None:
-            results[unit.name] = found
-    loaded = tuple(results)
-    todo = [settings.unit_config(unit) for unit in settings.units() if unit.name not in results]
-    logger.info("sweep in %s: %d units finished, %d to run on %s", folder.path, len(loaded), len(todo), executor.description)
-    computed, failures = _run_units(todo, executor, units_dir, results, progress, total=len(loaded) + len(todo))
-    rows = sweep_rows(settings, results)
-    csv_path = write_csv(rows, folder.file(CSV_NAME))
-    figure = plot_errors(rows, folder.file(FIGURE_NAME)) if rows else folder.file(FIGURE_NAME)
+    with RunFolder(out, settings.stamp(), stamp=SETTINGS_STAMP) as folder:
+        units_dir = folder.file(UNITS_FOLDER)
+        units_dir.mkdir(exist_ok=True)
+        results: dict[str, dict[str, Any]] = {}
+        for unit in settings.units():
+            found = _load_unit(folder, unit)
+            if found is not None:
+                results[unit.name] = found
+        loaded = tuple(results)
+        todo = [settings.unit_config(unit) for unit in settings.units() if unit.name not in results]
+        logger.info("sweep in %s: %d units finished, %d to run on %s", folder.path, len(loaded), len(todo), executor.description)
+        computed, failures = _run_units(todo, executor, folder, results, progress, total=len(loaded) + len(todo))
+        rows = sweep_rows(settings, results)
+        csv_path = write_csv(rows, folder.file(CSV_NAME))
+        figure = plot_errors(rows, folder.file(FIGURE_NAME)) if rows else folder.file(FIGURE_NAME)
     if failures:
         listed = "; ".join(f"{name} ({message})" for name, message in failures.items())
         raise SweepError(
@@ -134,7 +125,7 @@ def run_sweep(settings: SweepSettings, out: str | os.PathLike, executor: Executo
 
 
 def _run_units(
-    todo: list[PipelineConfig], executor: Executor, units_dir: Path, results: dict[str, dict[str, Any]], progress: bool, total: int
+    todo: list[PipelineConfig], executor: Executor, folder: RunFolder, results: dict[str, dict[str, Any]], progress: bool, total: int
 ) -> tuple[tuple[str, ...], dict[str, str]]:
     """Run the units on the executor, writing each result as it comes; returns the names
     of those computed and the failures' messages by name."""
@@ -149,7 +140,7 @@ def _run_units(
                 failures[name] = f"{type(outcome.error).__name__}: {outcome.error}"
                 logger.error("unit %s failed: %s", name, failures[name])
                 continue
-            write_json_atomically(units_dir / f"{name}.json", outcome.result)
+            folder.write_json(_unit_file(name), outcome.result)
             results[name] = outcome.result
             computed.append(name)
             bar.update(1)
