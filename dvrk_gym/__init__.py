@@ -63,6 +63,10 @@ _EXPORTS = {
     # the paper end to end
     "ReproduceConfig": "reproduce.run",
     "run_reproduce": "reproduce.run",
+    # sweeps over instruments, calibrators and seeds (locally or on Dask)
+    "SweepSettings": "sweep.grid",
+    "LocalExecutor": "sweep.executors",
+    "run_sweep": "sweep.run",
 }
 _LAZY = LazyExports(__name__, _EXPORTS)
 __all__ = ["ENV_IDS", "__version__", "register_envs", *_LAZY.names]
@@ -98,5 +102,8 @@ if TYPE_CHECKING:  # what type checkers and editors see; at run time the names l
     from dvrk_gym.sim.robot.bias import BiasConfig
     from dvrk_gym.sim.table.table import DebridementTable
     from dvrk_gym.sim.world import DvrkWorld, WorldConfig
+    from dvrk_gym.sweep.executors import LocalExecutor
+    from dvrk_gym.sweep.grid import SweepSettings
+    from dvrk_gym.sweep.run import run_sweep
 
 register_envs()

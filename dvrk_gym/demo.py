@@ -20,6 +20,7 @@ from dvrk_gym.sim.endoscope.stereo import StereoDetection
 from dvrk_gym.sim.physics.scene import grid_circle_centers
 from dvrk_gym.sim.robot import kinematics as kin
 from dvrk_gym.sim.world import DvrkWorld, WorldConfig
+from dvrk_gym.utils.atomic import atomic_write_bytes
 
 APPROACH_HEIGHT_M = 0.012
 """The tool first goes this far above a circle, then down to touch it."""
@@ -92,10 +93,14 @@ def _touch(world: DvrkWorld, index: int, grid: list[StereoDetection], rng: np.ra
 
 
 def _save_images(world: DvrkWorld, out: Path) -> dict[str, Path]:
+    """Write the stereo pair as PNG (each file whole or not at all); OSError if one cannot be written."""
     left, right = world.render("left"), world.render("right")
     paths = {name: out / f"{name}.png" for name in ("left", "right", "stereo")}
     for name, image in (("left", left), ("right", right), ("stereo", np.hstack([left, right]))):
-        cv2.imwrite(str(paths[name]), cv2.cvtColor(image, cv2.COLOR_RGB2BGR))
+        encoded, png = cv2.imencode(".png", cv2.cvtColor(image, cv2.COLOR_RGB2BGR))
+        if not encoded:
+            raise OSError(f"OpenCV could not encode the {name} image ({image.shape}) as PNG")
+        atomic_write_bytes(paths[name], png.tobytes())
     return paths
 
 

@@ -41,6 +41,7 @@ LAYER_RANKS = {
     "dvrk_gym.fidelity": 8,
     "dvrk_gym.baselines": 9,
     "dvrk_gym.reproduce": 10,
+    "dvrk_gym.sweep": 10,
     "dvrk_gym.cli": 11,
 }
 # Package faces, ranked by what they may re-export: ``dvrk_gym`` itself registers the envs

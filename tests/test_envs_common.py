@@ -8,6 +8,7 @@ import warnings
 
 import gymnasium as gym
 import numpy as np
+import pybullet
 import pytest
 from conftest import ENV_IDS, SMALL, json_from_fresh_process
 from gymnasium.error import ResetNeeded
@@ -155,10 +156,16 @@ def test_render_modes(make_env, env_id):
 
 
 @pytest.mark.parametrize("env_id", ENV_IDS)
-def test_human_render_mode_without_display_is_a_clear_error(env_id, monkeypatch):
+def test_human_render_mode_without_display_warns_and_runs_without_a_window(env_id, monkeypatch):
     monkeypatch.delenv("DISPLAY", raising=False)
-    with pytest.raises(RuntimeError, match="display"):
-        gym.make(env_id, render_mode="human", camera_resolution=SMALL)
+    with pytest.warns(RuntimeWarning, match="DISPLAY is not set"):
+        env = gym.make(env_id, render_mode="human", camera_resolution=SMALL)
+    try:
+        env.reset(seed=0)
+        assert env.render() is None
+        assert env.unwrapped.world.physics.client.getConnectionInfo()["connectionMethod"] == pybullet.DIRECT
+    finally:
+        env.close()
 
 
 @pytest.mark.parametrize("env_id", ENV_IDS)
@@ -228,3 +235,85 @@ def test_constructor_keywords_are_the_config_fields_with_the_same_defaults_and_d
         assert parameter.annotation != inspect.Parameter.empty, field_name
         assert parameter.default == getattr(defaults, field_name), field_name
         assert f"{field_name}:" in env_class.__init__.__doc__, f"{field_name} is not documented in help()"
+
+
+@pytest.mark.parametrize("env_id", ENV_IDS)
+def test_registered_episode_length_is_what_the_defaults_give(env_id):
+    from dvrk_gym.envs.debridement_config import DebridementConfig
+    from dvrk_gym.envs.exploration import ExplorationConfig
+
+    expected = {
+        "dvrk_gym/CalibrationExploration-v0": ExplorationConfig().max_steps,
+        "dvrk_gym/GridTouch-v0": None,  # one touch terminates the episode: no time limit to truncate it
+        "dvrk_gym/Debridement-v0": DebridementConfig().max_picks,
+    }
+    assert gym.spec(env_id).max_episode_steps == expected[env_id]
+
+
+@pytest.mark.parametrize("env_id", ENV_IDS)
+def test_gymnasium_env_checker_passes_without_flags_headless_with_rendering(env_id, monkeypatch):
+    monkeypatch.delenv("DISPLAY", raising=False)
+    env = gym.make(env_id, camera_resolution=SMALL, render_mode="rgb_array")
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # the checker advises a [-1, 1] action box; ours is SI
+            check_env(env.unwrapped)
+    finally:
+        env.close()
+
+
+@pytest.mark.parametrize("env_id", ENV_IDS)
+def test_every_env_reports_is_success_at_the_end_of_an_episode(make_env, env_id):
+    env = make_env(env_id)
+    env.reset(seed=0)
+    done, info = False, {}
+    while not done:
+        _, _, terminated, truncated, info = env.step(env.action_space.sample())
+        done = terminated or truncated
+    assert isinstance(info["is_success"], (bool, np.bool_))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("vectorization_mode", ["sync", "async"])
+def test_make_vec_steps_every_env_in_sync_and_async_vector_envs(vectorization_mode):
+    for env_id in ENV_IDS:
+        envs = gym.make_vec(env_id, num_envs=2, vectorization_mode=vectorization_mode, camera_resolution=SMALL)
+        try:
+            observations, _ = envs.reset(seed=[3, 4])
+            observations, rewards, terminated, truncated, infos = envs.step(envs.action_space.sample())
+            assert rewards.shape == (2,) and terminated.shape == (2,)
+        finally:
+            envs.close()
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("env_id", ENV_IDS)
+def test_record_video_writes_an_episode_of_every_env(env_id, tmp_path):
+    pytest.importorskip("moviepy")
+    from gymnasium.wrappers import RecordVideo
+
+    env = RecordVideo(gym.make(env_id, camera_resolution=(160, 96), render_mode="rgb_array"), str(tmp_path), episode_trigger=lambda _: True)
+    try:
+        env.reset(seed=0)
+        done = False
+        while not done:
+            _, _, terminated, truncated, _ = env.step(env.action_space.sample())
+            done = terminated or truncated
+    finally:
+        env.close()
+    videos = list(tmp_path.glob("*.mp4"))
+    assert len(videos) == 1 and videos[0].stat().st_size > 0
+
+
+def test_debridement_renders_the_frames_of_a_pick_phase_by_phase():
+    env = gym.make("dvrk_gym/Debridement-v0", camera_resolution=(160, 96), render_mode="rgb_array_list")
+    try:
+        env.reset(seed=0)
+        assert len(env.render()) == 1  # the table as the episode starts
+        env.step(env.action_space.sample())
+        frames = env.render()
+        assert len(frames) == 6 and all(frame.shape == (96, 160, 3) for frame in frames)  # the paper's six phases
+        assert env.render() == []  # each frame is handed out once
+        assert not all(np.array_equal(frames[0], frame) for frame in frames[1:])  # the arm moved
+    finally:
+        env.close()

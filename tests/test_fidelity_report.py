@@ -11,7 +11,7 @@ from dvrk_gym.calibration.datasets import load_paper_phase1
 from dvrk_gym.cli.main import main
 from dvrk_gym.fidelity.comparison import SHARE_TOLERANCE, compare
 from dvrk_gym.fidelity.statistics import FidelityStatistics, fidelity_statistics
-from dvrk_gym.utils.atomic import write_atomic, write_text_atomic
+from dvrk_gym.utils.atomic import atomic_path, atomic_write_text
 
 REFERENCE = FidelityStatistics(
     rows=100,
@@ -51,19 +51,16 @@ def test_cross_validation_rows_are_left_out_when_not_run():
 
 def test_atomic_write_replaces_whole_or_keeps_the_old_file(tmp_path):
     path = tmp_path / "result.json"
-    write_text_atomic(path, "old")
+    atomic_write_text(path, "old")
 
     class Interrupted(Exception):
         pass
 
-    def failing(temporary):
+    with pytest.raises(Interrupted), atomic_path(path) as temporary:
         temporary.write_text("half")
         raise Interrupted
-
-    with pytest.raises(Interrupted):
-        write_atomic(path, failing)
     assert path.read_text() == "old"
-    write_text_atomic(path, "new")
+    atomic_write_text(path, "new")
     assert path.read_text() == "new"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["result.json"]  # no temporary file left
 

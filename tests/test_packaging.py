@@ -36,3 +36,13 @@ def test_readme_test_command_is_the_one_ci_runs():
     ci_lines = (ROOT / ".ci" / "run").read_text().splitlines()
     command = next(line for line in ci_lines if "pytest" in line and not line.startswith("#"))
     assert command.strip() in (ROOT / "README.md").read_text()
+
+
+def test_citation_file_names_the_paper_and_this_version():
+    import re
+
+    from dvrk_gym import __version__
+
+    text = (ROOT / "CITATION.cff").read_text()
+    assert f"version: {__version__}" in text
+    assert "Two-Phase Calibration Procedure" in text and re.search(r"year: 2018", text)

@@ -37,3 +37,15 @@ def test_the_public_names_are_the_modules_own_objects():
     assert dvrk_gym.CalibratedPolicy is CalibratedPolicy
     assert dvrk_gym.GridTouchEnv is GridTouchEnv
     assert dvrk_gym.make_calibrator("rbt").__class__ is dvrk_gym.RigidBodyCalibrator
+
+
+def test_version_is_the_installed_distributions_and_the_cli_prints_it(capsys):
+    from importlib.metadata import version
+
+    from dvrk_gym.cli.main import main
+
+    assert dvrk_gym.__version__ == version("dvrk-gym")
+    with pytest.raises(SystemExit) as exit_info:
+        main(["--version"])
+    assert exit_info.value.code == 0
+    assert capsys.readouterr().out.strip() == f"dvrk-gym {dvrk_gym.__version__}"

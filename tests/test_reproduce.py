@@ -8,23 +8,9 @@ import pytest
 
 from dvrk_gym import paper
 from dvrk_gym.cli.main import main
-from dvrk_gym.reproduce import Profile, ReproduceConfig, build_tasks, run_reproduce
+from dvrk_gym.reproduce import TINY, Profile, ReproduceConfig, build_tasks, run_reproduce
 from dvrk_gym.reproduce.scheduler import Task, TaskError, run_tasks
 from dvrk_gym.utils.run_folder import RunFolder, read_settings
-
-TINY = Profile(
-    name="tiny",
-    n_trajectories=2,
-    steps_per_trajectory=30,
-    dnn_epochs=20,
-    search="quick",
-    debridement_trials=1,
-    debridement_picks=2,
-    rl_agents=("sac",),
-    rl_steps=60,
-    rl_eval_points=1,
-    camera_resolution=(480, 270),
-)
 
 
 @pytest.fixture(scope="module")

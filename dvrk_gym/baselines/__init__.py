@@ -4,8 +4,7 @@ Issue 7 asks how an agent that learns where to send the robot from reward compar
 the two-phase calibrator for the same number of robot moves (5,476: the paper's Phase I
 poses and Phase II touches; and ten times that).
 
-- :mod:`~dvrk_gym.baselines.budgets`: the agents' names and envs (no heavy imports).
-- :mod:`~dvrk_gym.baselines.budgets`: the budgets in env steps.
+- :mod:`~dvrk_gym.baselines.budgets`: the agents' names and envs, and the budgets in env steps (no heavy imports).
 - :mod:`~dvrk_gym.baselines.wrappers`: GridTouch-v0 as the agents see it (goals scaled,
   ``(bx, by, bz)`` in [-1, 1], the yaw the episode asks for).
 - :mod:`~dvrk_gym.baselines.picking`: Debridement-v0 (one pick per step) as the pick

@@ -5,15 +5,17 @@ friends) and ``<name>.json`` beside it: the training config, the policy's networ
 settings, the goal scaling and the env steps trained. :func:`load_agent` does not use
 SB3's ``load``, which unpickles (cloudpickle) part of the zip and so can run code from a
 crafted file: it rebuilds the model from the JSON and reads only the policy's weights
-(``policy.pth`` inside the zip) with ``torch.load(..., weights_only=True)``. Even so, only
-load files this tool wrote, or that you trust.
+(``policy.pth`` inside the zip) with ``torch.load(..., weights_only=True)``. Sizes are
+bounded before anything is built or inflated: the settings JSON's size, the network the
+settings describe (:func:`check_policy_kwargs`), and the zip's declared and actual member
+sizes (:data:`AGENT_FILE_LIMITS`). Even so, only load files this tool wrote, or that you trust.
 """
 
 from __future__ import annotations
 
 import io
 import json
-import zipfile
+import pickle
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -24,11 +26,22 @@ from stable_baselines3.common.base_class import BaseAlgorithm
 from dvrk_gym.baselines.agents import ALGORITHMS
 from dvrk_gym.baselines.training import TrainConfig, TrainResult, make_agent_env
 from dvrk_gym.baselines.wrappers import GOAL_CENTER_M, GOAL_HALF_RANGE_M
+from dvrk_gym.utils.atomic import atomic_path, atomic_write_json
+from dvrk_gym.utils.bounded_zip import ArchiveLimits, open_archive, read_member
+from dvrk_gym.utils.checks import check_bool, check_int
 
 FORMAT = "dvrk_gym.baselines/1"
 """Tag of the settings JSON, checked on load."""
 POLICY_WEIGHTS = "policy.pth"
 """The member of SB3's zip that holds the policy's state dict."""
+AGENT_FILE_LIMITS = ArchiveLimits(max_file_bytes=512 * 2**20, max_members=64, max_member_bytes=256 * 2**20, max_total_bytes=512 * 2**20)
+"""What an agent's zip may hold (a 256 x 256 SAC's is about 1 MB, its replay buffer not included)."""
+MAX_SETTINGS_BYTES = 2**20
+"""The largest settings JSON read, bytes."""
+MAX_LAYERS = 16
+MAX_LAYER_UNITS = 4096
+"""Bounds of the networks a settings file may describe: hidden layers, and units per layer."""
+_POLICY_KEYS = {"net_arch", "use_sde", "n_critics"}
 
 
 @dataclass(frozen=True)
@@ -66,7 +79,8 @@ def save_agent(result: TrainResult, path: Path) -> Path:
     """
     path = Path(path).with_suffix(".zip")
     path.parent.mkdir(parents=True, exist_ok=True)
-    result.model.save(path)
+    with atomic_path(path) as temporary:
+        result.model.save(temporary)
     settings = {
         "format": FORMAT,
         "config": result.config.to_dict(),
@@ -76,7 +90,7 @@ def save_agent(result: TrainResult, path: Path) -> Path:
         "train_seconds": result.train_seconds,
         "steps_per_second": result.steps_per_second,
     }
-    settings_path(path).write_text(json.dumps(settings, indent=1))
+    atomic_write_json(settings_path(path), settings, indent=1)
     return path
 
 
@@ -86,6 +100,40 @@ def _policy_kwargs(model: BaseAlgorithm) -> dict[str, Any]:
         json.dumps(kwargs)
     except TypeError as error:
         raise ValueError(f"policy_kwargs must be plain JSON values to be saved safely, got {kwargs!r}: {error}") from None
+    return check_policy_kwargs(kwargs)
+
+
+def _check_layers(name: str, layers: Any) -> None:
+    if not isinstance(layers, list) or len(layers) > MAX_LAYERS:
+        raise ValueError(f"{name} must be a list of at most {MAX_LAYERS} layer sizes, got {layers!r}")
+    for i, units in enumerate(layers):
+        check_int(f"{name}[{i}]", units, 1, MAX_LAYER_UNITS)
+
+
+def check_policy_kwargs(kwargs: Any) -> dict[str, Any]:
+    """The policy settings of an agent file, if they describe a network within fixed bounds.
+
+    Allowed: ``net_arch`` (a list of at most MAX_LAYERS sizes of 1-MAX_LAYER_UNITS units, or
+    ``{"pi": [...], "qf": [...]}``/``{"pi": [...], "vf": [...]}`` of such lists), ``use_sde``
+    (bool), ``n_critics`` (1-10).
+
+    Raises:
+        ValueError: anything else (the message names the key and what is allowed).
+    """
+    if not isinstance(kwargs, dict) or not set(kwargs) <= _POLICY_KEYS:
+        raise ValueError(f"policy_kwargs must be an object with keys among {sorted(_POLICY_KEYS)}, got {kwargs!r}")
+    arch = kwargs.get("net_arch", [])
+    if isinstance(arch, dict):
+        if not arch or not set(arch) <= {"pi", "qf", "vf"}:
+            raise ValueError(f"net_arch must be a list or an object with keys among ['pi', 'qf', 'vf'], got {arch!r}")
+        for key, layers in arch.items():
+            _check_layers(f"net_arch[{key!r}]", layers)
+    else:
+        _check_layers("net_arch", arch)
+    if "use_sde" in kwargs:
+        check_bool("use_sde", kwargs["use_sde"])
+    if "n_critics" in kwargs:
+        check_int("n_critics", kwargs["n_critics"], 1, 10)
     return kwargs
 
 
@@ -95,21 +143,47 @@ def _read_settings(path: Path) -> dict[str, Any]:
         raise FileNotFoundError(f"no model file {path}")
     if not json_path.exists():
         raise FileNotFoundError(f"{json_path} is missing: models are saved by 'dvrk-gym baseline train' as a .zip and a .json side by side")
-    settings = json.loads(json_path.read_text())
+    size = json_path.stat().st_size
+    if size > MAX_SETTINGS_BYTES:
+        raise ValueError(f"{json_path}: {size:,} bytes; a settings file has at most {MAX_SETTINGS_BYTES:,}")
+    try:
+        settings = json.loads(json_path.read_text())
+    except (ValueError, RecursionError) as error:
+        raise ValueError(f"{json_path} is not valid JSON ({error}); was it cut short? Train the agent again") from None
+    if not isinstance(settings, dict):
+        raise ValueError(f"{json_path} holds {type(settings).__name__}, not a dvrk_gym baseline settings object")
     if settings.get("format") != FORMAT:
         raise ValueError(f"{json_path} is not a dvrk_gym baseline settings file (format {settings.get('format')!r}, expected {FORMAT!r})")
-    scaling = settings["goal_scaling"]
-    if tuple(scaling["center_m"]) != tuple(GOAL_CENTER_M) or scaling["half_range_m"] != GOAL_HALF_RANGE_M:
-        raise ValueError(f"{path} was trained with goal scaling {scaling}, but this version scales by {GOAL_CENTER_M}, {GOAL_HALF_RANGE_M}")
+    try:
+        scaling = settings["goal_scaling"]
+        if tuple(scaling["center_m"]) != tuple(GOAL_CENTER_M) or scaling["half_range_m"] != GOAL_HALF_RANGE_M:
+            raise ValueError(
+                f"{path} was trained with goal scaling {scaling}, but this version scales by {GOAL_CENTER_M}, {GOAL_HALF_RANGE_M}"
+            )
+        check_policy_kwargs(settings["policy_kwargs"])
+        check_int("env_steps", settings["env_steps"], 0)
+        if not isinstance(settings["config"], dict):
+            raise ValueError(f"config must be an object, got {settings['config']!r}")
+    except (KeyError, TypeError) as error:
+        raise ValueError(f"{json_path} lacks or mangles a setting ({type(error).__name__}: {error})") from None
+    except ValueError as error:
+        raise ValueError(f"{json_path}: {error}") from None
     return settings
 
 
 def _policy_weights(path: Path) -> dict[str, torch.Tensor]:
-    with zipfile.ZipFile(path) as archive:
+    """The policy's state dict, read within :data:`AGENT_FILE_LIMITS`, tensors only (no pickled objects)."""
+    with open_archive(path, AGENT_FILE_LIMITS) as archive:
         if POLICY_WEIGHTS not in archive.namelist():
             raise ValueError(f"{path} holds no {POLICY_WEIGHTS}; is it a stable-baselines3 zip?")
-        buffer = io.BytesIO(archive.read(POLICY_WEIGHTS))
-    return torch.load(buffer, map_location="cpu", weights_only=True)
+        buffer = io.BytesIO(read_member(archive, POLICY_WEIGHTS, AGENT_FILE_LIMITS))
+    try:
+        weights = torch.load(buffer, map_location="cpu", weights_only=True)
+    except (pickle.UnpicklingError, RuntimeError, EOFError, ValueError) as error:
+        raise ValueError(f"{path}: {POLICY_WEIGHTS} is not a plain tensor state dict ({type(error).__name__}: {error})") from None
+    if not isinstance(weights, dict) or not all(isinstance(value, torch.Tensor) for value in weights.values()):
+        raise ValueError(f"{path}: {POLICY_WEIGHTS} is not a state dict of tensors")
+    return weights
 
 
 def load_agent(path: Path) -> LoadedAgent:
@@ -121,7 +195,10 @@ def load_agent(path: Path) -> LoadedAgent:
     """
     path = Path(path)
     settings = _read_settings(path)
-    config = TrainConfig(**settings["config"])
+    try:
+        config = TrainConfig(**settings["config"])
+    except (TypeError, ValueError) as error:
+        raise ValueError(f"{settings_path(path)}: bad training settings: {error}") from None
     env = make_agent_env(config, training=False)
     try:
         algorithm = ALGORITHMS[config.spec.algorithm]

@@ -17,6 +17,7 @@ from typing import Any
 from dvrk_gym import paper
 from dvrk_gym.baselines.budgets import CALIBRATOR_MOVES
 from dvrk_gym.baselines.training import CurvePoint
+from dvrk_gym.utils.atomic import atomic_savefig, atomic_write_json
 
 CURVE_METRICS = ("mm_error", "success_rate")
 """What :func:`plot_curves` can draw: touch error or grip offset (mm), or success rate."""
@@ -32,8 +33,7 @@ def save_curve(points: Sequence[CurvePoint], path: Path, meta: dict[str, Any]) -
     """Write ``{"meta": ..., "points": [{env_steps, mm_error, pixel_error, success_rate, time_per_fragment_s}]}``."""
     path = Path(path)
     rows = [{key: _json_value(value) for key, value in dataclasses.asdict(p).items()} for p in points]
-    path.write_text(json.dumps({"meta": meta, "points": rows}, indent=1))
-    return path
+    return atomic_write_json(path, {"meta": meta, "points": rows}, indent=1)
 
 
 def load_curve(path: Path) -> list[CurvePoint]:
@@ -92,7 +92,7 @@ def plot_curves(curves: dict[str, Sequence[CurvePoint]], path: Path, title: str 
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8)
     fig.tight_layout()
-    path = Path(path)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    try:
+        return atomic_savefig(fig, path, dpi=110)
+    finally:
+        plt.close(fig)

@@ -33,6 +33,7 @@ from dvrk_gym.calibration.benchmark import YAW_SETTINGS
 from dvrk_gym.envs.grid_touch import N_CIRCLES
 from dvrk_gym.evaluation.episodes import run_episodes
 from dvrk_gym.evaluation.trials import run_trials, totals
+from dvrk_gym.utils.checks import check_choice, check_int_fields, check_resolution
 from dvrk_gym.utils.torch_threads import torch_threads
 
 logger = logging.getLogger(__name__)
@@ -85,15 +86,18 @@ class TrainConfig:
     overrides: dict[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "camera_resolution", tuple(self.camera_resolution))
+        object.__setattr__(self, "camera_resolution", check_resolution("camera_resolution", self.camera_resolution))
+        if not isinstance(self.agent, str):
+            raise ValueError(f"agent must be an agent's name, got {self.agent!r}")
         get_agent(self.agent)
-        if self.training_yaws not in TRAINING_YAWS:
-            raise ValueError(f"training_yaws must be one of {TRAINING_YAWS}, got {self.training_yaws!r}")
-        if self.vec_env not in VEC_ENVS:
-            raise ValueError(f"vec_env must be one of {VEC_ENVS}, got {self.vec_env!r}")
-        for name in ("steps", "n_envs", "eval_points", "curve_trials", "torch_threads"):
-            if getattr(self, name) < 1:
-                raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
+        check_choice("training_yaws", self.training_yaws, TRAINING_YAWS)
+        check_choice("vec_env", self.vec_env, VEC_ENVS)
+        bounds = {"steps": (1, 10**9), "seed": (0, 2**31 - 1), "bias_seed": (0, 2**31 - 1), "n_envs": (1, 64), "eval_points": (1, 10_000)}
+        bounds.update({"curve_trials": (1, 10_000), "torch_threads": (1, 256)})
+        check_int_fields("TrainConfig", self, bounds)
+        for name in ("env_overrides", "overrides"):
+            if not isinstance(getattr(self, name), dict):
+                raise ValueError(f"{name} must be a dict of keywords, got {getattr(self, name)!r}")
 
     @property
     def spec(self) -> AgentSpec:

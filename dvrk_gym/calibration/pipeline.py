@@ -19,12 +19,13 @@ from typing import Any
 import gymnasium as gym
 
 from dvrk_gym import paper
-from dvrk_gym.calibration.benchmark import calibration_table, format_table, plot_error_maps, save_table, table_summary
+from dvrk_gym.calibration.benchmark import BENCHMARK_SEED, calibration_table, format_table, plot_error_maps, save_table, table_summary
 from dvrk_gym.calibration.models.dnn import DNNCalibrator
 from dvrk_gym.calibration.models.rigid import RigidBodyCalibrator
 from dvrk_gym.calibration.models.two_phase import TwoPhaseCalibrator
 from dvrk_gym.calibration.phase1 import Phase1Data, run_paper_phase1
 from dvrk_gym.calibration.phase2 import Phase2Data, collect_phase2
+from dvrk_gym.utils.atomic import atomic_write_text
 from dvrk_gym.utils.run_folder import RunFolder, read_settings
 
 logger = logging.getLogger(__name__)
@@ -33,8 +34,8 @@ SETTINGS_STAMP = "pipeline_config.json"
 """The file of a calibration run folder that holds its settings (:class:`PipelineConfig`)."""
 CALIBRATOR_FILES = {"rbt": "rbt.npz", "dnn": "dnn.npz", "dnn+rf": "two_phase.npz"}
 """The model file of each calibrator in a calibration run folder, by the calibrator's name."""
-BENCHMARK_SEED_OFFSET = 1000
-"""The benchmark's seed is the run's seed plus this."""
+BENCHMARK_SEED_OFFSET = BENCHMARK_SEED
+"""The benchmark's seed is the run's seed plus this (so run seed 0 gives calibration_table's default)."""
 
 
 @dataclass(frozen=True)
@@ -89,7 +90,11 @@ def run_calibration(out: Path, config: PipelineConfig = PipelineConfig(), progre
         "summary": ..., "timings_s": {...}}`` (no table or summary without ``benchmark``).
     """
     out = Path(out)
-    folder = RunFolder(out, dataclasses.asdict(config), stamp=SETTINGS_STAMP)
+    with RunFolder(out, dataclasses.asdict(config), stamp=SETTINGS_STAMP) as folder:
+        return _run_stages(out, folder, config, progress, benchmark)
+
+
+def _run_stages(out: Path, folder: RunFolder, config: PipelineConfig, progress: bool, benchmark: bool) -> dict[str, Any]:
     grid = gym.make("dvrk_gym/GridTouch-v0", **config.env_kwargs())
     try:
         phase1 = folder.cached("phase1.npz", lambda: _run_phase1(config, progress), Phase1Data.load, _save)
@@ -121,7 +126,7 @@ def run_calibration(out: Path, config: PipelineConfig = PipelineConfig(), progre
         grid.close()
     save_table(table, out / "calibration_table.json")
     plot_error_maps(table, out / "calibration_error_maps.png")
-    (out / "calibration_table.txt").write_text(format_table(table) + "\n")
+    atomic_write_text(out / "calibration_table.txt", format_table(table) + "\n")
     return {
         "phase1": phase1,
         "phase2": phase2,

@@ -28,7 +28,6 @@ import textwrap
 import time
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
-from typing import Protocol
 
 import numpy as np
 from matplotlib.figure import Figure
@@ -40,6 +39,7 @@ from dvrk_gym.calibration.models.dnn import DNNCalibrator
 from dvrk_gym.calibration.models.features import check_inputs, check_targets
 from dvrk_gym.calibration.models.forests import ForestCalibrator
 from dvrk_gym.calibration.models.linear import LinearCalibrator
+from dvrk_gym.calibration.models.two_phase import Regressor
 
 __all__ = [
     "CHOSEN_NET",
@@ -71,12 +71,9 @@ _TITLE_CHARS_PER_INCH = 12  # at 9 pt
 _LOG_SCALE_RATIO = 10.0  # log y axis when the largest bar is this many times the smallest
 
 
-class Calibrator(Protocol):
-    """Anything with ``fit(X, y)`` and ``predict(X)`` on SI calibration arrays."""
-
-    def fit(self, X: np.ndarray, y: np.ndarray) -> Calibrator: ...
-
-    def predict(self, X: np.ndarray) -> np.ndarray: ...
+Calibrator = Regressor
+"""Anything with ``fit(X, y)`` and ``predict(X)`` on SI calibration arrays (the search's name for
+:class:`~dvrk_gym.calibration.models.two_phase.Regressor`)."""
 
 
 @dataclass(frozen=True)

@@ -7,11 +7,11 @@ that ``dvrk-gym baseline --help`` stays fast.
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 
 from dvrk_gym import paper
-from dvrk_gym.cli.options import add_instrument_options, add_progress_option
+from dvrk_gym.cli.options import add_instrument_options, add_progress_option, writable_folder
+from dvrk_gym.utils.atomic import atomic_write_json, atomic_write_text
 
 LOAD_WARNING = (
     "Models are read back without unpickling (the policy weights with torch.load(weights_only=True), "
@@ -51,9 +51,9 @@ def _run_train(args: argparse.Namespace) -> int:
         env_overrides=env_overrides,
     )
     out = args.out or Path("dvrk_gym_out/baselines") / f"{args.algo}_{args.budget if args.steps is None else steps}_seed{args.seed}"
-    out.mkdir(parents=True, exist_ok=True)
+    writable_folder(out)  # before training: a folder that cannot hold the model is found now, not after the training
     result = train(config, progress=not args.no_progress)
-    model_path = save_agent(result, out / "model.zip")
+    model_path = save_agent(result, out / "model.zip")  # the model first: nothing after it can lose it
     label = f"{args.algo}, seed {args.seed}"
     meta = {"agent": args.algo, "seed": args.seed, "env_steps": result.env_steps, "steps_per_second": result.steps_per_second}
     save_curve(result.curve, out / "learning_curve.json", meta)
@@ -90,11 +90,11 @@ def _run_evaluate(args: argparse.Namespace) -> int:
 
     if args.trials < 1:
         raise ValueError(f"--trials must be >= 1, got {args.trials}")
+    writable_folder(args.out)
     agents = [load_agent(path) for path in args.model]
     labels = [agent.label for agent in agents]
     if len(set(labels)) < len(labels):
         raise ValueError(f"two models have the same agent, steps and seed ({labels}); give each once")
-    args.out.mkdir(parents=True, exist_ok=True)
     written: list[Path] = []
     grid_agents = [agent for agent in agents if agent.config.spec.env_id == GRID_TOUCH_ID]
     if grid_agents:
@@ -126,7 +126,7 @@ def _evaluate_touch_grid(agents: list, args: argparse.Namespace) -> list[Path]:
     text = format_table(table) + "\n" + "\n".join(f"{key}: {agent.label}, {agent.path}" for key, agent in zip(keys, agents))
     print(text)
     save_table(table, args.out / "baseline_table.json")
-    (args.out / "baseline_table.txt").write_text(text + "\n")
+    atomic_write_text(args.out / "baseline_table.txt", text + "\n")
     written = [args.out / "baseline_table.json", args.out / "baseline_table.txt"]
     if calibration is not None:
         rows += [agent_row(agent, table[key]) for key, agent in zip(keys, agents)]
@@ -134,8 +134,8 @@ def _evaluate_touch_grid(agents: list, args: argparse.Namespace) -> list[Path]:
         comparison = format_comparison(rows, notes)
         print()
         print(comparison)
-        (args.out / "comparison.txt").write_text(comparison + "\n")
-        (args.out / "comparison.json").write_text(json.dumps({"rows": [row.__dict__ for row in rows], "notes": notes}, indent=1))
+        atomic_write_text(args.out / "comparison.txt", comparison + "\n")
+        atomic_write_json(args.out / "comparison.json", {"rows": [row.__dict__ for row in rows], "notes": notes}, indent=1)
         written += [args.out / "comparison.txt", args.out / "comparison.json"]
     return written
 
@@ -167,7 +167,7 @@ def _evaluate_debridement(agents: list, args: argparse.Namespace) -> list[Path]:
     text = "\n\n".join(texts + [format_debridement_comparison(rows, notes)])
     print()
     print(text)
-    (args.out / "debridement.txt").write_text(text + "\n")
+    atomic_write_text(args.out / "debridement.txt", text + "\n")
     data = {
         "seed": seed,
         "trials": args.trials,
@@ -175,7 +175,7 @@ def _evaluate_debridement(agents: list, args: argparse.Namespace) -> list[Path]:
         "rows": [{**row.__dict__, "success_rate": row.success_rate} for row in rows],
         "notes": notes,
     }
-    (args.out / "debridement.json").write_text(json.dumps(data, indent=1))
+    atomic_write_json(args.out / "debridement.json", data, indent=1)
     return [args.out / "debridement.txt", args.out / "debridement.json"]
 
 

@@ -7,7 +7,8 @@ import json
 from pathlib import Path
 
 from dvrk_gym import paper
-from dvrk_gym.cli.options import add_instrument_options
+from dvrk_gym.cli.options import add_instrument_options, add_progress_option, writable_folder
+from dvrk_gym.utils.atomic import atomic_path, atomic_write_json
 
 
 def _add_world_options(parser: argparse.ArgumentParser) -> None:
@@ -36,11 +37,17 @@ def _config(args: argparse.Namespace):
 def _run_collect(args: argparse.Namespace) -> int:
     from dvrk_gym.calibration.phase1 import run_paper_phase1
 
+    path = writable_folder(args.out) / "phase1.npz"
+    if path.exists() and not args.force:
+        raise FileExistsError(f"{path} exists; give --force to replace it, or another --out")
     data = run_paper_phase1(
-        args.trajectories, args.seed, bias=args.bias, bias_seed=args.bias_seed, camera_resolution=tuple(args.resolution)
+        args.trajectories,
+        args.seed,
+        bias=args.bias,
+        bias_seed=args.bias_seed,
+        camera_resolution=tuple(args.resolution),
+        progress=not args.no_progress,
     )
-    args.out.mkdir(parents=True, exist_ok=True)
-    path = args.out / "phase1.npz"
     data.save(path)
     raw, kept = paper.PHASE1_RAW_SAMPLES, paper.PHASE1_KEPT_SAMPLES
     print(
@@ -54,7 +61,7 @@ def _run_collect(args: argparse.Namespace) -> int:
 def _run_calibrate(args: argparse.Namespace) -> int:
     from dvrk_gym.calibration.pipeline import run_calibration
 
-    result = run_calibration(args.out, _config(args), benchmark=False)
+    result = run_calibration(writable_folder(args.out), _config(args), progress=not args.no_progress, benchmark=False)
     phase1 = result["phase1"]
     print(f"Phase I: {phase1.n_raw} raw, {phase1.n_kept} kept; Phase II: {len(result['phase2'].circle)} corrections")
     print(f"models in {args.out}: rbt.npz, dnn.npz, two_phase.npz (safe to load: no pickles)")
@@ -67,7 +74,7 @@ def _run_evaluate(args: argparse.Namespace) -> int:
     from dvrk_gym.calibration.benchmark import format_table
     from dvrk_gym.calibration.pipeline import run_calibration
 
-    result = run_calibration(args.out, _config(args), benchmark=True)
+    result = run_calibration(writable_folder(args.out), _config(args), progress=not args.no_progress, benchmark=True)
     print(format_table(result["table"]))
     print(f"wrote {args.out / 'calibration_table.json'}, {args.out / 'calibration_table.txt'}, {args.out / 'calibration_error_maps.png'}")
     return 0
@@ -77,18 +84,24 @@ def _evaluate_policy(args: argparse.Namespace) -> int:
     from dvrk_gym.evaluation.episodes import evaluate_policy, load_policy_factory, summarize_metric
 
     factory = load_policy_factory(args.policy)  # a bad name fails before any env is built
-    options = json.loads(args.options) if args.options else None
+    try:
+        options = json.loads(args.options) if args.options else None
+    except ValueError as error:
+        raise ValueError(f"--options must be a JSON object, got {args.options!r} ({error})") from None
+    if options is not None and not isinstance(options, dict):
+        raise ValueError(f"--options must be a JSON object, got {args.options!r}")
+    writable_folder(args.out)
     world = {"bias": args.bias, "bias_seed": args.bias_seed, "camera_resolution": tuple(args.resolution)}
-    results = evaluate_policy(factory, args.env, args.episodes, seed=args.seed, options=options, **world)
+    results = evaluate_policy(factory, args.env, args.episodes, seed=args.seed, options=options, progress=not args.no_progress, **world)
     names = sorted({name for r in results for name in r.metrics})
     print(f"{args.policy} on {args.env}, {args.episodes} episodes (seed {args.seed})")
     print(f"{'metric':<22}{'mean':>10}{'s.e.':>9}{'median':>10}{'min':>10}{'max':>10}")
     for name in names:
         stats = summarize_metric(results, name)
         print(f"{name:<22}{stats['mean']:>10.3f}{stats['sem']:>9.3f}{stats['median']:>10.3f}{stats['min']:>10.3f}{stats['max']:>10.3f}")
-    args.out.mkdir(parents=True, exist_ok=True)
-    path = args.out / "evaluation.json"
-    path.write_text(json.dumps([{"options": r.options, "metrics": r.metrics} for r in results], indent=1, default=str))
+    path = atomic_write_json(
+        args.out / "evaluation.json", [{"options": r.options, "metrics": r.metrics} for r in results], indent=1, default=str
+    )
     print(f"wrote {path}")
     return 0
 
@@ -100,6 +113,7 @@ def _run_search(args: argparse.Namespace) -> int:
     from dvrk_gym.calibration.phase1 import Phase1Data
     from dvrk_gym.calibration.search import format_table, plot_search, run_search, search_caption
 
+    writable_folder(args.out)
     if args.data == "paper":
         X, y = load_paper_phase1()
         source = "the authors' real Phase I data"
@@ -111,8 +125,8 @@ def _run_search(args: argparse.Namespace) -> int:
     results = run_search(X, y, folds=args.folds, seed=args.seed, quick=args.quick, shuffle=split == "shuffled")
     caption = f"{search_caption(results)} Data: {source}, {len(X)} rows."
     print(format_table(results, caption))
-    args.out.mkdir(parents=True, exist_ok=True)
-    plot_search(results, str(args.out / "model_search.png"), caption)
+    with atomic_path(args.out / "model_search.png") as temporary:
+        plot_search(results, str(temporary), caption)
     rows = [
         {
             "name": r.name,
@@ -125,7 +139,7 @@ def _run_search(args: argparse.Namespace) -> int:
         }
         for r in results
     ]
-    (args.out / "model_search.json").write_text(json.dumps(rows, indent=1))
+    atomic_write_json(args.out / "model_search.json", rows, indent=1)
     print(f"wrote {args.out / 'model_search.png'}, {args.out / 'model_search.json'} ({np.size(results)} models)")
     return 0
 
@@ -135,13 +149,16 @@ def add_commands(subparsers: argparse._SubParsersAction) -> None:
     collect = subparsers.add_parser("collect", help="Phase I: run the paper's random exploration and save the data")
     collect.add_argument("--out", type=Path, default=Path("dvrk_gym_out/calibration"), help="output folder (default: %(default)s)")
     collect.add_argument("--trajectories", type=int, default=paper.PHASE1_TRAJECTORIES, help="trajectories (the paper: %(default)s)")
+    collect.add_argument("--force", action="store_true", help="replace a phase1.npz already in --out")
     _add_world_options(collect)
+    add_progress_option(collect)
     collect.set_defaults(func=_run_collect)
 
     calibrate = subparsers.add_parser("calibrate", help="Phase I and II: fit the rigid body, DNN and DNN+RF calibrators (cached stages)")
     calibrate.add_argument("--out", type=Path, default=Path("dvrk_gym_out/calibration"), help="output folder (default: %(default)s)")
     _add_budget_options(calibrate)
     _add_world_options(calibrate)
+    add_progress_option(calibrate)
     calibrate.set_defaults(func=_run_calibrate)
 
     evaluate = subparsers.add_parser(
@@ -158,6 +175,7 @@ def add_commands(subparsers: argparse._SubParsersAction) -> None:
     evaluate.add_argument("--options", help='reset options for --policy as JSON, e.g. \'{"yaw": "random"}\'')
     _add_budget_options(evaluate)
     _add_world_options(evaluate)
+    add_progress_option(evaluate)
     evaluate.set_defaults(func=_run_evaluate)
 
     search = subparsers.add_parser("search", help="the paper's model search: 10-fold CV of 24 nets, linear and forests, with its bar chart")

@@ -1,7 +1,8 @@
 """``dvrk-gym debride``: the paper's debridement trials with a calibrator from a calibration run folder.
 
-Loads the calibrator (:func:`~dvrk_gym.calibration.loading.load_calibrator`, which runs the
-two-phase pipeline in the folder first if it holds no models), runs the trials
+Loads the calibrator (:func:`~dvrk_gym.calibration.loading.load_calibrator`; with
+``--calibrate`` it runs the two-phase pipeline in the folder first if it holds no model,
+without it such a folder is an error), runs the trials
 (:func:`~dvrk_gym.evaluation.trials.run_debridement`) with a
 :class:`~dvrk_gym.calibration.policy.CalibratedPolicy` aimed at the next fragment the
 endoscope sees, prints the trial table and writes it (JSON, text) with a picture of the
@@ -14,17 +15,26 @@ import argparse
 from pathlib import Path
 
 from dvrk_gym import paper
-from dvrk_gym.cli.options import add_instrument_options, add_progress_option
+from dvrk_gym.cli.options import add_instrument_options, add_progress_option, writable_folder
 
 
 def _run_debride(args: argparse.Namespace) -> int:
     from dvrk_gym.calibration.loading import load_calibrator
+    from dvrk_gym.calibration.pipeline import CALIBRATOR_FILES
     from dvrk_gym.calibration.policy import CalibratedPolicy
     from dvrk_gym.envs.debridement import fragment_target
     from dvrk_gym.evaluation.trials import cell_label, cell_name, format_trial_table, run_debridement, save_cell
 
     if args.trials < 1:
         raise ValueError(f"--trials must be >= 1, got {args.trials}")
+    model_file = args.calibration / CALIBRATOR_FILES[args.calibrator]
+    if not args.calibrate and not model_file.exists():
+        found = "has no " + model_file.name if args.calibration.is_dir() else "does not exist"
+        raise FileNotFoundError(
+            f"--calibration {args.calibration} {found}; give the folder of a calibration run ('dvrk-gym calibrate'), "
+            "or add --calibrate to run the calibration there first"
+        )
+    writable_folder(args.out)
     calibrator, settings = load_calibrator(args.calibration, args.calibrator, args.bias, args.bias_seed)
     bias, bias_seed = settings.get("bias", args.bias), int(settings.get("bias_seed", args.bias_seed))
     policy = CalibratedPolicy(calibrator, target=fragment_target)
@@ -53,8 +63,8 @@ def add_commands(subparsers: argparse._SubParsersAction) -> None:
     debride = subparsers.add_parser(
         "debride",
         help="the paper's debridement trials: pick 8 fragments per trial with a calibrator, judged A/B/C",
-        description="Loads a calibrator from a calibration run folder (running the two-phase pipeline there "
-        "first if it has no models) and runs debridement trials on Debridement-v0: each pick goes to the next "
+        description="Loads a calibrator from a calibration run folder (with --calibrate, running the two-phase "
+        "pipeline there first if it has no models) and runs debridement trials on Debridement-v0: each pick goes to the next "
         "fragment the endoscope sees, through the calibrator. Prints and writes the paper's trial table "
         "(JSON and text) and a picture of the outcome grid.",
     )
@@ -68,8 +78,13 @@ def add_commands(subparsers: argparse._SubParsersAction) -> None:
     debride.add_argument(
         "--calibration", type=Path, default=Path("dvrk_gym_out/calibration"), help="calibration run folder (default: %(default)s)"
     )
+    debride.add_argument(
+        "--calibrate",
+        action="store_true",
+        help="run the two-phase calibration in --calibration first if it holds no model (without it, a folder with no model is an error)",
+    )
     debride.add_argument("--seed", type=int, default=0, help="seeds the trials (default: %(default)s)")
     debride.add_argument("--out", type=Path, default=Path("dvrk_gym_out/debridement"), help="output folder (default: %(default)s)")
-    add_instrument_options(debride, note=", if the folder has no run yet")
+    add_instrument_options(debride, note=", with --calibrate if the folder has no run yet")
     add_progress_option(debride)
     debride.set_defaults(func=_run_debride)

@@ -8,13 +8,14 @@ from pathlib import Path
 import numpy as np
 
 from dvrk_gym import paper
-from dvrk_gym.cli.options import add_instrument_options
+from dvrk_gym.cli.options import add_instrument_options, writable_folder
 
 
 def _run_demo(args: argparse.Namespace) -> int:
     from dvrk_gym.demo import run_demo
 
     width, height = args.resolution
+    writable_folder(args.out)
     result = run_demo(args.out, bias=args.bias, bias_seed=args.bias_seed, resolution=(width, height), n_circles=args.circles)
     print(f"endoscope {width}x{height}: {result.circles_found} of {paper.GRID_CIRCLES} grid circles found in both images")
     print(

@@ -7,14 +7,23 @@ import logging
 import sys
 from collections.abc import Callable, Sequence
 
+from dvrk_gym import __version__
 from dvrk_gym.cli.baselines import add_commands as add_baseline_commands
 from dvrk_gym.cli.calibration import add_commands as add_calibration_commands
 from dvrk_gym.cli.debridement import add_commands as add_debridement_commands
 from dvrk_gym.cli.demo import add_commands as add_demo_commands
 from dvrk_gym.cli.fidelity import add_commands as add_fidelity_commands
 from dvrk_gym.cli.reproduce import add_commands as add_reproduce_commands
+from dvrk_gym.cli.sweep import add_commands as add_sweep_commands
+from dvrk_gym.utils.run_folder import RunFolderBusy
 
 Command = Callable[[argparse.Namespace], int]
+
+
+def _one_line(error: BaseException) -> str:
+    """An error's message on one line (an OSError without its own words gets its errno's)."""
+    text = str(error) or type(error).__name__
+    return " ".join(text.split())
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -24,6 +33,7 @@ def build_parser() -> argparse.ArgumentParser:
         description="Simulated dVRK calibration and debridement (Seita et al., ICRA 2018).",
     )
     parser.add_argument("-v", "--verbose", action="store_true", help="log progress details")
+    parser.add_argument("--version", action="version", version=f"dvrk-gym {__version__}")
     subparsers = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     add_reproduce_commands(subparsers)
     add_demo_commands(subparsers)
@@ -31,6 +41,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_fidelity_commands(subparsers)
     add_debridement_commands(subparsers)
     add_baseline_commands(subparsers)
+    add_sweep_commands(subparsers)
     return parser
 
 
@@ -40,8 +51,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
     try:
         return int(args.func(args))
-    except (ValueError, FileNotFoundError) as error:
-        print(f"dvrk-gym {args.command}: error: {error}", file=sys.stderr)
+    except (ValueError, OSError, RunFolderBusy) as error:  # bad input, unwritable output, a folder in use: one line, status 2
+        print(f"dvrk-gym {args.command}: error: {_one_line(error)}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print(f"dvrk-gym {args.command}: interrupted (cached stages are kept: the same command resumes)", file=sys.stderr)

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import argparse
+import tempfile
+from pathlib import Path
 
 
 def add_instrument_options(parser: argparse.ArgumentParser, resolution: bool = True, note: str = "") -> None:
@@ -16,16 +18,43 @@ def add_instrument_options(parser: argparse.ArgumentParser, resolution: bool = T
     parser.add_argument("--bias", default="paper", help=f"cable bias preset: none, paper or severe{note} (default: %(default)s)")
     parser.add_argument("--bias-seed", type=int, default=0, help=f"which instrument to draw{note} (default: %(default)s)")
     if resolution:
-        parser.add_argument(
-            "--resolution",
-            type=int,
-            nargs=2,
-            default=(1920, 1080),
-            metavar=("W", "H"),
-            help="endoscope image size in pixels (default: 1920 1080)",
-        )
+        add_resolution_option(parser)
+
+
+def add_resolution_option(parser: argparse.ArgumentParser) -> None:
+    """``--resolution W H``: the endoscope's image size, pixels."""
+    parser.add_argument(
+        "--resolution",
+        type=int,
+        nargs=2,
+        default=(1920, 1080),
+        metavar=("W", "H"),
+        help="endoscope image size in pixels (default: 1920 1080)",
+    )
 
 
 def add_progress_option(parser: argparse.ArgumentParser) -> None:
     """``--no-progress``: no progress bars."""
     parser.add_argument("--no-progress", action="store_true", help="no progress bars")
+
+
+def writable_folder(path: Path, what: str = "--out") -> Path:
+    """``path`` as an output folder that exists and can be written, checked before any work starts.
+
+    Raises:
+        NotADirectoryError: ``path`` (or a parent) is a file.
+        PermissionError: the folder cannot be written.
+    """
+    path = Path(path)
+    for parent in (path, *path.parents):
+        if parent.exists() and not parent.is_dir():
+            raise NotADirectoryError(f"{what} {path}: {parent} is a file, not a folder")
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+        with tempfile.NamedTemporaryFile(dir=path, prefix=".write-check-"):
+            pass
+    except PermissionError:
+        raise PermissionError(f"{what} {path}: the folder cannot be written (permission denied)") from None
+    except OSError as error:
+        raise OSError(f"{what} {path}: the folder cannot be written ({error.strerror or error})") from None
+    return path

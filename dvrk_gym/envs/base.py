@@ -18,9 +18,10 @@ import gymnasium as gym
 import numpy as np
 from gymnasium.error import ResetNeeded
 
-from dvrk_gym.sim.robot.bias import BiasConfig
+from dvrk_gym.sim.robot.bias import BIAS_PRESETS, BiasConfig
 from dvrk_gym.sim.robot.kinematics import JOINT_NAMES
-from dvrk_gym.sim.world import DvrkWorld, WorldConfig
+from dvrk_gym.sim.world import MAX_PIXEL_NOISE_PX, DvrkWorld, WorldConfig
+from dvrk_gym.utils.checks import check_choice, check_float_fields, check_int_fields, check_resolution
 
 
 @dataclass(frozen=True)
@@ -43,7 +44,13 @@ class EnvConfig:
 
     def __post_init__(self) -> None:
         # gym.make passes lists from JSON-like specs; the world wants a tuple.
-        object.__setattr__(self, "camera_resolution", tuple(self.camera_resolution))
+        object.__setattr__(self, "camera_resolution", check_resolution("camera_resolution", self.camera_resolution))
+        if isinstance(self.bias, str):
+            check_choice("bias", self.bias, sorted(BIAS_PRESETS))
+        elif not isinstance(self.bias, BiasConfig):
+            raise ValueError(f"bias must be one of {sorted(BIAS_PRESETS)} or a BiasConfig, got {self.bias!r}")
+        check_int_fields(type(self).__name__, self, {"bias_seed": (0, 2**31 - 1)})
+        check_float_fields(type(self).__name__, self, {"pixel_noise_px": (0.0, MAX_PIXEL_NOISE_PX, False)})
 
 
 ConfigT = TypeVar("ConfigT", bound=EnvConfig)
@@ -71,9 +78,13 @@ def check_action(action: Any, space: gym.spaces.Box, names: tuple[str, ...]) -> 
         (the action clipped into the space as float64, boolean mask of clipped elements).
 
     Raises:
-        ValueError: wrong shape, or an element that is NaN or infinite (named in the message).
+        ValueError: not real numbers (complex, bool, text), wrong shape, or an element that is
+            NaN or infinite (named in the message).
     """
-    array = np.asarray(action, dtype=np.float64)
+    raw = np.asarray(action)
+    if raw.dtype.kind not in "fiu":  # complex, bool, strings and objects are not coerced
+        raise ValueError(f"action must hold real numbers ({', '.join(names)}), got dtype {raw.dtype} ({action!r})")
+    array = raw.astype(np.float64)
     if array.shape != space.shape:
         raise ValueError(f"action must have shape {space.shape} ({', '.join(names)}), got {array.shape}")
     for i, value in enumerate(array):
@@ -170,7 +181,7 @@ class DvrkEnv(gym.Env, Generic[ConfigT]):
             self._needs_reset = True
         return observation, reward, terminated, truncated, info
 
-    def render(self) -> np.ndarray | None:
+    def render(self) -> np.ndarray | list[Any] | None:
         if self.render_mode == "rgb_array":
             return self.world.render("left")
         return None  # "human": the PyBullet GUI shows the world live; None: nothing to draw
@@ -179,6 +190,23 @@ class DvrkEnv(gym.Env, Generic[ConfigT]):
         if hasattr(self, "world"):
             self.world.close()
         super().close()
+
+    # ------------------------------------------------------------------ no copies
+    def _refuse_copy(self, what: str) -> TypeError:
+        return TypeError(
+            f"{type(self).__name__} cannot be {what}: it owns a PyBullet physics server, which a copy would share "
+            f"(two envs stepping one world). Make another env instead: gym.make(env.spec.id, **env.spec.kwargs), "
+            f"or {type(self).__name__}(**dataclasses.asdict(env.unwrapped.config)), and reset it with the same seed"
+        )
+
+    def __copy__(self) -> DvrkEnv:
+        raise self._refuse_copy("copied")
+
+    def __deepcopy__(self, memo: dict[int, Any]) -> DvrkEnv:
+        raise self._refuse_copy("deep-copied")
+
+    def __reduce_ex__(self, protocol: Any) -> Any:
+        raise self._refuse_copy("pickled")
 
     # ------------------------------------------------------------------ helpers for subclasses
     def _restore_initial_state(self) -> None:

@@ -114,6 +114,7 @@ class DebridementEnv(DvrkEnv[DebridementConfig]):
             a new random stream (the same seed and history give the same trial).
     """
 
+    metadata: dict[str, Any] = {"render_modes": ["human", "rgb_array", "rgb_array_list"], "render_fps": 4}
     config_class = DebridementConfig
     option_names = ("relax",)
 
@@ -161,6 +162,9 @@ class DebridementEnv(DvrkEnv[DebridementConfig]):
         self.observer = FragmentObserver(self.world.camera, pixel_noise_px=self.config.pixel_noise_px)
         self.table = DebridementTable(self.world, gripper_config=self.config.gripper)
         self.picker = PickPrimitive(self.world, self.table, self.config.timing)
+        self._frames: list[np.ndarray] = []  # render_mode "rgb_array_list": frames since the last render()
+        if self.render_mode == "rgb_array_list":
+            self.picker.on_phase = self._capture_frame
         self._episode = _Episode()
 
     # ------------------------------------------------------------------ episode
@@ -186,6 +190,8 @@ class DebridementEnv(DvrkEnv[DebridementConfig]):
         self._jaw_target = world.jaw_angle
         observation = self._observe()
         info = {"sim_time_s": 0.0, "true_fragment_positions": table.true_fragment_positions(), "fragments_on_paper": len(self._on_paper())}
+        self._frames = []
+        self._capture_frame()
         return observation, info
 
     def _step_episode(self, action: np.ndarray, clamped: np.ndarray):
@@ -206,13 +212,30 @@ class DebridementEnv(DvrkEnv[DebridementConfig]):
         info["sim_error"] = error
         on_paper = len(self._on_paper()) if error is None else 0
         info["fragments_on_paper"] = on_paper
+        # Success of the trial, as SB3 and RL Zoo read it: every fragment in the receptacle.
+        info["is_success"] = error is None and len(self._delivered()) == len(self.table.fragments)
         if self.primitive:
             terminated = error is not None or on_paper == 0 or len(episode.outcomes) >= self.config.max_picks
             truncated = False
         else:
             terminated = error is not None or (on_paper == 0 and not self.table.held())
             truncated = not terminated and episode.steps >= self.config.max_steps
+        if not self.primitive:
+            self._capture_frame()
         return observation, float(reward), terminated, truncated, info
+
+    # ------------------------------------------------------------------ rendering
+    def render(self) -> np.ndarray | list[Any] | None:
+        """The left endoscope image ("rgb_array"), or the frames since the last call
+        ("rgb_array_list": the end of each phase of every pick, or one per delta step)."""
+        if self.render_mode == "rgb_array_list":
+            frames, self._frames = self._frames, []
+            return frames
+        return super().render()
+
+    def _capture_frame(self) -> None:
+        if self.render_mode == "rgb_array_list":
+            self._frames.append(self.world.render("left"))
 
     # ------------------------------------------------------------------ a pick
     def _pick(self, action: np.ndarray) -> tuple[float, dict[str, Any]]:

@@ -13,6 +13,7 @@ from dvrk_gym.envs.picks import PickTiming
 from dvrk_gym.sim.robot.motion import MotionLimits
 from dvrk_gym.sim.table.fragments import FRAGMENT_TYPES
 from dvrk_gym.sim.table.grasp import GripperConfig
+from dvrk_gym.utils.checks import check_bool, check_choice, check_float_fields, check_int_fields
 
 ACTION_MODES = ("primitive", "delta")
 PICK_ACTION_NAMES = ("bx", "by", "bz", "yaw")
@@ -27,6 +28,8 @@ seed, 1.8 on a raisin). The Large Needle Driver's jaws are serrated. Measured wi
 paper's calibrators (64 picks each): with 1.0, seeds squeezed off-centre by a millimetre
 at the up to 22.5 degrees the yaw rounding leaves turn out of the jaws too often (DNN+RF
 83 % with B 17 %; the paper: 92 %, B 7.5 %); with 1.5, 94 % and B 6 %."""
+MAX_PICKS = 64
+"""The most picks an episode may have (the paper: 8)."""
 DEFAULT_PICK_TIMING = PickTiming()
 """The default pick timing of Debridement-v0 (tuned to the paper's phase durations)."""
 SERRATED_GRIPPER = GripperConfig(jaw_friction=SERRATED_JAW_FRICTION)
@@ -81,16 +84,14 @@ class DebridementConfig(EnvConfig):
                 "timing must be a PickTiming and gripper a GripperConfig (or their fields as dicts), "
                 f"got {type(self.timing).__name__} and {type(self.gripper).__name__}"
             )
-        if self.fragment not in FRAGMENT_TYPES:
-            raise ValueError(f"fragment must be one of {sorted(FRAGMENT_TYPES)}, got {self.fragment!r}")
-        if self.action_mode not in ACTION_MODES:
-            raise ValueError(f"action_mode must be one of {ACTION_MODES}, got {self.action_mode!r}")
-        for name in ("max_picks", "max_steps"):
-            if int(getattr(self, name)) < 1:
-                raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
-        for name in ("control_period_s", "max_delta_m", "max_delta_jaw_rad"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value > 0):
-                raise ValueError(f"{name} must be finite and > 0, got {value}")
-        if not (math.isfinite(self.delta_yaw_rad) and abs(self.delta_yaw_rad) <= math.pi / 2):
-            raise ValueError(f"delta_yaw_rad must be in [-pi/2, pi/2], got {self.delta_yaw_rad}")
+        check_choice("fragment", self.fragment, sorted(FRAGMENT_TYPES))
+        check_choice("action_mode", self.action_mode, ACTION_MODES)
+        check_int_fields("DebridementConfig", self, {"max_picks": (1, MAX_PICKS), "max_steps": (1, 1_000_000)})
+        check_bool("remove_failed", self.remove_failed)
+        bounds = {
+            "control_period_s": (0.0, 10.0, True),
+            "max_delta_m": (0.0, 0.05, True),
+            "max_delta_jaw_rad": (0.0, math.pi, True),
+            "delta_yaw_rad": (-math.pi / 2, math.pi / 2, False),
+        }
+        check_float_fields("DebridementConfig", self, bounds, units={"control_period_s": "s", "max_delta_m": "m"})

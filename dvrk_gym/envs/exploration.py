@@ -20,6 +20,7 @@ from dvrk_gym.sim.endoscope.stereo import StereoDetection
 from dvrk_gym.sim.robot import ik
 from dvrk_gym.sim.robot import kinematics as kin
 from dvrk_gym.sim.robot.bias import BiasConfig
+from dvrk_gym.utils.checks import check_int_fields
 
 SAFE_X_M = paper.REAL_PHASE1_X_RANGE_M
 SAFE_Y_M = paper.REAL_PHASE1_Y_RANGE_M
@@ -83,8 +84,7 @@ class ExplorationConfig(EnvConfig):
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        if int(self.max_steps) < 1:
-            raise ValueError(f"max_steps must be >= 1, got {self.max_steps}")
+        check_int_fields("ExplorationConfig", self, {"max_steps": (1, 100_000)})
 
 
 def marker_observation_space(width: int, height: int) -> dict[str, spaces.Space]:
@@ -159,8 +159,9 @@ class CalibrationExplorationEnv(DvrkEnv[ExplorationConfig]):
         corner = options.get("corner")
         if corner is None:
             corner = int(self.np_random.integers(4))
-        elif corner not in (0, 1, 2, 3):
-            raise ValueError(f"option 'corner' must be 0, 1, 2 or 3, got {corner!r}")
+        elif isinstance(corner, (bool, np.bool_)) or not isinstance(corner, (int, np.integer)) or corner not in (0, 1, 2, 3):
+            raise ValueError(f"option 'corner' must be an int 0, 1, 2 or 3, got {corner!r}")
+        corner = int(corner)
         start = kin.pose_from_euler(workspace_corners()[corner], *home_orientation())
         self.world.reset_robot(ik.inverse_kinematics(start))
         self._steps = 0
@@ -195,5 +196,7 @@ class CalibrationExplorationEnv(DvrkEnv[ExplorationConfig]):
             "sim_time_s": self.world.clock.time_s,
             "true_marker_position": self.world.true_marker_position(),
             "true_tip_position": self.world.true_touch_point(),
+            # A Phase I sample counts when both cameras saw the marker (a row the authors could use).
+            "is_success": detection.seen_both,
             **extra,
         }

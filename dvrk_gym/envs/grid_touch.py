@@ -15,6 +15,7 @@ episode, as HER's relabelling and stable-baselines3's GoalEnv check require. The
 
 from __future__ import annotations
 
+import numbers
 from dataclasses import dataclass
 from typing import Any
 
@@ -23,11 +24,11 @@ from gymnasium import spaces
 
 from dvrk_gym.envs.base import DvrkEnv, EnvConfig, config_arguments, relax_option
 from dvrk_gym.envs.exploration import CAMERA_BOX_HIGH_M, CAMERA_BOX_LOW_M, encode_reported
-from dvrk_gym.sim.endoscope.noise import PixelNoise
 from dvrk_gym.sim.physics.scene import GRID_COLUMNS, GRID_ROWS, WORKSPACE_CENTER_M, grid_circle_centers
 from dvrk_gym.sim.robot import ik
 from dvrk_gym.sim.robot import kinematics as kin
 from dvrk_gym.sim.robot.bias import BiasConfig
+from dvrk_gym.utils.checks import check_choice, check_float_fields
 
 N_CIRCLES = GRID_ROWS * GRID_COLUMNS
 ACTION_NAMES = ("bx", "by", "bz", "yaw")
@@ -61,12 +62,13 @@ class GridTouchConfig(EnvConfig):
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        if self.reward_type not in REWARD_TYPES:
-            raise ValueError(f"reward_type must be one of {REWARD_TYPES}, got {self.reward_type!r}")
-        for name in ("distance_threshold_m", "approach_height_m", "correction_noise_m"):
-            value = getattr(self, name)
-            if not (np.isfinite(value) and value >= 0):
-                raise ValueError(f"{name} must be finite and >= 0, got {value}")
+        check_choice("reward_type", self.reward_type, REWARD_TYPES)
+        bounds = {
+            "distance_threshold_m": (0.0, 0.05, False),
+            "approach_height_m": (0.0, 0.05, False),
+            "correction_noise_m": (0.0, 0.01, False),
+        }
+        check_float_fields("GridTouchConfig", self, bounds, units=dict.fromkeys(bounds, "m"))
 
 
 def _check_yaw_option(yaw: Any) -> float | str:
@@ -75,10 +77,9 @@ def _check_yaw_option(yaw: Any) -> float | str:
         if yaw != "random":
             raise ValueError(message)
         return yaw
-    try:
-        value = float(yaw)
-    except (TypeError, ValueError):
-        raise ValueError(message) from None
+    if isinstance(yaw, (bool, np.bool_)) or not isinstance(yaw, numbers.Real):  # no bools, complex numbers or text
+        raise ValueError(message)
+    value = float(yaw)
     if not (np.isfinite(value) and abs(value) <= np.pi / 2 + 1e-9):
         raise ValueError(message)
     return value
@@ -265,7 +266,7 @@ class GridTouchEnv(DvrkEnv[GridTouchConfig]):
         """The jaws' touch point as the endoscope sees it (projected, with pixel noise)."""
         camera = self.world.camera
         left, right = camera.project(self.world.true_touch_point())
-        noise = PixelNoise(self.config.pixel_noise_px, camera.intrinsics.width)
+        noise = self.world.pixel_noise
         left = noise.apply(left, self.np_random)
         right = noise.apply(right, self.np_random)  # after left's: the draw order is part of the episode
         return camera.triangulate(left, right)[0]

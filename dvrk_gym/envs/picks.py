@@ -12,7 +12,7 @@ judge (:mod:`dvrk_gym.sim.table.judge`) needs.
 
 from __future__ import annotations
 
-import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -27,6 +27,7 @@ from dvrk_gym.sim.table import judge
 from dvrk_gym.sim.table.grasp import GRASP_TIP_CLEARANCE_M
 from dvrk_gym.sim.table.table import DebridementTable
 from dvrk_gym.sim.world import DvrkWorld
+from dvrk_gym.utils.checks import check_float_fields
 
 PHASES: tuple[str, ...] = tuple(paper.DEBRIDEMENT_PHASE_FRAMES)
 """The paper's six phases of a pick, in order."""
@@ -77,10 +78,12 @@ class PickTiming:
     drop_dwell_s: float = 1.54
 
     def __post_init__(self) -> None:
-        for name in ("approach_height_m", "grip_depth_m", "raise_height_m", "drop_height_m", "grip_dwell_s", "drop_fall_s", "drop_dwell_s"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value >= 0):
-                raise ValueError(f"PickTiming.{name} must be finite and >= 0, got {value}")
+        heights = dict.fromkeys(("approach_height_m", "grip_depth_m", "raise_height_m", "drop_height_m"), (0.0, 0.1, False))
+        dwells = dict.fromkeys(("grip_dwell_s", "drop_fall_s", "drop_dwell_s"), (0.0, 60.0, False))
+        check_float_fields("PickTiming", self, {**heights, **dwells})
+        for name in ("travel", "descend", "carry"):
+            if not isinstance(getattr(self, name), MotionLimits):
+                raise ValueError(f"PickTiming.{name} must be a MotionLimits (or its fields as a dict), got {getattr(self, name)!r}")
 
 
 @dataclass(frozen=True)
@@ -108,12 +111,17 @@ class PickPrimitive:
         world: the arm, its cables and the clock.
         table: the fragments and the gripper beside it.
         timing: heights, speeds and dwell times of a pick.
+
+    Attributes:
+        on_phase: called at the end of each of the six phases (None: nothing); the env uses
+            it to render the frames of a pick.
     """
 
     def __init__(self, world: DvrkWorld, table: DebridementTable, timing: PickTiming) -> None:
         self.world = world
         self.table = table
         self.timing = timing
+        self.on_phase: Callable[[], None] | None = None
 
     def drop_point(self, pick: int) -> np.ndarray:
         """Where the closed jaw tip should be when pick number ``pick`` drops, base frame, m."""
@@ -158,6 +166,8 @@ class PickPrimitive:
         def phase_done() -> None:
             marks.append(world.clock.time_s)
             pierced.update(i for i, mode in table.held().items() if mode == "pierce")
+            if self.on_phase is not None:
+                self.on_phase()
 
         above = tool_pose(target + [0.0, 0.0, timing.approach_height_m], yaw)
         move = world.move_to(above, kin.JAW_FULLY_OPEN_RAD, rng, True, timing.travel)
@@ -180,4 +190,6 @@ class PickPrimitive:
         spent += world.move_to(tool_pose(drop, 0.0), None, rng, True, timing.travel).duration_s
         table.dwell(timing.drop_dwell_s - spent, step_physics=False)
         marks.append(world.clock.time_s)
+        if self.on_phase is not None:
+            self.on_phase()
         return PickRun(record, pierced, np.diff(marks), joints_clamped)

@@ -112,7 +112,13 @@ def run_episodes(
 
 
 def evaluate_policy(
-    factory: str | Callable[[gym.Env], Any], env_id: str, n_episodes: int, seed: int = 0, options: Options = None, **env_kwargs: Any
+    factory: str | Callable[[gym.Env], Any],
+    env_id: str,
+    n_episodes: int,
+    seed: int = 0,
+    options: Options = None,
+    progress: bool = True,
+    **env_kwargs: Any,
 ) -> list[EpisodeResult]:
     """Run a policy made for a fresh environment: ``factory(env)`` gives the policy.
 
@@ -120,15 +126,16 @@ def evaluate_policy(
         factory: a function of the env returning the policy, or its ``"package.module:factory"``
             name (:func:`load_policy_factory`).
         env_id: the environment, e.g. ``"dvrk_gym/GridTouch-v0"``.
-        n_episodes: how many episodes (:func:`run_episodes`, with a progress bar).
+        n_episodes: how many episodes (:func:`run_episodes`).
         seed: the first episode's reset seed.
         options: reset options, fixed or a function of the episode index.
+        progress: show a progress bar.
         **env_kwargs: ``gym.make`` keywords (``bias``, ``bias_seed``, ``camera_resolution``...).
     """
     make_policy = load_policy_factory(factory) if isinstance(factory, str) else factory
     env = gym.make(env_id, **env_kwargs)
     try:
-        return run_episodes(env, make_policy(env), n_episodes, seed=seed, options=options)
+        return run_episodes(env, make_policy(env), n_episodes, seed=seed, options=options, progress=progress)
     finally:
         env.close()
 

@@ -11,7 +11,6 @@ it as JSON (and text) with a picture of the outcome grid.
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -23,6 +22,7 @@ from dvrk_gym import paper
 from dvrk_gym.envs.picks import PHASES
 from dvrk_gym.evaluation.episodes import run_episodes
 from dvrk_gym.sim.table.judge import outcome_counts
+from dvrk_gym.utils.atomic import atomic_savefig, atomic_write_json, atomic_write_text
 
 OUTCOME_COLOURS = {"-": "#4caf50", "A": "#e53935", "B": "#fb8c00", "C": "#8e24aa", "": "#bdbdbd"}
 """Colour of each outcome in the outcome grid ("" marks no pick)."""
@@ -175,9 +175,7 @@ def save_trials(trials: list[Trial], path: str | Path, meta: dict[str, Any]) -> 
         "totals": totals(trials),
         "paper": paper.DEBRIDEMENT_RESULTS.get((str(meta.get("calibrator")), str(meta.get("fragment")))),
     }
-    path = Path(path)
-    path.write_text(json.dumps(data, indent=1))
-    return path
+    return atomic_write_json(path, data, indent=1)
 
 
 def plot_outcome_grid(trials: list[Trial], path: str | Path, title: str) -> Path:
@@ -209,10 +207,10 @@ def plot_outcome_grid(trials: list[Trial], path: str | Path, title: str) -> Path
     ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8)
     ax.set_title(title, fontsize=9)
     fig.tight_layout()
-    path = Path(path)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    try:
+        return atomic_savefig(fig, path, dpi=110)
+    finally:
+        plt.close(fig)
 
 
 def save_cell(trials: list[Trial], stem: str | Path, meta: dict[str, Any], label: str, text: str | None = None) -> dict[str, Path]:
@@ -226,7 +224,6 @@ def save_cell(trials: list[Trial], stem: str | Path, meta: dict[str, Any], label
     stem.parent.mkdir(parents=True, exist_ok=True)
     written = {"json": save_trials(trials, stem.with_name(f"{stem.name}.json"), meta)}
     if text is not None:
-        written["txt"] = stem.with_name(f"{stem.name}.txt")
-        written["txt"].write_text(text + "\n")
+        written["txt"] = atomic_write_text(stem.with_name(f"{stem.name}.txt"), text + "\n")
     written["png"] = plot_outcome_grid(trials, stem.with_name(f"{stem.name}.png"), f"Debridement outcomes: {label} ({len(trials)} trials)")
     return written

@@ -16,7 +16,7 @@ from matplotlib.figure import Figure
 
 from dvrk_gym.fidelity.comparison import RELATIVE_TOLERANCE, SHARE_TOLERANCE, ComparisonRow, FidelityRun
 from dvrk_gym.fidelity.statistics import PAPER_YAWS_DEG, rigid_residuals_camera
-from dvrk_gym.utils.atomic import write_atomic, write_text_atomic
+from dvrk_gym.utils.atomic import atomic_savefig, atomic_write_text
 
 __all__ = ["JSON_NAME", "PNG_NAME", "format_table", "plot_fidelity", "report_dict", "write_report"]
 
@@ -122,7 +122,7 @@ def plot_fidelity(run: FidelityRun, path: str | os.PathLike) -> Path:
         f"{settings['trajectories']} trajectories): {run.passed} of {len(run.rows)} statistics within target",
         fontsize=10,
     )
-    return write_atomic(path, lambda temporary: figure.savefig(temporary, dpi=120, format="png"))
+    return atomic_savefig(figure, path, dpi=120, format="png")
 
 
 def write_report(run: FidelityRun, out: str | os.PathLike) -> tuple[Path, Path]:
@@ -133,5 +133,5 @@ def write_report(run: FidelityRun, out: str | os.PathLike) -> tuple[Path, Path]:
     """
     folder = Path(out)
     folder.mkdir(parents=True, exist_ok=True)
-    json_path = write_text_atomic(folder / JSON_NAME, json.dumps(report_dict(run), indent=1))
+    json_path = atomic_write_text(folder / JSON_NAME, json.dumps(report_dict(run), indent=1))
     return json_path, plot_fidelity(run, folder / PNG_NAME)

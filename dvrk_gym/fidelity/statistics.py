@@ -34,15 +34,16 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
-from typing import Any, Protocol
+from typing import Any
 
 import numpy as np
 from sklearn.ensemble import RandomForestRegressor
 from sklearn.linear_model import LinearRegression
-from sklearn.model_selection import KFold
 
 from dvrk_gym.calibration.models.features import PAPER_YAWS_RAD, check_inputs, check_targets, nearest_yaw_index
 from dvrk_gym.calibration.models.rigid import RigidBodyCalibrator
+from dvrk_gym.calibration.models.two_phase import Regressor
+from dvrk_gym.calibration.search import cross_validate
 
 __all__ = [
     "CV_FOLDS",
@@ -71,12 +72,6 @@ _M2_TO_MM2 = 1e6
 # value means millimetres or degrees were passed.
 _MAX_POSITION_M = 1.0
 _MAX_ANGLE_RAD = 2.0 * np.pi
-
-
-class _Regressor(Protocol):
-    def fit(self, X: np.ndarray, y: np.ndarray) -> Any: ...
-
-    def predict(self, X: np.ndarray) -> np.ndarray: ...
 
 
 @dataclass(frozen=True)
@@ -150,13 +145,10 @@ def consecutive_pairs(y: np.ndarray, max_step_m: float = JITTER_MAX_STEP_M) -> n
     return np.flatnonzero(steps <= max_step_m)
 
 
-def contiguous_cv_mse_mm2(make: Callable[[], _Regressor], X: np.ndarray, y: np.ndarray, folds: int = CV_FOLDS) -> float:
-    """Mean over contiguous, unshuffled folds of the held-out mean squared L2 error, mm^2."""
-    errors = []
-    for train, test in KFold(n_splits=folds, shuffle=False).split(X):
-        predicted = make().fit(X[train], y[train]).predict(X[test])
-        errors.append(np.mean(np.sum((predicted - y[test]) ** 2, axis=1)) * _M2_TO_MM2)
-    return float(np.mean(errors))
+def contiguous_cv_mse_mm2(make: Callable[[], Regressor], X: np.ndarray, y: np.ndarray, folds: int = CV_FOLDS) -> float:
+    """Mean over contiguous, unshuffled folds of the held-out mean squared L2 error, mm^2
+    (the model search's :func:`~dvrk_gym.calibration.search.cross_validate`, unshuffled)."""
+    return float(np.mean(cross_validate(lambda _seed: make(), X, y, folds=folds, shuffle=False)))
 
 
 def fidelity_statistics(

@@ -6,7 +6,7 @@
 PosixPath('dvrk_gym_out/reproduce-quick/report.md')
 """
 
-from dvrk_gym.reproduce.profiles import FULL, PROFILES, QUICK, Profile
+from dvrk_gym.reproduce.profiles import FULL, PROFILES, QUICK, TINY, Profile
 from dvrk_gym.reproduce.run import ReproduceConfig, Reproduction, build_tasks, run_reproduce
 
-__all__ = ["FULL", "PROFILES", "QUICK", "Profile", "Reproduction", "ReproduceConfig", "build_tasks", "run_reproduce"]
+__all__ = ["FULL", "PROFILES", "QUICK", "TINY", "Profile", "Reproduction", "ReproduceConfig", "build_tasks", "run_reproduce"]

@@ -3,13 +3,19 @@
 from __future__ import annotations
 
 import dataclasses
+import json
+import os
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 from dvrk_gym import paper
 from dvrk_gym.baselines.budgets import AGENT_ENVS, GRID_TOUCH_ID
+from dvrk_gym.utils.checks import check_choice, check_int, check_resolution
 
 SEARCHES = ("paper", "quick")
+_MAX_COUNT = 10**7
+"""An upper bound on every count of a profile (trajectories, epochs, trials, steps...)."""
 
 
 @dataclass(frozen=True)
@@ -46,22 +52,49 @@ class Profile:
     camera_resolution: tuple[int, int] = paper.ENDOSCOPE_RESOLUTION_PX
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "camera_resolution", tuple(int(v) for v in self.camera_resolution))
+        if not isinstance(self.name, str) or not self.name:
+            raise ValueError(f"name must be a non-empty string, got {self.name!r}")
+        object.__setattr__(self, "camera_resolution", check_resolution("camera_resolution", self.camera_resolution))
+        if isinstance(self.rl_agents, str) or not isinstance(self.rl_agents, (list, tuple)):
+            raise ValueError(f"rl_agents must be a list of agent names, got {self.rl_agents!r}")
         object.__setattr__(self, "rl_agents", tuple(self.rl_agents))
-        if self.search not in SEARCHES:
-            raise ValueError(f"search must be one of {SEARCHES}, got {self.search!r}")
+        check_choice("search", self.search, SEARCHES)
         for name in ("n_trajectories", "steps_per_trajectory", "dnn_epochs", "debridement_trials", "debridement_picks", "rl_eval_points"):
-            if int(getattr(self, name)) < 1:
-                raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
+            check_int(name, getattr(self, name), 1, _MAX_COUNT)
         grid_agents = sorted(name for name, env_id in AGENT_ENVS.items() if env_id == GRID_TOUCH_ID)
         unknown = [agent for agent in self.rl_agents if agent not in grid_agents]
         if unknown:
             raise ValueError(f"rl_agents must be GridTouch-v0 agents {grid_agents}, got {unknown}")
-        if self.rl_steps is not None and self.rl_steps < 1:
-            raise ValueError(f"rl_steps must be >= 1 or None, got {self.rl_steps}")
+        if self.rl_steps is not None:
+            check_int("rl_steps (or None)", self.rl_steps, 1, _MAX_COUNT)
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
+
+    @classmethod
+    def from_dict(cls, values: Any) -> Profile:
+        """A profile from its fields as JSON gives them (lists for tuples).
+
+        Raises:
+            ValueError: not an object, an unknown field (named), or a bad value.
+        """
+        if not isinstance(values, dict):
+            raise ValueError(f"a profile must be a JSON object of Profile fields, got {type(values).__name__}")
+        known = {field.name for field in dataclasses.fields(cls)}
+        unknown = sorted(set(values) - known)
+        if unknown:
+            raise ValueError(f"unknown profile field(s) {unknown}; the fields are {sorted(known)}")
+        if "name" not in values:
+            raise ValueError("a profile needs a 'name'")
+        return cls(**values)
+
+    @classmethod
+    def from_file(cls, path: str | os.PathLike) -> Profile:
+        """A profile from a JSON file of its fields (see :meth:`from_dict`); errors name the file."""
+        try:
+            return cls.from_dict(json.loads(Path(path).read_text()))
+        except ValueError as error:
+            raise ValueError(f"profile {path}: {error}") from None
 
 
 FULL = Profile(name="full")
@@ -70,4 +103,20 @@ debridement cell, SAC+HER and SAC for the calibrator's number of robot moves."""
 QUICK = Profile(name="quick", search="quick", debridement_trials=3, rl_agents=("sac_her",), rl_steps=1000, rl_eval_points=5)
 """The paper's calibration budgets (the data decide the calibrators' accuracy), a five-model
 search, 3 trials per debridement cell and 1,000 moves of SAC+HER: a few minutes."""
+TINY = Profile(
+    name="tiny",
+    n_trajectories=2,
+    steps_per_trajectory=30,
+    dnn_epochs=20,
+    search="quick",
+    debridement_trials=1,
+    debridement_picks=2,
+    rl_agents=("sac",),
+    rl_steps=60,
+    rl_eval_points=1,
+    camera_resolution=(480, 270),
+)
+"""Every stage at its smallest (2 trajectories, 20 epochs, 1 trial of 2 picks per cell, 60 RL
+moves, 480 x 270): about a minute on 2 cores. Its numbers mean nothing; it is for the tests
+and the fault-injection benchmark (``dvrk-gym reproduce --profile`` takes its JSON)."""
 PROFILES = {"full": FULL, "quick": QUICK}

@@ -17,6 +17,7 @@ from dvrk_gym.baselines.curves import plot_curves
 from dvrk_gym.baselines.training import CurvePoint
 from dvrk_gym.calibration.benchmark import YAW_SETTINGS
 from dvrk_gym.calibration.search import SearchResult, plot_search
+from dvrk_gym.utils.atomic import atomic_path, atomic_write_text
 
 PAPER_PHASE1 = {"raw": paper.PHASE1_RAW_SAMPLES, "kept": paper.PHASE1_KEPT_SAMPLES}
 """The paper's Phase I: raw samples and those both cameras saw at the same place."""
@@ -102,7 +103,8 @@ def write_figures(folder: Path, data: dict[str, Any]) -> dict[str, str]:
     figures = {"bias_field": "figures/bias_field.png", "calibration_error_maps": "figures/calibration_error_maps.png"}
     if data["search"]:
         results = [SearchResult(**{**row, "fold_mm2": tuple(row["fold_mm2"])}) for row in data["search"]]
-        plot_search(results, str(folder / "model_search.png"))
+        with atomic_path(folder / "model_search.png") as temporary:
+            plot_search(results, str(temporary))
         figures["model_search"] = "figures/model_search.png"
     if data["rl"]:
         curves = {agent["label"]: [CurvePoint(**point) for point in agent["curve"]] for agent in data["rl"]}
@@ -151,9 +153,7 @@ def write_report(path: Path, data: dict[str, Any]) -> Path:
         [[name, f"{s:.1f}", "yes" if name in data["task_cached"] else ""] for name, s in data["task_wall_s"].items()],
     )
     lines += ["", "Versions: " + ", ".join(f"{k} {v}" for k, v in settings["versions"].items()), ""]
-    path = Path(path)
-    path.write_text("\n".join(lines))
-    return path
+    return atomic_write_text(path, "\n".join(lines))
 
 
 def _timing_sentence(data: dict[str, Any]) -> str:

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import shutil
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -27,6 +26,8 @@ from dvrk_gym.reproduce.profiles import QUICK, Profile
 from dvrk_gym.reproduce.report import collect_results, write_figures, write_report
 from dvrk_gym.reproduce.scheduler import Task, run_tasks
 from dvrk_gym.sim.robot.bias import resolve_bias
+from dvrk_gym.utils.atomic import atomic_write_bytes, atomic_write_json
+from dvrk_gym.utils.checks import check_bool, check_int
 from dvrk_gym.utils.run_folder import RunFolder
 
 CALIBRATORS = tuple(dict.fromkeys(method for method, _ in paper.DEBRIDEMENT_RESULTS))
@@ -61,8 +62,14 @@ class ReproduceConfig:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "out", Path(self.out))
-        if self.workers < 1:
-            raise ValueError(f"workers must be >= 1, got {self.workers}")
+        if not isinstance(self.profile, Profile):
+            raise ValueError(f"profile must be a Profile, got {type(self.profile).__name__}")
+        check_int("workers", self.workers, 1, 256)
+        check_int("seed", self.seed, 0, 2**31 - 1)
+        check_int("bias_seed", self.bias_seed, 0, 2**31 - 1)
+        check_bool("progress", self.progress)
+        if not isinstance(self.bias, str):
+            raise ValueError(f"bias must be a preset name (str), got {self.bias!r}")
         resolve_bias(self.bias)  # a clear error for an unknown preset, before any work
 
     def settings(self) -> dict[str, Any]:
@@ -174,37 +181,68 @@ def run_reproduce(config: ReproduceConfig) -> Reproduction:
 
     Raises:
         ValueError: ``config.out`` holds a run made with other settings.
+        RunFolderBusy: another process is running in ``config.out``.
     """
+    with RunFolder(config.out, config.settings(), stamp=SETTINGS_STAMP) as folder:
+        return _reproduce(config, folder)
+
+
+def _reproduce(config: ReproduceConfig, folder: RunFolder) -> Reproduction:
     start = time.perf_counter()
-    RunFolder(config.out, config.settings(), stamp=SETTINGS_STAMP)
     (config.out / "figures").mkdir(parents=True, exist_ok=True)
     task_results = run_tasks(build_tasks(config), config.out / "tasks", workers=config.workers, progress=config.progress)
     error_maps = Path(task_results["calibration"]["figure"])
     if error_maps.exists():
-        shutil.copyfile(error_maps, config.out / "figures" / "calibration_error_maps.png")
+        atomic_write_bytes(config.out / "figures" / "calibration_error_maps.png", error_maps.read_bytes())
     data = collect_results(config, task_results)
     data["figures"] = write_figures(config.out / "figures", data)
     wall = time.perf_counter() - start
-    calls = _log_call(config, wall, tasks_run=sum(not result["cached"] for result in task_results.values()))
+    calls = _log_call(folder, config, wall, tasks_run=sum(not result["cached"] for result in task_results.values()))
     data["calls"] = calls
     data["wall_s"] = {
         "this_call": wall,
         "all_calls": sum(call["wall_s"] for call in calls),
         "tasks_total": sum(r["wall_s"] for r in task_results.values()),
     }
-    results_path = config.out / "results.json"
-    results_path.write_text(json.dumps(data, indent=1, default=_json_default))
+    results_path = atomic_write_json(config.out / "results.json", data, indent=1, default=_json_default)
     report_path = write_report(config.out / "report.md", data)
     return Reproduction(report_path, results_path, data, wall)
 
 
-def _log_call(config: ReproduceConfig, wall_s: float, tasks_run: int) -> list[dict[str, Any]]:
-    """Append this call to ``calls.json`` in the run folder (a resumed run has several)."""
-    path = config.out / "calls.json"
-    calls = json.loads(path.read_text()) if path.exists() else []
-    calls.append({"wall_s": wall_s, "tasks_run": tasks_run, "workers": config.workers, "finished": time.strftime("%Y-%m-%d %H:%M:%S")})
-    path.write_text(json.dumps(calls, indent=1))
+def _read_calls(path: Path) -> list[dict[str, Any]]:
+    calls = json.loads(path.read_text())
+    if not isinstance(calls, list) or not all(isinstance(call, dict) and isinstance(call.get("wall_s"), (int, float)) for call in calls):
+        raise ValueError("not a list of calls with their wall_s")
     return calls
+
+
+def _log_call(folder: RunFolder, config: ReproduceConfig, wall_s: float, tasks_run: int) -> list[dict[str, Any]]:
+    """Append this call to ``calls.json`` in the run folder (a resumed run has several)."""
+    calls = folder.load("calls.json", _read_calls) or []
+    calls.append({"wall_s": wall_s, "tasks_run": tasks_run, "workers": config.workers, "finished": time.strftime("%Y-%m-%d %H:%M:%S")})
+    folder.write_json("calls.json", calls)
+    return calls
+
+
+CLOCK_KEYS = frozenset(
+    {"wall_s", "wall_s_per_trial", "seconds", "steps_per_second", "train_s", "eval_seconds", "task_wall_s", "stage_s", "calls"}
+)
+"""Keys of ``results.json`` whose values are wall-clock times, or the record of the calls that made them."""
+RUN_KEYS = frozenset({"task_cached", "workers"})
+"""Keys of ``results.json`` that say how a run went (tasks loaded from the cache, workers), not what it found."""
+
+
+def seeded_results(value: Any) -> Any:
+    """A ``results.json`` tree without its wall-clock times and run records: what the seed decides.
+
+    Two runs with the same settings give equal trees, whether interrupted and resumed or
+    run with any number of workers.
+    """
+    if isinstance(value, dict):
+        return {key: seeded_results(item) for key, item in value.items() if key not in CLOCK_KEYS | RUN_KEYS}
+    if isinstance(value, list):
+        return [seeded_results(item) for item in value]
+    return value
 
 
 def _json_default(value: Any) -> Any:

@@ -4,24 +4,30 @@ A task is a top-level function (so a worker process can import it) with keyword
 arguments, the names of the tasks it needs, and a rough cost. Its result, a JSON-able
 dict, is cached in ``cache_dir/<name>.json`` (a :class:`~dvrk_gym.utils.run_folder.RunFolder`)
 with the wall time it took; a re-run loads the cached results and runs only the rest, so
-an interrupted run resumes. Results do not
-depend on the number of workers: every task seeds itself and runs with one torch thread.
+an interrupted run resumes (a cached result cut short is moved aside and its task run
+again). Results do not depend on the number of workers: every task seeds itself and runs
+with one torch thread. Worker processes end with the process that started them, even when
+it is killed (:func:`~dvrk_gym.utils.parent_watch.end_with_parent`).
 """
 
 from __future__ import annotations
 
 import contextlib
+import json
 import logging
 import multiprocessing
+import os
 import time
 from collections.abc import Callable, Iterator
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from tqdm.auto import tqdm
 
+from dvrk_gym.utils.parent_watch import end_with_parent
 from dvrk_gym.utils.run_folder import RunFolder
 from dvrk_gym.utils.torch_threads import torch_threads
 
@@ -58,6 +64,14 @@ def _call(function: Callable[..., dict[str, Any]], kwargs: dict[str, Any]) -> tu
     with torch_threads(1):  # the same numbers on any machine, no oversubscription side by side
         result = function(**kwargs)
     return result, time.perf_counter() - start
+
+
+def _read_result(path: Path) -> dict[str, Any]:
+    """A cached task result; ValueError unless it is a JSON object with the task's wall time."""
+    result = json.loads(path.read_text())
+    if not isinstance(result, dict) or not isinstance(result.get("wall_s"), (int, float)):
+        raise ValueError("not a task result (a JSON object with its wall_s)")
+    return result
 
 
 def _check_graph(tasks: list[Task]) -> None:
@@ -110,14 +124,19 @@ def run_tasks(tasks: list[Task], cache_dir: Path, workers: int = 1, progress: bo
     Raises:
         TaskError: a task failed (the others that were running are awaited first).
     """
-    if workers < 1:
-        raise ValueError(f"workers must be >= 1, got {workers}")
+    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
+        raise ValueError(f"workers must be an int >= 1, got {workers!r}")
     _check_graph(tasks)
-    cache = RunFolder(cache_dir)
+    with RunFolder(cache_dir) as cache:
+        return _run_graph(tasks, cache, workers, progress)
+
+
+def _run_graph(tasks: list[Task], cache: RunFolder, workers: int, progress: bool) -> dict[str, dict[str, Any]]:
     results: dict[str, dict[str, Any]] = {}
     for task in tasks:
-        if cache.has(f"{task.name}.json"):
-            results[task.name] = {**cache.read_json(f"{task.name}.json"), "cached": True}
+        found = cache.load(f"{task.name}.json", _read_result)
+        if found is not None:
+            results[task.name] = {**found, "cached": True}
     priority = _priorities(tasks)
     pending = sorted((task for task in tasks if task.name not in results), key=lambda task: -priority[task.name])
     bar = tqdm(total=len(tasks), initial=len(results), desc="reproduce", unit="task", disable=not progress)
@@ -169,7 +188,8 @@ def _run_in_pool(
     running: dict[Future, Task] = {}
     failure: TaskError | None = None
     context = multiprocessing.get_context("spawn")  # no forked torch or pybullet state
-    with ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool, _stop_workers_on_interrupt():
+    pool = ProcessPoolExecutor(max_workers=workers, mp_context=context, initializer=end_with_parent, initargs=(os.getpid(),))
+    with pool, _stop_workers_on_interrupt():
         while pending or running:
             if failure is None:
                 for task in ready():
@@ -181,10 +201,15 @@ def _run_in_pool(
                 break
             bar.set_postfix_str(", ".join(sorted(task.name for task in running.values())))
             done, _ = wait(running, return_when=FIRST_COMPLETED)
+            lost = sorted(task.name for task in running.values())  # what was running, should a worker die
             for future in done:
                 task = running.pop(future)
                 try:
                     finish(task, *future.result())
+                except BrokenProcessPool as error:  # a worker was killed (or ran out of memory): no task can say which
+                    if failure is None:
+                        failure = TaskError(f"a worker process died while running {lost}: {error}")
+                        failure.__cause__ = error
                 except Exception as error:  # noqa: BLE001  (reported after the running tasks end)
                     if failure is None:
                         failure = TaskError(f"task {task.name!r} failed: {type(error).__name__}: {error}")

@@ -42,6 +42,7 @@ from dvrk_gym.sim.robot.bias import BiasConfig, resolve_bias
 from dvrk_gym.sim.robot.body import PSMBody, marker_corners, marker_face_samples, marker_position
 from dvrk_gym.sim.robot.cables import CableModel
 from dvrk_gym.sim.robot.motion import CartesianMove, MotionLimits, SimClock
+from dvrk_gym.utils.checks import check_bool, check_float_fields, check_int_fields, check_resolution
 
 HOME_JOINTS = np.array([0.0, 0.0, 0.05, 0.0, 0.0, 0.0])
 """A retracted configuration: the tool is 34 mm below the RCM, far outside the camera's view."""
@@ -53,6 +54,8 @@ MARKER_WINDOW_MARGIN_PX = 2
 """Pixels added around the marker's projected bounding box when rendering its window."""
 MARKER_RAY_STANDOFF_M = 0.00005
 """Visibility rays stop this far in front of the marker's face, metres."""
+MAX_PIXEL_NOISE_PX = 50.0
+"""The largest detection noise a world accepts (standard deviation at 1920 x 1080), pixels."""
 
 
 @dataclass(frozen=True)
@@ -85,13 +88,18 @@ class WorldConfig:
     marker_noise: DetectionNoise = IDENTIFIED_MARKER_NOISE
 
     def __post_init__(self) -> None:
-        if not (math.isfinite(self.pixel_noise_px) and self.pixel_noise_px >= 0):
-            raise ValueError(f"pixel_noise_px must be finite and >= 0, got {self.pixel_noise_px}")
-        width, height = self.camera_resolution
-        if not (isinstance(width, (int, np.integer)) and isinstance(height, (int, np.integer))):
-            raise ValueError(f"camera_resolution must be two ints (width, height), got {self.camera_resolution!r}")
-        if not (16 <= width <= 7680 and 16 <= height <= 4320):
-            raise ValueError(f"camera_resolution {self.camera_resolution} is outside 16x16 to 7680x4320 pixels")
+        check_float_fields("WorldConfig", self, {"pixel_noise_px": (0.0, MAX_PIXEL_NOISE_PX, False)})
+        object.__setattr__(self, "camera_resolution", check_resolution("camera_resolution", self.camera_resolution))
+        check_int_fields("WorldConfig", self, {"bias_seed": (0, 2**31 - 1)})
+        if not isinstance(self.bias, (str, BiasConfig)):
+            raise ValueError(f"bias must be a preset name or a BiasConfig, got {self.bias!r}")
+        check_bool("gui", self.gui)
+        if not isinstance(self.motion, MotionLimits):
+            raise ValueError(f"motion must be a MotionLimits, got {self.motion!r}")
+        if self.camera_pose is not None:
+            pose = np.asarray(self.camera_pose)
+            if pose.shape != (4, 4) or pose.dtype.kind != "f" or not np.all(np.isfinite(pose)):
+                raise ValueError(f"camera_pose must be None or a finite 4x4 float transform (metres), got {self.camera_pose!r}")
 
 
 @dataclass(frozen=True)
@@ -155,6 +163,8 @@ class DvrkWorld:
             pose=default_camera_pose() if self.config.camera_pose is None else self.config.camera_pose,
             calibrated_baseline_m=PAPER_BASELINE_M,
         )
+        self.pixel_noise = PixelNoise(self.config.pixel_noise_px, self.camera.intrinsics.width)
+        """The detection noise of every pixel the endoscope reports (scaled to this resolution)."""
         self.physics = Physics(gui=self.config.gui)
         self.scene: SceneBodies = build_scene(self.physics)
         self.robot = PSMBody(self.physics, dh=self.cable.true_dh)
@@ -302,7 +312,7 @@ class DvrkWorld:
             return None if noise_rng is not None else blob
         width = self.camera.intrinsics.width
         centroid = blob.centroid + self.config.marker_noise.sample(noise_rng, width)
-        centroid = whole_pixels(PixelNoise(self.config.pixel_noise_px, width).apply(centroid, noise_rng), width)
+        centroid = whole_pixels(self.pixel_noise.apply(centroid, noise_rng), width)
         return Blob(centroid, blob.area_px, blob.touches_border)
 
     def marker_visible_fraction(self, side: str) -> float:

@@ -1,45 +1,128 @@
-"""Files written whole or not at all: a reader never sees a half-written file.
+"""One way to write a file: all of it or none of it.
 
-The content goes to a temporary file in the target's own folder (so the rename stays on one
-file system), which then replaces the target with :func:`os.replace`, atomic on POSIX and
-Windows.
+Every file the package writes goes through here. The bytes go to a temporary file in the
+same folder (``.<stem>.<random>.partial<suffix>``: the target's suffix is kept, so writers
+that choose a format by it, such as matplotlib's ``savefig`` or ``np.savez``, behave as
+with the target), are flushed and fsynced, and the temporary file is renamed over the
+target with :func:`os.replace` (atomic within one file system); the folder is then fsynced
+so that the rename survives a power cut. A kill at any moment leaves the old file or the
+new one, never a half-written one; a temporary file left by a kill is removed by
+:func:`remove_partial_files` (a :class:`~dvrk_gym.utils.run_folder.RunFolder` does so when
+it is opened).
 """
 
 from __future__ import annotations
 
+import contextlib
+import json
+import logging
 import os
-import tempfile
-from collections.abc import Callable
+import secrets
+from collections.abc import Iterator
 from pathlib import Path
+from typing import IO, Any
 
-__all__ = ["write_atomic", "write_text_atomic"]
+logger = logging.getLogger(__name__)
 
-_FILE_MODE = 0o644
+PARTIAL_MARK = ".partial"
+"""What the name of a temporary file holds before the target's suffix."""
 
 
-def write_atomic(path: str | os.PathLike, write: Callable[[Path], object]) -> Path:
-    """Call ``write(temporary_path)``, then move the temporary file onto ``path``.
+def partial_path(path: str | os.PathLike) -> Path:
+    """A fresh temporary path beside ``path``, hidden, with ``path``'s suffix."""
+    path = Path(path)
+    return path.with_name(f".{path.stem}.{secrets.token_hex(4)}{PARTIAL_MARK}{path.suffix}")
 
-    Args:
-        path: the file to write; its folder must exist.
-        write: writes the whole content to the path it is given (it keeps ``path``'s suffix).
 
-    Returns:
-        ``path`` as a :class:`Path`.
-    """
-    target = Path(path)
-    handle, temporary = tempfile.mkstemp(dir=target.parent, prefix=f".{target.name}.", suffix=target.suffix)
-    os.close(handle)
+def _fsync_path(path: Path, directory: bool = False) -> None:
+    """Flush a file's (or a folder's) data to the disk; a no-op where a folder cannot be opened (Windows)."""
     try:
-        write(Path(temporary))
-        os.chmod(temporary, _FILE_MODE)  # mkstemp makes it private; a result file is for everyone to read
-        os.replace(temporary, target)
-    except BaseException:
-        Path(temporary).unlink(missing_ok=True)
+        descriptor = os.open(path, os.O_RDONLY | (getattr(os, "O_DIRECTORY", 0) if directory else 0))
+    except OSError:
+        if directory:
+            return
         raise
-    return target
+    try:
+        os.fsync(descriptor)
+    finally:
+        os.close(descriptor)
 
 
-def write_text_atomic(path: str | os.PathLike, text: str) -> Path:
-    """Write ``text`` (UTF-8) to ``path`` atomically (:func:`write_atomic`)."""
-    return write_atomic(path, lambda temporary: temporary.write_text(text, encoding="utf-8"))
+@contextlib.contextmanager
+def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
+    """A temporary path to write ``path`` through: renamed over ``path`` if the block ends well, removed if not.
+
+    For writers that take a path (``savefig``, ``np.savez``, stable-baselines3's ``save``).
+
+    Raises:
+        OSError: the folder is missing or read-only, ``path`` is a folder, or the block wrote nothing.
+    """
+    path = Path(path)
+    temporary = partial_path(path)
+    try:
+        yield temporary
+        if not temporary.is_file():
+            raise OSError(f"nothing was written to {path}")
+        _fsync_path(temporary)
+        os.replace(temporary, path)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            temporary.unlink()
+        raise
+    _fsync_path(path.parent, directory=True)
+
+
+@contextlib.contextmanager
+def atomic_open(path: str | os.PathLike, mode: str = "wb", encoding: str | None = None) -> Iterator[IO[Any]]:
+    """A stream to write ``path`` through (``"wb"`` or ``"w"``), in place only if the block ends well.
+
+    For writers that take a stream (``np.savez`` to a handle, ``torch.save``).
+    """
+    if mode not in ("wb", "w"):
+        raise ValueError(f"mode must be 'wb' or 'w', got {mode!r}")
+    with atomic_path(path) as temporary, open(temporary, mode, encoding=encoding if "b" not in mode else None) as stream:
+        yield stream
+        stream.flush()
+
+
+def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> Path:
+    """Write ``data`` to ``path``, all or nothing; returns the path."""
+    with atomic_open(path, "wb") as stream:
+        stream.write(data)
+    return Path(path)
+
+
+def atomic_write_text(path: str | os.PathLike, text: str, encoding: str = "utf-8") -> Path:
+    """Write ``text`` to ``path``, all or nothing; returns the path."""
+    return atomic_write_bytes(path, text.encode(encoding))
+
+
+def atomic_write_json(path: str | os.PathLike, value: Any, **dumps_options: Any) -> Path:
+    """Write ``value`` as JSON (``json.dumps(value, **dumps_options)``) to ``path``, all or nothing.
+
+    The JSON is made before anything is written, so a value that cannot be written leaves ``path`` as it was.
+    """
+    return atomic_write_text(path, json.dumps(value, **dumps_options))
+
+
+def remove_partial_files(folder: str | os.PathLike) -> list[Path]:
+    """Remove the temporary files a killed write left in ``folder`` and the folders below it; returns them.
+
+    Only call this on a folder no other process is writing (a run folder its owner holds).
+    """
+    removed = []
+    for path in Path(folder).rglob(f".*{PARTIAL_MARK}*"):
+        if path.is_file():
+            with contextlib.suppress(OSError):
+                path.unlink()
+                removed.append(path)
+    if removed:
+        logger.info("removed %d temporary file(s) left by an interrupted write in %s", len(removed), folder)
+    return removed
+
+
+def atomic_savefig(figure: Any, path: str | os.PathLike, **options: Any) -> Path:
+    """``figure.savefig(path, **options)`` (a matplotlib figure), all or nothing; returns the path."""
+    with atomic_path(path) as temporary:
+        figure.savefig(temporary, **options)
+    return Path(path)

@@ -1,24 +1,51 @@
-"""A run folder: results cached on disk for one set of settings, so an interrupted run resumes.
+"""A run folder: results cached on disk for one set of settings, owned by one run at a time.
 
 A folder opened with settings is stamped with them (a JSON file in the folder); opening it
 again with other settings is refused with an error that names what differs, so results
 made with one set of settings are never mixed with another's. Each result is a file in the
-folder: :meth:`RunFolder.cached` loads it when it is there, else makes and saves it.
+folder: :meth:`RunFolder.cached` loads it when it is there, else makes and saves it, and a
+result that cannot be read back (cut short by a full disk, edited by hand) is named in a
+warning, moved aside as ``<name>.corrupt`` and made again.
+
+One run owns a folder at a time: opening it takes a lock (``run.lock``, a
+:class:`filelock.FileLock` holding the owner's process id), and a second process that
+opens it gets :class:`RunFolderBusy`, which names the folder and the owner. The kernel
+drops the lock when its owner dies, however it dies; the next run takes the folder over
+with a logged message naming the dead owner. Within one process the lock is re-entrant.
+Every file is written atomically (:mod:`dvrk_gym.utils.atomic`), and the temporary files
+an interrupted write left behind are removed when the folder is opened.
 """
 
 from __future__ import annotations
 
+import contextlib
 import json
 import logging
 import os
 import time
+import zipfile
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any, TypeVar
 
+from filelock import FileLock, Timeout
+
+from dvrk_gym.utils.atomic import atomic_path, atomic_write_json, remove_partial_files
+
 logger = logging.getLogger(__name__)
 
 T = TypeVar("T")
+
+LOCK_FILE = "run.lock"
+"""The lock file of a run folder; it holds the owner's process id while a run owns the folder."""
+CORRUPT_SUFFIX = ".corrupt"
+"""A result that could not be read back is renamed to its name plus this."""
+UNREADABLE = (ValueError, OSError, EOFError, KeyError, TypeError, zipfile.BadZipFile)
+"""What a loader raises on a file cut short or tampered with (JSON and model-file errors are ValueErrors)."""
+
+
+class RunFolderBusy(RuntimeError):
+    """Another process owns the run folder (the message names the folder and the owner's process id)."""
 
 
 def _flatten(value: Any, prefix: str = "") -> dict[str, Any]:
@@ -43,13 +70,36 @@ def settings_differences(found: Any, wanted: Any) -> list[str]:
 
 
 def read_settings(folder: str | os.PathLike, stamp: str) -> dict[str, Any] | None:
-    """The settings a folder was stamped with, or None when it has no stamp."""
+    """The settings a folder was stamped with, or None when it has no stamp.
+
+    Raises:
+        ValueError: the stamp is not a JSON object (the message names the file).
+    """
     path = Path(folder) / stamp
-    return json.loads(path.read_text()) if path.exists() else None
+    if not path.exists():
+        return None
+    try:
+        settings = json.loads(path.read_text())
+    except (ValueError, OSError) as error:
+        raise ValueError(f"{path} is unreadable ({error}); delete it, or the folder, to start the run again") from None
+    if not isinstance(settings, dict):
+        raise ValueError(f"{path} holds {type(settings).__name__}, not the settings object this tool writes; delete it or the folder")
+    return settings
+
+
+def _owner_pid(text: str) -> int | None:
+    """The process id a lock file holds, or None when it holds none (a clean release empties it)."""
+    try:
+        return int(json.loads(text)["pid"])
+    except (ValueError, KeyError, TypeError):
+        return None
 
 
 class RunFolder:
-    """A folder of cached results made with one set of settings.
+    """A folder of cached results made with one set of settings, owned by this process until :meth:`close`.
+
+    Use it as a context manager (``with RunFolder(path) as folder:``) or call :meth:`close`;
+    the lock is also dropped when the process ends, however it ends.
 
     Args:
         path: the folder (created if missing).
@@ -58,17 +108,77 @@ class RunFolder:
         stamp: the name of the file holding the settings.
 
     Raises:
+        RunFolderBusy: another process owns the folder.
         ValueError: the folder is stamped with other settings (the message lists them).
+        OSError: the folder cannot be made or written (a file of that name, no permission).
     """
 
     def __init__(self, path: str | os.PathLike, settings: Mapping[str, Any] | None = None, stamp: str = "settings.json") -> None:
         self.path = Path(path)
+        if self.path.exists() and not self.path.is_dir():
+            raise NotADirectoryError(f"{self.path} is a file, not a folder; give a folder for the run")
         self.path.mkdir(parents=True, exist_ok=True)
         self.stamp = self.path / stamp
         self.made_s: dict[str, float] = {}
         """Wall time of each result made (not loaded) by :meth:`cached`, by stage, seconds."""
-        if settings is not None:
-            self._check_and_stamp(settings)
+        self._lock = FileLock(self.path / LOCK_FILE, timeout=0, thread_local=False, is_singleton=True)
+        self._held = False
+        self._acquire()
+        try:
+            if self._lock.lock_counter == 1:  # the first owner in this process: nobody else writes here now
+                self._claim()
+                remove_partial_files(self.path)
+            if settings is not None:
+                self._check_and_stamp(settings)
+        except BaseException:
+            self.close()
+            raise
+
+    def _acquire(self) -> None:
+        try:
+            self._lock.acquire()
+        except Timeout:
+            owner = _owner_pid((self.path / LOCK_FILE).read_text(errors="replace")) if (self.path / LOCK_FILE).exists() else None
+            who = f"process {owner}" if owner is not None else "another process"
+            raise RunFolderBusy(
+                f"{self.path} is in use by {who} (its lock: {self.path / LOCK_FILE}); "
+                "wait for that run to finish, stop it, or give another folder"
+            ) from None
+        self._held = True
+
+    def _claim(self) -> None:
+        """Write this process's id into the lock file just taken, first logging the dead owner it replaces."""
+        lock_file = self.path / LOCK_FILE
+        previous = _owner_pid(lock_file.read_text(errors="replace"))
+        if previous is not None and previous != os.getpid():
+            logger.warning(
+                "%s: taking over the stale lock of process %d, which no longer runs (it was killed or crashed)", self.path, previous
+            )
+        # Written in place, not atomically: a rename would give the lock path a new inode, which another
+        # process could lock while this one holds the old one.
+        lock_file.write_text(json.dumps({"pid": os.getpid(), "since": time.strftime("%Y-%m-%d %H:%M:%S")}))
+
+    def close(self) -> None:
+        """Give up the folder (safe to call more than once); the lock file is emptied first, so
+        the next owner knows it was released, not left by a dead process."""
+        if not self._held:
+            return
+        self._held = False
+        if self._lock.lock_counter == 1:
+            with contextlib.suppress(OSError):
+                (self.path / LOCK_FILE).write_text("")
+        self._lock.release()
+
+    def __enter__(self) -> RunFolder:
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.close()
+
+    def __del__(self) -> None:
+        if getattr(self, "_held", False):
+            with contextlib.suppress(Exception):  # at interpreter exit the kernel drops the lock anyway
+                self.close()
 
     def _check_and_stamp(self, settings: Mapping[str, Any]) -> None:
         wanted = json.loads(json.dumps(settings))  # tuples become lists, as they come back from the stamp
@@ -78,7 +188,7 @@ class RunFolder:
             raise ValueError(
                 f"{self.path} holds a run with other settings ({differences}; see {self.stamp}); use another --out or delete it"
             )
-        self.stamp.write_text(json.dumps(wanted, indent=1, sort_keys=True))
+        atomic_write_json(self.stamp, wanted, indent=1, sort_keys=True)
 
     def file(self, name: str) -> Path:
         """The path of a result in the folder."""
@@ -88,34 +198,53 @@ class RunFolder:
         """Whether the folder holds the result ``name``."""
         return self.file(name).exists()
 
+    def load(self, name: str, load: Callable[[Path], T]) -> T | None:
+        """The result ``name`` read by ``load``; None when it is missing or unreadable.
+
+        An unreadable file (``load`` raised one of :data:`UNREADABLE`, but not a permission
+        error) is named in a warning and renamed to ``<name>.corrupt``, so that it is made again.
+        """
+        path = self.file(name)
+        if not path.exists():
+            return None
+        try:
+            return load(path)
+        except PermissionError:
+            raise
+        except UNREADABLE as error:
+            aside = path.with_name(path.name + CORRUPT_SUFFIX)
+            os.replace(path, aside)
+            logger.warning("%s is unreadable (%s: %s); moved it to %s and making it again", path, type(error).__name__, error, aside.name)
+            return None
+
     def cached(
         self, name: str, make: Callable[[], T], load: Callable[[Path], T], save: Callable[[T, Path], Any], stage: str | None = None
     ) -> T:
-        """The result ``name``: loaded from the folder if there, else made, saved and timed.
+        """The result ``name``: loaded from the folder if there and readable, else made, saved (atomically) and timed.
 
         Args:
             name: the result's file name in the folder.
             make: computes the result.
             load: reads the result from its path.
-            save: writes the result to its path.
+            save: writes the result to the path it is given (a temporary one, renamed into place).
             stage: the key of its time in :attr:`made_s` (default: the file name's stem).
         """
         path = self.file(name)
-        if path.exists():
-            logger.info("%s: loading %s", stage or path.stem, path)
-            return load(path)
+        found = self.load(name, load)
+        if found is not None:
+            logger.info("%s: loaded %s", stage or path.stem, path)
+            return found
         start = time.perf_counter()
         value = make()
         self.made_s[stage or path.stem] = time.perf_counter() - start
-        save(value, path)
+        with atomic_path(path) as temporary:
+            save(value, temporary)
         return value
 
     def read_json(self, name: str) -> Any:
-        """A JSON result of the folder."""
-        return json.loads(self.file(name).read_text())
+        """A JSON result of the folder; None when it is missing or unreadable (see :meth:`load`)."""
+        return self.load(name, lambda path: json.loads(path.read_text()))
 
     def write_json(self, name: str, value: Any) -> Path:
-        """Write a JSON result into the folder (indented); returns its path."""
-        path = self.file(name)
-        path.write_text(json.dumps(value, indent=1))
-        return path
+        """Write a JSON result into the folder (indented, atomically); returns its path."""
+        return atomic_write_json(self.file(name), value, indent=1)

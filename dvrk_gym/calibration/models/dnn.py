@@ -22,6 +22,7 @@ from tqdm import tqdm
 from dvrk_gym import paper
 from dvrk_gym.calibration.models.features import check_inputs, check_targets, encode_euler
 from dvrk_gym.calibration.models.serialization import SavableModel, require_array, require_names
+from dvrk_gym.utils.checks import check_bool, check_choice, check_float, check_int
 
 __all__ = ["ACTIVATIONS", "DEFAULT_BATCH_SIZE", "DEFAULT_LEARNING_RATE", "DNNCalibrator"]
 
@@ -41,6 +42,18 @@ DEFAULT_LEARNING_RATE = 3e-3
 _INPUT_FEATURES = 9
 _OUTPUTS = 3
 _PROGRESS_EVERY_EPOCHS = 25
+MAX_HIDDEN_LAYERS = 16
+MAX_UNITS = 4096
+MAX_PARAMETERS = 2**25
+"""The largest network built, weights and biases (128 MiB in float32); the paper's 3 x 300 has 183,303."""
+MAX_EPOCHS = 10**7
+MAX_BATCH_SIZE = 2**24
+
+
+def network_parameters(hidden_layers: int, units: int) -> int:
+    """The weights and biases of an MLP with ``hidden_layers`` layers of ``units`` (9 inputs, 3 outputs)."""
+    widths = [_INPUT_FEATURES] + [units] * hidden_layers + [_OUTPUTS]
+    return sum((fan_in + 1) * fan_out for fan_in, fan_out in zip(widths[:-1], widths[1:]))
 
 
 def _build_network(hidden_layers: int, units: int, activation: str) -> nn.Sequential:
@@ -94,21 +107,19 @@ class DNNCalibrator(SavableModel):
         seed: int = 0,
         progress: bool = True,
     ) -> None:
-        for name, value in (("hidden_layers", hidden_layers), ("units", units), ("epochs", epochs), ("batch_size", batch_size)):
-            if isinstance(value, bool) or int(value) != value or value < 1:
-                raise ValueError(f"{name} is {value!r}; expected a positive integer")
-        if activation not in ACTIVATIONS:
-            raise ValueError(f"activation is {activation!r}; expected one of {sorted(ACTIVATIONS)}")
-        if not (math.isfinite(learning_rate) and learning_rate > 0.0):
-            raise ValueError(f"learning_rate is {learning_rate!r}; expected a finite positive number")
-        self.hidden_layers = int(hidden_layers)
-        self.units = int(units)
-        self.activation = activation
-        self.epochs = int(epochs)
-        self.batch_size = int(batch_size)
-        self.learning_rate = float(learning_rate)
-        self.seed = int(seed)
-        self.progress = bool(progress)
+        self.hidden_layers = check_int("hidden_layers", hidden_layers, 1, MAX_HIDDEN_LAYERS)
+        self.units = check_int("units", units, 1, MAX_UNITS)
+        self.activation = check_choice("activation", activation, sorted(ACTIVATIONS))
+        self.epochs = check_int("epochs", epochs, 1, MAX_EPOCHS)
+        self.batch_size = check_int("batch_size", batch_size, 1, MAX_BATCH_SIZE)
+        self.learning_rate = check_float("learning_rate", learning_rate, 0.0, 1.0, low_open=True)
+        self.seed = check_int("seed", seed, 0, 2**63 - 1)
+        self.progress = check_bool("progress", progress)
+        parameters = network_parameters(self.hidden_layers, self.units)
+        if parameters > MAX_PARAMETERS:
+            raise ValueError(
+                f"a {self.hidden_layers} x {self.units} network has {parameters:,} parameters; at most {MAX_PARAMETERS:,} are allowed"
+            )
         self.network_: nn.Sequential | None = None
         self.x_mean_: np.ndarray | None = None  # (9,) encoded-input mean
         self.x_scale_: np.ndarray | None = None  # (9,) encoded-input standard deviation
@@ -205,9 +216,13 @@ class DNNCalibrator(SavableModel):
 
     @classmethod
     def _restore(cls, params: Mapping[str, Any], arrays: Mapping[str, np.ndarray]) -> DNNCalibrator:
-        model = cls(**params, progress=False)
+        model = cls(**params, progress=False)  # checks the sizes against fixed bounds before anything is built
         names = model._layer_names()
         require_names(arrays, {"x_mean", "x_scale", "y_mean", "y_scale"} | {f"{n}_{part}" for n in names for part in ("weight", "bias")})
+        widths = [_INPUT_FEATURES] + [model.units] * model.hidden_layers + [_OUTPUTS]
+        for name, fan_in, fan_out in zip(names, widths[:-1], widths[1:]):  # the file's arrays fit the header before it is built
+            require_array(arrays, f"{name}_weight", (fan_out, fan_in), np.float32)
+            require_array(arrays, f"{name}_bias", (fan_out,), np.float32)
         model.x_mean_ = require_array(arrays, "x_mean", (_INPUT_FEATURES,), np.float64)
         model.x_scale_ = require_array(arrays, "x_scale", (_INPUT_FEATURES,), np.float64)
         model.y_mean_ = require_array(arrays, "y_mean", (_OUTPUTS,), np.float64)

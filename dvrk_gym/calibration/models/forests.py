@@ -27,6 +27,7 @@ from dvrk_gym.calibration.models.features import (
 )
 from dvrk_gym.calibration.models.serialization import SavableModel, require_names
 from dvrk_gym.calibration.models.tree_ensemble import TreeEnsemble, fit_forest
+from dvrk_gym.utils.checks import check_int
 
 __all__ = ["ForestCalibrator", "ResidualForests"]
 
@@ -34,11 +35,15 @@ _EULER_FEATURES = 9
 _POSITION_FEATURES = 3
 
 
-def _check_forest_params(trees: int, max_depth: int | None) -> None:
-    if int(trees) != trees or trees < 1:
-        raise ValueError(f"trees is {trees}; expected a positive integer")
-    if max_depth is not None and (int(max_depth) != max_depth or max_depth < 1):
-        raise ValueError(f"max_depth is {max_depth}; expected a positive integer or None")
+MAX_TREES = 10_000
+MAX_DEPTH = 1_000
+
+
+def _check_forest_params(trees: int, max_depth: int | None, seed: int) -> None:
+    check_int("trees", trees, 1, MAX_TREES)
+    if max_depth is not None:
+        check_int("max_depth (or None)", max_depth, 1, MAX_DEPTH)
+    check_int("seed", seed, 0, 2**32 - 1)  # scikit-learn's random_state range
 
 
 class ForestCalibrator(SavableModel):
@@ -56,7 +61,7 @@ class ForestCalibrator(SavableModel):
     KIND = "forest_calibrator"
 
     def __init__(self, trees: int = 100, max_depth: int | None = None, seed: int = 0) -> None:
-        _check_forest_params(trees, max_depth)
+        _check_forest_params(trees, max_depth, seed)
         self.trees = int(trees)
         self.max_depth = None if max_depth is None else int(max_depth)
         self.seed = int(seed)
@@ -106,7 +111,7 @@ class ResidualForests(SavableModel):
     KIND = "residual_forests"
 
     def __init__(self, trees: int = paper.RESIDUAL_FOREST_TREES, max_depth: int | None = None, seed: int = 0) -> None:
-        _check_forest_params(trees, max_depth)
+        _check_forest_params(trees, max_depth, seed)
         self.trees = int(trees)
         self.max_depth = None if max_depth is None else int(max_depth)
         self.seed = int(seed)

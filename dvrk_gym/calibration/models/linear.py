@@ -10,6 +10,7 @@ from sklearn.linear_model import LinearRegression
 
 from dvrk_gym.calibration.models.features import check_inputs, check_targets, encode_euler, encode_quaternion
 from dvrk_gym.calibration.models.serialization import SavableModel, require_array, require_names
+from dvrk_gym.utils.checks import check_choice
 
 __all__ = ["LinearCalibrator"]
 
@@ -31,9 +32,7 @@ class LinearCalibrator(SavableModel):
     KIND = "linear_calibrator"
 
     def __init__(self, angles: str = "euler") -> None:
-        if angles not in _ENCODINGS:
-            raise ValueError(f"angles is {angles!r}; expected one of {sorted(_ENCODINGS)}")
-        self.angles = angles
+        self.angles = check_choice("angles", angles, sorted(_ENCODINGS))
         self.coef_: np.ndarray | None = None
         self.intercept_: np.ndarray | None = None
 

@@ -7,27 +7,37 @@ A model file is an ``np.savez`` archive holding
   "arrays": {name: {"shape", "dtype"}}}``,
 - ``__digest__``: a 0-d unicode array, the SHA-256 (hex) of the metadata and every array.
 
-Loading uses ``np.load(..., allow_pickle=False)`` and refuses, with ``ModelFileError``,
-anything that is not exactly such a file. The digest detects corruption and careless edits;
-it is not a signature (anyone can recompute it), so the models also check their arrays'
-shapes, finiteness and index ranges after loading.
+Loading never unpickles and never trusts a size it has not checked: the archive's declared
+and actual sizes are bounded (:data:`MODEL_FILE_LIMITS`, through
+:mod:`dvrk_gym.utils.bounded_zip`), each ``.npy`` header's shape and dtype must match the
+bytes that follow before an array is made, and anything that is not exactly such a file is
+refused with ``ModelFileError``. The digest detects corruption and careless edits; it is
+not a signature (anyone can recompute it), so the models also check their parameters
+against fixed bounds and their arrays' shapes before building anything, and their arrays'
+finiteness and index ranges after.
 """
 
 from __future__ import annotations
 
 import hashlib
+import io
 import json
+import math
 import os
-import zipfile
 from collections.abc import Mapping
 from typing import Any, ClassVar, TypeVar
 
 import numpy as np
 
+from dvrk_gym.utils.atomic import atomic_open
+from dvrk_gym.utils.bounded_zip import ArchiveLimitError, ArchiveLimits, open_archive, read_member
+
 __all__ = [
     "FORMAT_VERSION",
+    "MODEL_FILE_LIMITS",
     "ModelFileError",
     "SavableModel",
+    "read_arrays",
     "read_model_file",
     "require_array",
     "require_names",
@@ -38,6 +48,10 @@ FORMAT_VERSION = 1
 _METADATA = "__metadata__"
 _DIGEST = "__digest__"
 _ALLOWED_KINDS = "fiub"  # float, signed and unsigned integer, bool
+_MAX_NPY_HEADER_BYTES = 10_000
+MODEL_FILE_LIMITS = ArchiveLimits(max_file_bytes=512 * 2**20, max_members=10_000, max_member_bytes=256 * 2**20, max_total_bytes=512 * 2**20)
+"""What a model file may hold: 512 MiB on disk and inflated, 256 MiB per array, 10,000 arrays
+(the largest model here, a 100-tree forest on the paper's 1,939 rows, takes about 10 MB)."""
 
 PathLike = str | os.PathLike
 _Model = TypeVar("_Model", bound="SavableModel")
@@ -90,22 +104,49 @@ def write_model_file(path: PathLike, kind: str, params: Mapping[str, Any], array
         "arrays": {name: {"shape": list(value.shape), "dtype": value.dtype.str} for name, value in sorted(arrays.items())},
     }
     metadata_json = json.dumps(metadata, sort_keys=True)
-    with open(path, "wb") as stream:  # a handle, so np.savez adds no ".npz" to the name
+    with atomic_open(path) as stream:  # a handle, so np.savez adds no ".npz" to the name
         entries: dict[str, Any] = {**arrays, _METADATA: np.array(metadata_json), _DIGEST: np.array(_digest(metadata_json, arrays))}
         np.savez(stream, **entries)
 
 
-def _read_all(path: PathLike) -> dict[str, np.ndarray]:
+def _npy_array(path: PathLike, name: str, data: bytes) -> np.ndarray:
+    """One ``.npy`` member parsed from its bytes: the header's shape and dtype are checked
+    against the bytes actually there before any array is made."""
+    stream = io.BytesIO(data)
+    try:
+        version = np.lib.format.read_magic(stream)
+        if version not in ((1, 0), (2, 0)):
+            raise ValueError(f"npy format version {version}; expected 1.0 or 2.0")
+        read_header = np.lib.format.read_array_header_1_0 if version == (1, 0) else np.lib.format.read_array_header_2_0
+        shape, fortran_order, dtype = read_header(stream, max_header_size=_MAX_NPY_HEADER_BYTES)
+    except (ValueError, SyntaxError, TypeError, EOFError) as error:
+        raise ModelFileError(f"{path}: member {name!r} has no valid npy header: {error}") from None
+    if dtype.hasobject or dtype.kind not in _ALLOWED_KINDS + "U":
+        raise ModelFileError(f"{path}: member {name!r} has dtype {dtype}; only numeric, bool and string arrays are read (never pickles)")
+    count = math.prod(shape)
+    held = len(data) - stream.tell()
+    if count * dtype.itemsize != held:
+        raise ModelFileError(
+            f"{path}: member {name!r} declares {shape} {dtype} ({count * dtype.itemsize:,} bytes) but holds {held:,} bytes"
+        )
+    array = np.frombuffer(data, dtype=dtype, count=count, offset=stream.tell())
+    return array.reshape(shape, order="F" if fortran_order else "C").copy()
+
+
+def read_arrays(path: PathLike) -> dict[str, np.ndarray]:
+    """Every array of an ``.npz``, read within :data:`MODEL_FILE_LIMITS` (sizes checked before anything is inflated)."""
     if not os.path.isfile(path):
         raise ModelFileError(f"{path}: no such model file")
-    if not zipfile.is_zipfile(path):
-        raise ModelFileError(f"{path}: not an .npz model file (not a zip archive)")
     try:
-        with np.load(path, allow_pickle=False) as archive:
-            return {name: archive[name] for name in archive.files}
-    except (ValueError, OSError, EOFError, zipfile.BadZipFile, KeyError) as error:
-        # Object arrays (pickles) raise ValueError here because allow_pickle is False.
-        raise ModelFileError(f"{path}: unreadable model file: {error}") from None
+        with open_archive(path, MODEL_FILE_LIMITS) as archive:
+            arrays = {}
+            for member in archive.namelist():
+                if not member.endswith(".npy"):
+                    raise ModelFileError(f"{path}: member {member!r} is not an .npy array")
+                arrays[member[: -len(".npy")]] = _npy_array(path, member, read_member(archive, member, MODEL_FILE_LIMITS))
+            return arrays
+    except ArchiveLimitError as error:
+        raise ModelFileError(f"not an .npz file within the size limits: {error}") from None
 
 
 def _string(arrays: Mapping[str, np.ndarray], name: str, path: PathLike) -> str:
@@ -151,13 +192,13 @@ def read_model_file(path: PathLike, kind: str) -> tuple[dict[str, Any], dict[str
             bad or missing header, the wrong kind or version, missing or extra arrays,
             shapes or dtypes unlike the header, non-finite floats, or a digest mismatch.
     """
-    arrays = _read_all(path)
+    arrays = read_arrays(path)
     metadata_json = _string(arrays, _METADATA, path)
     digest = _string(arrays, _DIGEST, path)
     data = {name: value for name, value in arrays.items() if name not in (_METADATA, _DIGEST)}
     try:
         metadata = json.loads(metadata_json)
-    except json.JSONDecodeError as error:
+    except (json.JSONDecodeError, RecursionError) as error:
         raise ModelFileError(f"{path}: metadata is not valid JSON: {error}") from None
     if not isinstance(metadata, dict) or not isinstance(metadata.get("arrays"), dict) or not isinstance(metadata.get("params"), dict):
         raise ModelFileError(f"{path}: metadata lacks 'params' and 'arrays' objects")
@@ -216,7 +257,7 @@ class SavableModel:
         params, arrays = read_model_file(path, cls.KIND)
         try:
             return cls._restore(params, arrays)
-        except (ValueError, KeyError, TypeError, AttributeError) as error:
+        except (ValueError, KeyError, TypeError, AttributeError, OverflowError) as error:
             if isinstance(error, ModelFileError):
                 raise
             raise ModelFileError(f"{path}: invalid {cls.KIND} model: {error}") from None

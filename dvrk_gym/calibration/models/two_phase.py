@@ -2,6 +2,10 @@
 
     x_b = f_DNN(x_c, phi) + f_RF^(yaw)(f_DNN(x_c, phi))
 
+The Phase I model may be any regressor with scikit-learn's ``fit(X, y)`` / ``predict(X)``
+(SI arrays: X (N, 6) metres and radians, y (N, 3) metres): the paper's DNN by default, or a
+gradient-boosting model, a k-NN... of the user's, to which Phase II then adds the forests.
+
 Phase I fits the network on the coarse exploration data; Phase II moves the gripper to known
 targets via the network, records where a human (or a simulated one) pushed it, and fits one
 forest per yaw to the residual between that corrected position and the network's prediction.
@@ -10,7 +14,7 @@ forest per yaw to the residual between that corrected position and the network's
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -25,20 +29,47 @@ _DNN_PREFIX = "dnn_"
 _FORESTS_PREFIX = "rf_"
 
 
+class Regressor(Protocol):
+    """What a Phase I model needs: scikit-learn's ``fit`` and ``predict``."""
+
+    def fit(self, X: np.ndarray, y: np.ndarray) -> Any: ...
+
+    def predict(self, X: np.ndarray) -> np.ndarray: ...
+
+
+def _looks_fitted(model: Any) -> bool:
+    """scikit-learn's convention: fitted attributes end in ``_``; one that is set means fitted.
+
+    A model with no such attributes (a user's own class) is taken as given: fitted.
+    """
+    learned = [value for name, value in vars(model).items() if name.endswith("_") and not name.startswith("__")]
+    return any(value is not None for value in learned) if learned else True
+
+
 class TwoPhaseCalibrator(SavableModel):
-    """DNN plus per-yaw residual forests; with only Phase I fitted it equals the DNN.
+    """A Phase I model plus per-yaw residual forests; with only Phase I fitted it equals that model.
 
     Args:
-        dnn: The Phase I network (default: the paper's 3 x 300 ReLU, 1000 epochs).
+        dnn: The Phase I model: the paper's network by default (3 x 300 ReLU, 1000 epochs),
+            or any regressor with ``fit``/``predict`` on SI arrays, fitted or not.
         forests: The Phase II residual forests (default: 100 trees, default depth).
         seed: Seed for the default components (ignored for components passed in).
+
+    Example::
+
+        from sklearn.ensemble import GradientBoostingRegressor
+        from sklearn.multioutput import MultiOutputRegressor
+
+        mine = MultiOutputRegressor(GradientBoostingRegressor()).fit(X1, y1)  # Phase I rows
+        model = TwoPhaseCalibrator(dnn=mine).fit_phase2(X2, y2_corrected)  # adds the forests
     """
 
     KIND = "two_phase_calibrator"
 
-    def __init__(self, dnn: DNNCalibrator | None = None, forests: ResidualForests | None = None, seed: int = 0) -> None:
-        self.dnn = dnn if dnn is not None else DNNCalibrator(seed=seed)
+    def __init__(self, dnn: Regressor | None = None, forests: ResidualForests | None = None, seed: int = 0) -> None:
+        self.dnn: Regressor = dnn if dnn is not None else DNNCalibrator(seed=seed)
         self.forests = forests if forests is not None else ResidualForests(seed=seed)
+        self.phase1_fitted_ = dnn is not None and _looks_fitted(dnn)
         self.phase2_fitted_ = False
 
     def fit_phase1(self, X: np.ndarray, y: np.ndarray) -> TwoPhaseCalibrator:
@@ -47,6 +78,7 @@ class TwoPhaseCalibrator(SavableModel):
         Any Phase II fit is discarded, since its residuals were relative to the old network.
         """
         self.dnn.fit(X, y)
+        self.phase1_fitted_ = True
         self.phase2_fitted_ = False
         return self
 
@@ -68,24 +100,34 @@ class TwoPhaseCalibrator(SavableModel):
         """
         X_c_phase2 = check_inputs(X_c_phase2, name="X_c_phase2")
         y_corrected = check_targets(y_corrected, X_c_phase2.shape[0], name="y_corrected")
-        if self.dnn.network_ is None:
+        if not self.phase1_fitted_:
             raise ValueError("fit_phase2 called before fit_phase1")
-        predicted = self.dnn.predict(X_c_phase2)
+        predicted = self._phase1_predict(X_c_phase2)
         self.forests.fit(predicted, X_c_phase2[:, 3], y_corrected - predicted)
         self.phase2_fitted_ = True
         return self
 
     def predict(self, X: np.ndarray) -> np.ndarray:
         """Base positions (N, 3) in metres for inputs X (N, 6: metres, radians)."""
-        if self.dnn.network_ is None:
+        if not self.phase1_fitted_:
             raise ValueError("TwoPhaseCalibrator.predict called before fit_phase1")
         X = check_inputs(X)
-        base = self.dnn.predict(X)
+        base = self._phase1_predict(X)
         if self.phase2_fitted_:
             base = base + self.forests.predict(base, X[:, 3])
         return base
 
+    def _phase1_predict(self, X: np.ndarray) -> np.ndarray:
+        """The Phase I model's base positions (N, 3), m, checked: a user's model may return anything."""
+        predicted = np.asarray(self.dnn.predict(X), dtype=float)
+        return check_targets(predicted, X.shape[0], name=f"{type(self.dnn).__name__}.predict(X)")
+
     def _export(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+        if not isinstance(self.dnn, DNNCalibrator):
+            raise TypeError(
+                f"a model file holds the paper's DNN as Phase I, not a {type(self.dnn).__name__}: save the "
+                "forests alone (model.forests.save(path)) and your Phase I model with its own library"
+            )
         dnn_params, dnn_arrays = self.dnn._export()
         params: dict[str, Any] = {"dnn": dnn_params, "forests": None}
         arrays = {_DNN_PREFIX + name: value for name, value in dnn_arrays.items()}

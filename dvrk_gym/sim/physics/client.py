@@ -10,6 +10,7 @@ import contextlib
 import logging
 import os
 import sys
+import warnings
 from collections.abc import Iterator
 
 import pybullet
@@ -53,10 +54,15 @@ class Physics:
 
     def __init__(self, gui: bool = False, time_step_s: float = DEFAULT_TIME_STEP_S) -> None:
         if gui and not os.environ.get("DISPLAY"):
-            raise RuntimeError(
-                "render_mode='human' opens the PyBullet GUI, which needs a display, and "
-                "DISPLAY is not set; use render_mode='rgb_array' or None on a headless machine"
+            # Gymnasium's env checker makes every advertised render mode, headless too: run
+            # the same physics without a window, and say so, rather than fail.
+            warnings.warn(
+                "render_mode='human' opens the PyBullet GUI, which needs a display, and DISPLAY is not set: "
+                "the simulation runs without a window (use render_mode='rgb_array' for images)",
+                RuntimeWarning,
+                stacklevel=2,
             )
+            gui = False
         mode = pybullet.GUI if gui else pybullet.DIRECT
         with _quiet_stdout():  # the server prints "argv[0]=" on every connection
             self._client: bullet_client.BulletClient | None = bullet_client.BulletClient(connection_mode=mode)

@@ -18,6 +18,7 @@ from dvrk_gym.sim.robot import kinematics as kin
 from dvrk_gym.sim.robot.bias import BIAS_PRESETS
 from dvrk_gym.sim.robot.bias_statistics import WORKSPACE_X_M, WORKSPACE_Y_M, rigid_fit_residuals
 from dvrk_gym.sim.robot.cables import CableModel
+from dvrk_gym.utils.atomic import atomic_savefig
 
 GRID_SHAPE = (7, 5)
 """Points along base x and y: the paper's 35 circles."""
@@ -102,6 +103,4 @@ def plot_field(model: CableModel, path: Path, field: str = "rigid") -> Path:
         f"Cable model '{model_name(model)}', bias seed {model.bias_seed}: tip error {label} "
         "(arrows: its x-y part, 1:1 in mm; paper's pitch and roll for each yaw; noiseless)"
     )
-    path = Path(path)
-    figure.savefig(path, dpi=110)
-    return path
+    return atomic_savefig(figure, path, dpi=110)

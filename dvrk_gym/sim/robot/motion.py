@@ -16,6 +16,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
 
 from dvrk_gym import paper
+from dvrk_gym.utils.checks import check_float_fields
 
 
 @dataclass(frozen=True)
@@ -37,12 +38,14 @@ class MotionLimits:
     settle_time_s: float = 0.05
 
     def __post_init__(self) -> None:
-        for name in ("max_speed_m_s", "max_accel_m_s2", "max_angular_speed_rad_s", "max_angular_accel_rad_s2"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value > 0):
-                raise ValueError(f"MotionLimits.{name} must be finite and > 0, got {value}")
-        if not (math.isfinite(self.settle_time_s) and self.settle_time_s >= 0):
-            raise ValueError(f"MotionLimits.settle_time_s must be finite and >= 0, got {self.settle_time_s}")
+        bounds = {
+            "max_speed_m_s": (0.0, 1.0, True),
+            "max_accel_m_s2": (0.0, 100.0, True),
+            "max_angular_speed_rad_s": (0.0, 100.0, True),
+            "max_angular_accel_rad_s2": (0.0, 10_000.0, True),
+            "settle_time_s": (0.0, 10.0, False),
+        }
+        check_float_fields("MotionLimits", self, bounds)
 
 
 def trapezoid_timing(distance: float, max_speed: float, max_accel: float) -> tuple[float, float]:

@@ -54,6 +54,7 @@ from dvrk_gym.sim.robot.body import PSMBody
 from dvrk_gym.sim.table import holding
 from dvrk_gym.sim.table.fragments import Fragment
 from dvrk_gym.sim.table.holding import JAW_LINKS, Hold, Touch
+from dvrk_gym.utils.checks import check_float_fields, check_int_fields
 
 GRASP_TIP_CLEARANCE_M = 0.0007
 """Where to stop the closed jaw tip above the paper before closing, m. With the paper's
@@ -99,12 +100,18 @@ class GripperConfig:
     max_free_speed_m_s: float = 0.2
 
     def __post_init__(self) -> None:
-        for name in ("grip_force_n", "jaw_speed_rad_s", "stop_depth_m", "pierce_tear_m", "max_free_speed_m_s"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value > 0):
-                raise ValueError(f"GripperConfig.{name} must be finite and > 0, got {value}")
-        if self.grasp_steps < 1:
-            raise ValueError(f"GripperConfig.grasp_steps must be >= 1, got {self.grasp_steps}")
+        bounds = {
+            "grip_force_n": (0.0, 100.0, True),
+            "jaw_speed_rad_s": (0.0, 100.0, True),
+            "stop_depth_m": (0.0, 0.01, True),
+            "jaw_friction": (0.0, 10.0, False),
+            "pierce_tip_zone_m": (0.0, 0.01, False),
+            "pierce_max_angle_rad": (0.0, math.pi / 2, False),
+            "pierce_tear_m": (0.0, 0.01, True),
+            "max_free_speed_m_s": (0.0, 100.0, True),
+        }
+        check_float_fields("GripperConfig", self, bounds)
+        check_int_fields("GripperConfig", self, {"grasp_steps": (1, 10_000)})
 
 
 class Gripper:

@@ -1,0 +1,163 @@
+"""The grid of a sweep: instruments x calibrators x seeds, and the settings every cell shares.
+
+A cell is (instrument, calibrator, seed). One calibration run on an instrument with a seed
+makes all three of the paper's calibrators, so the unit of work is (instrument, seed):
+:class:`Unit`, which fills one row per calibrator.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import operator
+from dataclasses import dataclass
+from typing import Any
+
+from dvrk_gym.calibration.pipeline import CALIBRATOR_FILES, PipelineConfig
+from dvrk_gym.sim.robot.bias import resolve_bias
+
+CALIBRATORS: tuple[str, ...] = tuple(CALIBRATOR_FILES)
+"""The calibrators a sweep knows, by their command-line names: ``rbt``, ``dnn``, ``dnn+rf``."""
+METHOD_NAMES = {"rbt": "RBT", "dnn": "DNN", "dnn+rf": "DNN+RF"}
+"""Each calibrator's name in the calibration table (and in :mod:`dvrk_gym.paper`)."""
+
+
+@dataclass(frozen=True)
+class Unit:
+    """One calibration run of a sweep: an instrument and a seed.
+
+    Attributes:
+        bias_seed: which instrument (the draw of its cable bias).
+        seed: seeds Phase I, the DNN, Phase II, the forests and the benchmark.
+    """
+
+    bias_seed: int
+    seed: int
+
+    @property
+    def name(self) -> str:
+        """The unit's name, also its result file's stem: ``bias3-seed0``."""
+        return f"bias{self.bias_seed}-seed{self.seed}"
+
+
+@dataclass(frozen=True)
+class SweepSettings:
+    """What a sweep runs.
+
+    Attributes:
+        bias_seeds: the instruments, by bias seed (non-negative, no repeats).
+        calibrators: the calibrators whose rows the table holds, of :data:`CALIBRATORS`.
+            Every unit makes and benchmarks all three (one pipeline run makes them all),
+            so choosing fewer changes the table, not the work.
+        seeds: the run seeds (non-negative, no repeats).
+        pipeline: the budget and world every unit shares (Phase I trajectories and poses,
+            DNN epochs, bias preset, camera resolution); its ``bias_seed`` and ``seed`` are
+            replaced by each unit's.
+    """
+
+    bias_seeds: tuple[int, ...] = (0, 1, 2, 3, 4)
+    calibrators: tuple[str, ...] = CALIBRATORS
+    seeds: tuple[int, ...] = (0,)
+    pipeline: PipelineConfig = PipelineConfig()
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "calibrators", tuple(self.calibrators))
+        for field in ("bias_seeds", "seeds"):
+            object.__setattr__(self, field, _as_ints(getattr(self, field), field))
+        _check_seeds(self.bias_seeds, "bias_seeds")
+        _check_seeds(self.seeds, "seeds")
+        if not self.calibrators:
+            raise ValueError(f"calibrators is empty; expected some of {list(CALIBRATORS)}")
+        unknown = [name for name in self.calibrators if name not in CALIBRATORS]
+        if unknown:
+            raise ValueError(f"unknown calibrators {unknown}; expected some of {list(CALIBRATORS)}")
+        _check_unique(self.calibrators, "calibrators")
+        resolve_bias(self.pipeline.bias)  # an unknown preset fails here, not in every unit
+        budget = {"n_trajectories": self.pipeline.n_trajectories, "steps_per_trajectory": self.pipeline.steps_per_trajectory}
+        for name, value in {**budget, "dnn_epochs": self.pipeline.dnn_epochs}.items():
+            if value < 1:
+                raise ValueError(f"pipeline.{name} is {value}; expected at least 1")
+        if len(self.pipeline.camera_resolution) != 2 or min(self.pipeline.camera_resolution) < 1:
+            raise ValueError(f"pipeline.camera_resolution is {self.pipeline.camera_resolution}; expected (width, height) in pixels, >= 1")
+
+    def units(self) -> list[Unit]:
+        """The units, instruments first then seeds, in the order given."""
+        return [Unit(bias_seed=bias_seed, seed=seed) for bias_seed in self.bias_seeds for seed in self.seeds]
+
+    def unit_config(self, unit: Unit) -> PipelineConfig:
+        """The calibration pipeline's settings for one unit."""
+        return dataclasses.replace(self.pipeline, bias_seed=unit.bias_seed, seed=unit.seed)
+
+    def stamp(self) -> dict[str, Any]:
+        """What a unit's numbers depend on besides its instrument and seed: the settings an
+        output folder is stamped with. The grid is not in it, so a sweep can grow (more
+        instruments, seeds or calibrators) in the same folder and reuse its finished units."""
+        shared = dataclasses.asdict(self.pipeline)
+        del shared["bias_seed"], shared["seed"]
+        return {"pipeline": shared}
+
+
+def _check_unique(values: tuple[Any, ...], name: str) -> None:
+    repeated = sorted({value for value in values if values.count(value) > 1}, key=str)
+    if repeated:
+        raise ValueError(f"{name} repeats {repeated}; give each once")
+
+
+def _as_ints(values: Any, name: str) -> tuple[int, ...]:
+    """Integers (numpy's too) as a tuple of ``int``."""
+    values = list(values)
+    try:
+        if any(isinstance(value, bool) for value in values):
+            raise TypeError(name)
+        return tuple(operator.index(value) for value in values)
+    except TypeError:
+        raise ValueError(f"{name} is {values!r}; expected non-negative integers") from None
+
+
+def _check_seeds(values: tuple[int, ...], name: str) -> None:
+    if not values:
+        raise ValueError(f"{name} is empty; expected at least one non-negative integer")
+    bad = [value for value in values if value < 0]
+    if bad:
+        raise ValueError(f"{name} has {bad}; expected non-negative integers")
+    _check_unique(values, name)
+
+
+def parse_int_list(text: str, option: str) -> tuple[int, ...]:
+    """Integers from a list of numbers and inclusive ranges: ``"0-4"``, ``"0,3,7-9"``.
+
+    Args:
+        text: the option's value.
+        option: the option's name, for the error message.
+
+    Raises:
+        ValueError: not such a list, an empty range (``"4-0"``) or a repeated number.
+    """
+    values: list[int] = []
+    for part in text.split(","):
+        low, dash, high = part.strip().partition("-")
+        try:
+            first = int(low)
+            last = int(high) if dash else first
+        except ValueError:
+            raise ValueError(f"{option} {text!r}: {part.strip()!r} is not a number or a range; expected e.g. '0-4' or '0,3,7-9'") from None
+        if last < first:
+            raise ValueError(f"{option} {text!r}: the range {part.strip()!r} is empty; write it low-high, e.g. '{last}-{first}'")
+        values.extend(range(first, last + 1))
+    _check_unique(tuple(values), option)
+    return tuple(values)
+
+
+def parse_calibrators(text: str) -> tuple[str, ...]:
+    """Calibrator names from a comma-separated list (``"rbt,dnn,dnn+rf"``), checked.
+
+    Raises:
+        ValueError: an empty list, an unknown name or a repeated one.
+    """
+    names = tuple(part.strip().lower() for part in text.split(",") if part.strip())
+    if not names:
+        raise ValueError(f"--calibrators {text!r} names none; expected some of {','.join(CALIBRATORS)}")
+    unknown = [name for name in names if name not in CALIBRATORS]
+    if unknown:
+        raise ValueError(f"--calibrators: unknown {unknown}; expected some of {','.join(CALIBRATORS)}")
+    _check_unique(names, "--calibrators")
+    return names

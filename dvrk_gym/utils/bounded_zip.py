@@ -1,0 +1,100 @@
+"""Zip archives from elsewhere, read within fixed size limits.
+
+A zip's central directory declares each member's size, and a member of a few kilobytes can
+inflate to gigabytes. :func:`open_archive` refuses an archive whose members, or whose
+declared sizes, exceed :class:`ArchiveLimits` before anything is inflated, and
+:func:`read_member` reads a member in chunks and stops as soon as it holds more than it
+declared or than the limit allows. Model files (``.npz``) and agent files
+(stable-baselines3's ``.zip``) are read through here.
+"""
+
+from __future__ import annotations
+
+import os
+import zipfile
+from dataclasses import dataclass
+from pathlib import Path
+
+MIB = 2**20
+_CHUNK_BYTES = MIB
+
+
+class ArchiveLimitError(ValueError):
+    """An archive is not a zip, or is larger than the limits allow (the message names the file and the limit)."""
+
+
+@dataclass(frozen=True)
+class ArchiveLimits:
+    """What an archive may hold.
+
+    Attributes:
+        max_file_bytes: the archive file's size on disk, bytes.
+        max_members: how many members it may list.
+        max_member_bytes: one member's size once inflated, bytes.
+        max_total_bytes: all members' sizes once inflated, together, bytes.
+    """
+
+    max_file_bytes: int = 512 * MIB
+    max_members: int = 10_000
+    max_member_bytes: int = 256 * MIB
+    max_total_bytes: int = 512 * MIB
+
+
+def open_archive(path: str | os.PathLike, limits: ArchiveLimits = ArchiveLimits()) -> zipfile.ZipFile:
+    """Open a zip archive whose declared sizes are all within ``limits`` (close it after use).
+
+    Raises:
+        FileNotFoundError: no such file.
+        ArchiveLimitError: not a zip archive, or larger than the limits.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: no such file")
+    size = path.stat().st_size
+    if size > limits.max_file_bytes:
+        raise ArchiveLimitError(f"{path}: {size:,} bytes; at most {limits.max_file_bytes:,} are read")
+    try:
+        archive = zipfile.ZipFile(path)
+    except (zipfile.BadZipFile, OSError, ValueError, EOFError) as error:
+        raise ArchiveLimitError(f"{path}: not a readable zip archive ({error})") from None
+    try:
+        members = archive.infolist()
+        if len(members) > limits.max_members:
+            raise ArchiveLimitError(f"{path}: {len(members):,} members; at most {limits.max_members:,} are read")
+        for member in members:
+            if member.file_size > limits.max_member_bytes:
+                raise ArchiveLimitError(
+                    f"{path}: member {member.filename!r} inflates to {member.file_size:,} bytes "
+                    f"({member.compress_size:,} compressed); at most {limits.max_member_bytes:,} are read"
+                )
+        total = sum(member.file_size for member in members)
+        if total > limits.max_total_bytes:
+            raise ArchiveLimitError(f"{path}: members inflate to {total:,} bytes together; at most {limits.max_total_bytes:,} are read")
+    except BaseException:
+        archive.close()
+        raise
+    return archive
+
+
+def read_member(archive: zipfile.ZipFile, name: str, limits: ArchiveLimits = ArchiveLimits()) -> bytes:
+    """The bytes of member ``name``, read in chunks, refused once they exceed the declared size or the limit.
+
+    Raises:
+        KeyError: no such member.
+        ArchiveLimitError: the member inflates beyond its declared size or the limit, or is corrupt.
+    """
+    info = archive.getinfo(name)
+    allowed = min(info.file_size, limits.max_member_bytes)
+    chunks, total = [], 0
+    try:
+        with archive.open(info) as stream:
+            while chunk := stream.read(min(_CHUNK_BYTES, allowed + 1 - total)):
+                total += len(chunk)
+                if total > allowed:
+                    raise ArchiveLimitError(f"{archive.filename}: member {name!r} inflates beyond its declared {info.file_size:,} bytes")
+                chunks.append(chunk)
+    except (zipfile.BadZipFile, OSError, EOFError, NotImplementedError, ValueError) as error:
+        if isinstance(error, ArchiveLimitError):
+            raise
+        raise ArchiveLimitError(f"{archive.filename}: member {name!r} is corrupt ({type(error).__name__}: {error})") from None
+    return b"".join(chunks)

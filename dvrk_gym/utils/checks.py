@@ -1,0 +1,109 @@
+"""Checks of settings by type and range, each error naming the setting and what is allowed.
+
+No silent coercion: ``"8"`` is not an int, ``True`` is not a number, ``2.0`` is not a
+count, ``nan`` and complex numbers are refused. numpy's scalar types count as the Python
+types they stand for (``np.int64(3)`` is an int, ``np.float32(0.1)`` a float).
+"""
+
+from __future__ import annotations
+
+import math
+import numbers
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+
+
+def _shown(value: Any) -> str:
+    return f"{value!r} ({type(value).__name__})"
+
+
+def check_int(name: str, value: Any, low: int | None = None, high: int | None = None) -> int:
+    """``value`` as an int, if it is an integer (not a bool) in ``[low, high]``.
+
+    Raises:
+        ValueError: the message names ``name`` and the allowed range.
+    """
+    allowed = f"an int in [{'-inf' if low is None else low}, {'inf' if high is None else high}]"
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral):
+        raise ValueError(f"{name} must be {allowed}, got {_shown(value)}")
+    number = int(value)
+    if (low is not None and number < low) or (high is not None and number > high):
+        raise ValueError(f"{name} must be {allowed}, got {number}")
+    return number
+
+
+def check_float(
+    name: str, value: Any, low: float | None = None, high: float | None = None, low_open: bool = False, unit: str = ""
+) -> float:
+    """``value`` as a float, if it is a finite real number (not a bool) in ``[low, high]``
+    (``(low, high]`` with ``low_open``).
+
+    Args:
+        unit: shown after the range in the error ("m", "s"...).
+
+    Raises:
+        ValueError: the message names ``name`` and the allowed range.
+    """
+    bracket = "(" if low_open else "["
+    allowed = f"a finite number in {bracket}{'-inf' if low is None else f'{low:g}'}, {'inf' if high is None else f'{high:g}'}]"
+    allowed += f" {unit}" if unit else ""
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        raise ValueError(f"{name} must be {allowed}, got {_shown(value)}")
+    number = float(value)
+    too_low = low is not None and (number <= low if low_open else number < low)
+    if not math.isfinite(number) or too_low or (high is not None and number > high):
+        raise ValueError(f"{name} must be {allowed}, got {number}")
+    return number
+
+
+def check_bool(name: str, value: Any) -> bool:
+    """``value`` if it is a bool (numpy's too), else ValueError naming ``name``."""
+    if not isinstance(value, (bool, np.bool_)):
+        raise ValueError(f"{name} must be True or False, got {_shown(value)}")
+    return bool(value)
+
+
+def check_choice(name: str, value: Any, choices: Sequence[Any]) -> Any:
+    """``value`` if it is one of ``choices`` (compared by type and value), else ValueError listing them."""
+    if not any(type(value) is type(choice) and value == choice for choice in choices):
+        raise ValueError(f"{name} must be one of {list(choices)}, got {_shown(value)}")
+    return value
+
+
+def check_resolution(name: str, value: Any, low: tuple[int, int] = (16, 16), high: tuple[int, int] = (7680, 4320)) -> tuple[int, int]:
+    """An image size ``(width, height)`` in pixels: two ints within ``low`` and ``high``."""
+    allowed = f"(width, height): two ints from {low[0]}x{low[1]} to {high[0]}x{high[1]} pixels"
+    if isinstance(value, (str, bytes)) or not isinstance(value, Sequence) or len(value) != 2:
+        raise ValueError(f"{name} must be {allowed}, got {_shown(value)}")
+    try:
+        width = check_int(f"{name}[0] (width)", value[0], low[0], high[0])
+        height = check_int(f"{name}[1] (height)", value[1], low[1], high[1])
+    except ValueError as error:
+        raise ValueError(f"{error}; {name} must be {allowed}") from None
+    return width, height
+
+
+Bounds = tuple[float | None, float | None, bool]
+"""A float field's (low, high, low_open) for :func:`check_float_fields`."""
+
+
+def check_float_fields(owner: str, config: Any, bounds: Mapping[str, Bounds], units: Mapping[str, str] | None = None) -> None:
+    """Check each named float field of a frozen dataclass against its bounds and store it as a float.
+
+    Args:
+        owner: the class's name, shown in errors (``"GripperConfig.jaw_friction must be ..."``).
+        config: the dataclass instance (its ``__post_init__`` calls this).
+        bounds: ``{field: (low, high, low_open)}``; None for an open end.
+        units: ``{field: unit}`` shown after the range.
+    """
+    for name, (low, high, low_open) in bounds.items():
+        value = check_float(f"{owner}.{name}", getattr(config, name), low, high, low_open, (units or {}).get(name, ""))
+        object.__setattr__(config, name, value)
+
+
+def check_int_fields(owner: str, config: Any, bounds: Mapping[str, tuple[int | None, int | None]]) -> None:
+    """Check each named int field of a frozen dataclass against ``{field: (low, high)}`` and store it as an int."""
+    for name, (low, high) in bounds.items():
+        object.__setattr__(config, name, check_int(f"{owner}.{name}", getattr(config, name), low, high))

@@ -1,0 +1,232 @@
+"""Every constructor argument, option and action checked by type and range; no silent coercion.
+
+Hypothesis draws wrong types (text, bools, complex numbers, None, lists), non-finite and
+out-of-range numbers for each field of each configuration; each must be refused with a
+ValueError that names the field, and each value in range accepted as it was given.
+"""
+
+import copy
+import math
+import pickle
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from dvrk_gym.envs.base import check_action
+from dvrk_gym.envs.debridement_config import DebridementConfig
+from dvrk_gym.envs.exploration import ExplorationConfig
+from dvrk_gym.envs.grid_touch import GridTouchConfig
+from dvrk_gym.envs.picks import PickTiming
+from dvrk_gym.sim.robot.motion import MotionLimits
+from dvrk_gym.sim.table.grasp import GripperConfig
+from dvrk_gym.sim.world import WorldConfig
+
+FUZZ = settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+
+NOT_A_NUMBER = st.one_of(
+    st.text(max_size=5),
+    st.booleans(),
+    st.complex_numbers(allow_nan=False, allow_infinity=False).filter(lambda z: z.imag != 0),
+    st.none(),
+    st.lists(st.integers(), max_size=3),
+    st.sampled_from([float("nan"), float("inf"), -float("inf"), "8", "0.1"]),
+)
+NOT_AN_INT = st.one_of(NOT_A_NUMBER, st.floats(allow_nan=False, allow_infinity=False))
+
+OPEN_0 = -0.0
+"""Marks a range open at 0: (0, high]."""
+# (config class, field, low, high): float fields; a value outside [low, high] must be refused.
+FLOAT_FIELDS = [
+    (GridTouchConfig, "distance_threshold_m", 0.0, 0.05),
+    (GridTouchConfig, "approach_height_m", 0.0, 0.05),
+    (GridTouchConfig, "correction_noise_m", 0.0, 0.01),
+    (GridTouchConfig, "pixel_noise_px", 0.0, 50.0),
+    (DebridementConfig, "control_period_s", OPEN_0, 10.0),
+    (DebridementConfig, "max_delta_m", OPEN_0, 0.05),
+    (DebridementConfig, "max_delta_jaw_rad", OPEN_0, math.pi),
+    (DebridementConfig, "delta_yaw_rad", -math.pi / 2, math.pi / 2),
+    (GripperConfig, "grip_force_n", OPEN_0, 100.0),
+    (GripperConfig, "jaw_friction", 0.0, 10.0),
+    (GripperConfig, "pierce_max_angle_rad", 0.0, math.pi / 2),
+    (PickTiming, "grip_depth_m", 0.0, 0.1),
+    (PickTiming, "drop_dwell_s", 0.0, 60.0),
+    (MotionLimits, "max_speed_m_s", OPEN_0, 1.0),
+    (MotionLimits, "settle_time_s", 0.0, 10.0),
+    (WorldConfig, "pixel_noise_px", 0.0, 50.0),
+]
+INT_FIELDS = [
+    (DebridementConfig, "max_picks", 1, 64),
+    (DebridementConfig, "max_steps", 1, 1_000_000),
+    (ExplorationConfig, "max_steps", 1, 100_000),
+    (GridTouchConfig, "bias_seed", 0, 2**31 - 1),
+    (GripperConfig, "grasp_steps", 1, 10_000),
+    (WorldConfig, "bias_seed", 0, 2**31 - 1),
+]
+
+
+def _field_ids(fields):
+    return [f"{klass.__name__}.{name}" for klass, name, *_ in fields]
+
+
+@pytest.mark.parametrize(("klass", "name", "low", "high"), FLOAT_FIELDS, ids=_field_ids(FLOAT_FIELDS))
+@FUZZ
+@given(data=st.data())
+def test_float_fields_refuse_wrong_types_and_values_out_of_range(klass, name, low, high, data):
+    open_low = math.copysign(1.0, low) < 0 and low == 0.0
+    too_low = st.floats(max_value=0.0) if open_low else st.floats(max_value=low, exclude_max=True)
+    bad = data.draw(st.one_of(NOT_A_NUMBER, too_low, st.floats(min_value=high, exclude_min=True)))
+    with pytest.raises(ValueError, match=name) as refused:
+        klass(**{name: bad})
+    assert f"{'(0' if open_low else f'[{low:g}'}, {high:g}]" in str(refused.value)  # the message gives the range
+    good = data.draw(st.floats(min_value=0.0, max_value=high, exclude_min=True) if open_low else st.floats(min_value=low, max_value=high))
+    assert getattr(klass(**{name: good}), name) == good
+
+
+@pytest.mark.parametrize(("klass", "name", "low", "high"), INT_FIELDS, ids=_field_ids(INT_FIELDS))
+@FUZZ
+@given(data=st.data())
+def test_int_fields_refuse_wrong_types_and_values_out_of_range(klass, name, low, high, data):
+    bad = data.draw(st.one_of(NOT_AN_INT, st.integers(max_value=low - 1), st.integers(min_value=high + 1)))
+    with pytest.raises(ValueError, match=rf"{name} must be an int in \[{low}, {high}\]"):
+        klass(**{name: bad})
+    good = data.draw(st.integers(min_value=low, max_value=high))
+    value = getattr(klass(**{name: good}), name)
+    assert value == good and type(value) is int
+
+
+@pytest.mark.parametrize(
+    ("klass", "name", "bad"),
+    [
+        (GridTouchConfig, "reward_type", "shaped"),
+        (GridTouchConfig, "reward_type", b"dense"),
+        (DebridementConfig, "fragment", "almond"),
+        (DebridementConfig, "action_mode", None),
+        (DebridementConfig, "remove_failed", 1),
+        (DebridementConfig, "remove_failed", "yes"),
+        (GridTouchConfig, "bias", "rusty"),
+        (GridTouchConfig, "bias", 0.5),
+        (GridTouchConfig, "camera_resolution", (640.0, 360.0)),
+        (GridTouchConfig, "camera_resolution", (8, 8)),
+        (GridTouchConfig, "camera_resolution", "640x360"),
+        (GridTouchConfig, "camera_resolution", (640, 360, 3)),
+        (WorldConfig, "gui", "no"),
+        (WorldConfig, "camera_pose", np.eye(3)),
+        (WorldConfig, "camera_pose", np.full((4, 4), np.nan)),
+        (DebridementConfig, "timing", {"travel": {"max_speed_m_s": -1.0}}),
+        (DebridementConfig, "gripper", {"jaw_friction": float("nan")}),
+    ],
+)
+def test_choices_flags_sizes_and_nested_settings_are_checked(klass, name, bad):
+    nested = {"timing": "MotionLimits.max_speed_m_s", "gripper": "GripperConfig.jaw_friction"}
+    with pytest.raises(ValueError, match=nested.get(name, name)):
+        klass(**{name: bad})
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        ({"max_picks": "8"}, r"max_picks must be an int in \[1, 64\], got '8' \(str\)"),
+        ({"max_picks": True}, r"max_picks must be an int in \[1, 64\], got True \(bool\)"),
+        ({"max_picks": 8.0}, r"max_picks must be an int"),
+        ({"control_period_s": 1e9}, r"control_period_s must be a finite number in \(0, 10\] s, got 1000000000.0"),
+        ({"gripper": {"jaw_friction": float("nan")}}, r"jaw_friction must be a finite number in \[0, 10\], got nan"),
+    ],
+)
+def test_the_inputs_the_issue_found_accepted_are_refused_by_the_env(make_env, kwargs, message):
+    with pytest.raises(ValueError, match=message):
+        make_env("dvrk_gym/Debridement-v0", **kwargs)
+
+
+# ---------------------------------------------------------------- actions
+BOX = gym.spaces.Box(np.array([0.0, 0.0, -0.175, -np.pi / 2]), np.array([0.08, 0.085, -0.13, np.pi / 2]), dtype=np.float64)
+NAMES = ("bx", "by", "bz", "yaw")
+
+
+@FUZZ
+@given(st.lists(st.complex_numbers(allow_nan=False, allow_infinity=False, max_magnitude=1.0), min_size=4, max_size=4))
+def test_complex_actions_are_refused_even_with_a_zero_imaginary_part(values):
+    with pytest.raises(ValueError, match="real numbers"):
+        check_action(np.array(values, dtype=complex), BOX, NAMES)
+
+
+@FUZZ
+@given(st.lists(st.one_of(st.booleans(), st.text(max_size=3), st.none()), min_size=4, max_size=4))
+def test_actions_of_bools_text_or_none_are_refused(values):
+    with pytest.raises(ValueError, match="action"):
+        check_action(values, BOX, NAMES)
+
+
+@FUZZ
+@given(st.integers(0, 3), st.sampled_from([float("nan"), float("inf"), -float("inf")]))
+def test_a_non_finite_element_is_named(index, value):
+    action = np.array([0.04, 0.04, -0.15, 0.0])
+    action[index] = value
+    with pytest.raises(ValueError, match=rf"action\[{index}\] \({NAMES[index]}\) is {value}"):
+        check_action(action, BOX, NAMES)
+
+
+@FUZZ
+@given(st.lists(st.floats(-1.0, 1.0), min_size=0, max_size=7).filter(lambda v: len(v) != 4))
+def test_a_wrong_shape_is_refused(values):
+    with pytest.raises(ValueError, match=r"shape \(4,\)"):
+        check_action(values, BOX, NAMES)
+
+
+@FUZZ
+@given(st.lists(st.floats(-10.0, 10.0), min_size=4, max_size=4), st.sampled_from([np.float32, np.float64, np.int64]))
+def test_finite_real_actions_are_clipped_into_the_space(values, dtype):
+    clipped, clamped = check_action(np.array(values).astype(dtype), BOX, NAMES)
+    assert np.all(clipped >= BOX.low) and np.all(clipped <= BOX.high)
+    assert np.array_equal(clamped, clipped != np.array(values).astype(dtype).astype(np.float64))
+
+
+def test_an_env_refuses_a_complex_action_and_keeps_its_episode(make_env):
+    env = make_env("dvrk_gym/GridTouch-v0", bias="none")
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match="real numbers"):
+        env.step(np.array([0.04, 0.04, -0.15, 0.0]) + 1e-3j)
+    _, _, terminated, _, info = env.step(np.array([0.04, 0.04, -0.15, 0.0]))  # the episode goes on
+    assert terminated and "is_success" in info
+
+
+@pytest.mark.parametrize(
+    ("options", "message"),
+    [
+        ({"circle": 35}, "circle"),
+        ({"circle": -1}, "circle"),
+        ({"circle": "3"}, "circle"),
+        ({"circle": 3.0}, "circle"),
+        ({"circle": True}, "circle"),
+        ({"yaw": "0.5"}, "yaw"),
+        ({"yaw": True}, "yaw"),
+        ({"yaw": 2.0}, "yaw"),
+        ({"yaw": float("nan")}, "yaw"),
+        ({"yaw": 0.5j}, "yaw"),
+        ({"speed": 1.0}, "unknown reset option"),
+    ],
+)
+def test_grid_touch_reset_options_are_checked(make_env, options, message):
+    env = make_env("dvrk_gym/GridTouch-v0", bias="none")
+    with pytest.raises(ValueError, match=message):
+        env.reset(seed=0, options=options)
+
+
+@pytest.mark.parametrize("corner", [4, -1, True, "0", 1.0])
+def test_exploration_corner_option_is_checked(make_env, corner):
+    env = make_env("dvrk_gym/CalibrationExploration-v0")
+    with pytest.raises(ValueError, match="corner"):
+        env.reset(seed=0, options={"corner": corner})
+
+
+# ---------------------------------------------------------------- copies
+@pytest.mark.parametrize("env_id", ["dvrk_gym/CalibrationExploration-v0", "dvrk_gym/GridTouch-v0", "dvrk_gym/Debridement-v0"])
+@pytest.mark.parametrize(("copier", "word"), [(copy.deepcopy, "deep-copied"), (pickle.dumps, "pickled"), (copy.copy, "copied")])
+def test_envs_refuse_to_be_copied_or_pickled(make_env, env_id, copier, word):
+    env = make_env(env_id, camera_resolution=(160, 90))
+    target = env.unwrapped if copier is copy.copy else env  # a shallow copy of a wrapper shares its env by definition
+    with pytest.raises(TypeError, match=f"cannot be {word}: it owns a PyBullet physics server"):
+        copier(target)
+    env.reset(seed=0)  # the env itself is untouched

@@ -1,0 +1,152 @@
+"""The command line's output problems: one line on stderr, exit status 2, nothing half written.
+
+Each command is checked before it does any work: an ``--out`` naming a file or a folder that
+cannot be written, a ``phase1.npz`` that ``collect`` would overwrite, a ``--calibration``
+folder with no model, a bad profile, a run folder another process owns.
+"""
+
+import os
+import stat
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+from faults import ROOT, environment, files_in, run_cli
+
+from dvrk_gym.cli.main import main
+
+
+@pytest.fixture
+def read_only_folder(tmp_path):
+    """A folder this process cannot write: /sys for root (which ignores permissions), else a mode 0o500 folder."""
+    if os.geteuid() == 0:
+        yield Path("/sys")
+        return
+    folder = tmp_path / "read_only"
+    folder.mkdir()
+    folder.chmod(stat.S_IRUSR | stat.S_IXUSR)
+    yield folder
+    folder.chmod(stat.S_IRWXU)
+
+
+def _fails_in_one_line(capsys, argv, *words):
+    """``dvrk-gym ARGV`` returns 2 and prints one line naming ``words`` on stderr (and no traceback)."""
+    status = main(argv)
+    err = capsys.readouterr().err.strip()
+    assert status == 2, err
+    assert len(err.splitlines()) == 1 and "Traceback" not in err, err
+    for word in words:
+        assert word in err, err
+    return err
+
+
+COMMANDS = {
+    "demo": ["demo", "--circles", "1"],
+    "collect": ["collect", "--trajectories", "1"],
+    "calibrate": ["calibrate", "--trajectories", "1"],
+    "evaluate": ["evaluate", "--trajectories", "1"],
+    "search": ["search", "--quick"],
+    "debride": ["debride", "--calibrate"],
+    "baseline train": ["baseline", "train", "--algo", "sac", "--steps", "10"],
+    "baseline evaluate": ["baseline", "evaluate", "--model", "missing.zip"],
+    "reproduce": ["reproduce", "--quick"],
+}
+
+
+@pytest.mark.parametrize("command", sorted(COMMANDS))
+def test_out_naming_a_file_is_a_one_line_error(capsys, tmp_path, command):
+    target = tmp_path / "results.txt"
+    target.write_text("keep me")
+    start = time.perf_counter()
+    _fails_in_one_line(capsys, [*COMMANDS[command], "--out", str(target)], str(target), "file")
+    assert time.perf_counter() - start < 30.0  # refused before any work
+    assert target.read_text() == "keep me" and files_in(tmp_path) == {"results.txt"}
+
+
+@pytest.mark.parametrize("command", ["demo", "collect", "calibrate", "baseline train", "reproduce"])
+def test_out_in_a_read_only_folder_is_a_one_line_error(capsys, read_only_folder, command):
+    before = files_in(read_only_folder) if read_only_folder != Path("/sys") else None
+    out = read_only_folder if command == "demo" else read_only_folder / "run"
+    _fails_in_one_line(capsys, [*COMMANDS[command], "--out", str(out)], "cannot be written")
+    if before is not None:
+        assert files_in(read_only_folder) == before
+
+
+def test_baseline_train_checks_its_folder_before_training(capsys, read_only_folder):
+    start = time.perf_counter()
+    _fails_in_one_line(capsys, ["baseline", "train", "--algo", "sac", "--steps", "200000", "--out", str(read_only_folder / "x")])
+    assert time.perf_counter() - start < 30.0  # 200,000 steps would take hours
+
+
+def test_collect_refuses_to_overwrite_phase1_without_force(capsys, tmp_path):
+    (tmp_path / "phase1.npz").write_bytes(b"the old data")
+    _fails_in_one_line(capsys, ["collect", "--out", str(tmp_path), "--trajectories", "1"], "phase1.npz exists", "--force")
+    assert (tmp_path / "phase1.npz").read_bytes() == b"the old data"
+
+
+@pytest.mark.parametrize("exists", [False, True], ids=["missing-folder", "folder-without-model"])
+def test_debride_refuses_a_calibration_folder_without_a_model(capsys, tmp_path, exists):
+    calibration = tmp_path / "calibraton"  # misspelt
+    if exists:
+        calibration.mkdir()
+    start = time.perf_counter()
+    word = "has no two_phase.npz" if exists else "does not exist"
+    _fails_in_one_line(capsys, ["debride", "--calibration", str(calibration), "--out", str(tmp_path / "out")], word, "--calibrate")
+    assert time.perf_counter() - start < 30.0 and not (tmp_path / "out").exists()
+    assert files_in(calibration) == set()  # no calibration was started in it
+
+
+@pytest.mark.parametrize(
+    ("profile", "words"),
+    [
+        ('{"name": "tiny", "n_trajectories": ', ("profile", "Expecting value")),
+        ('{"name": "tiny", "trajectories": 2}', ("unknown profile field", "trajectories")),
+        ('{"name": "tiny", "debridement_trials": "3"}', ("debridement_trials must be an int",)),
+        ('{"name": "tiny", "camera_resolution": [10, 10]}', ("camera_resolution",)),
+        ("[1, 2]", ("a profile must be a JSON object",)),
+    ],
+    ids=["cut-json", "unknown-field", "string-count", "tiny-camera", "not-an-object"],
+)
+def test_reproduce_refuses_a_bad_profile(capsys, tmp_path, profile, words):
+    path = tmp_path / "profile.json"
+    path.write_text(profile)
+    _fails_in_one_line(capsys, ["reproduce", "--profile", str(path), "--out", str(tmp_path / "run")], *words)
+    assert not (tmp_path / "run").exists()
+
+
+def test_reproduce_refuses_quick_and_a_profile_together(capsys, tmp_path):
+    (tmp_path / "p.json").write_text('{"name": "x"}')
+    _fails_in_one_line(capsys, ["reproduce", "--quick", "--profile", str(tmp_path / "p.json"), "--out", str(tmp_path / "r")], "not both")
+
+
+def test_reproduce_in_a_folder_another_run_owns_is_an_error_naming_its_pid(capsys, tmp_path):
+    holder = subprocess.Popen(
+        [sys.executable, "-c", "import sys, time\nfrom dvrk_gym.utils.run_folder import RunFolder\nf = RunFolder(sys.argv[1])\n"
+         "print('holding', flush=True)\ntime.sleep(600)\n", str(tmp_path / "run")],
+        stdout=subprocess.PIPE, text=True, env=environment(), cwd=ROOT,
+    )  # fmt: skip
+    try:
+        assert holder.stdout.readline().strip() == "holding"
+        _fails_in_one_line(capsys, ["reproduce", "--quick", "--out", str(tmp_path / "run")], "in use by", f"process {holder.pid}")
+    finally:
+        holder.kill()
+        holder.wait()
+    assert sorted(files_in(tmp_path / "run")) == ["run.lock"]
+
+
+def test_the_console_command_exits_2_with_one_line(tmp_path):
+    """The real entry point in a fresh process: exit status 2, one line, no traceback."""
+    (tmp_path / "out").write_text("a file")
+    result = run_cli("demo", "--out", str(tmp_path / "out"))
+    assert result.returncode == 2
+    lines = result.stderr.strip().splitlines()
+    assert lines[-1].startswith("dvrk-gym demo: error:") and not any("Traceback" in line for line in lines), result.stderr
+
+
+def test_evaluate_refuses_options_that_are_not_a_json_object(capsys, tmp_path):
+    argv = ["evaluate", "--policy", "dvrk_gym.evaluation.episodes:as_policy", "--out", str(tmp_path / "out")]
+    for options in ("{yaw: 0}", "[1]"):
+        _fails_in_one_line(capsys, [*argv, "--options", options], "--options must be a JSON object")
+    assert not (tmp_path / "out").exists()

@@ -1,0 +1,243 @@
+"""Model and agent files from elsewhere: every size bounded before anything is allocated.
+
+A forger can write a valid digest (it is no signature), so each test writes a file whose
+header is consistent and whose sizes are not: the load must refuse it quickly, naming
+what is wrong, and without growing the process.
+"""
+
+import io
+import json
+import time
+import zipfile
+from pathlib import Path
+
+import numpy as np
+import psutil
+import pytest
+
+from dvrk_gym.calibration.models.dnn import DNNCalibrator
+from dvrk_gym.calibration.models.forests import ForestCalibrator
+from dvrk_gym.calibration.models.serialization import ModelFileError, write_model_file
+from dvrk_gym.calibration.phase2 import Phase2Data
+from dvrk_gym.utils.bounded_zip import ArchiveLimitError, ArchiveLimits, open_archive, read_member
+
+GIB = 2**30
+
+
+def _bounded(load, path):
+    """Run ``load(path)``; the error it raised, checked to come fast and without growing the process by 100 MB."""
+    process = psutil.Process()
+    before, start = process.memory_info().rss, time.perf_counter()
+    with pytest.raises((ModelFileError, ValueError)) as raised:
+        load(path)
+    assert time.perf_counter() - start < 20.0
+    assert process.memory_info().rss - before < 100 * 2**20
+    return str(raised.value)
+
+
+@pytest.fixture(scope="module")
+def dnn_file(tmp_path_factory):
+    rng = np.random.default_rng(0)
+    X = np.column_stack([rng.uniform(-0.03, 0.03, (60, 2)), rng.uniform(0.17, 0.2, 60), rng.uniform(-1, 1, (60, 3))])
+    model = DNNCalibrator(hidden_layers=1, units=8, epochs=2, progress=False).fit(X, X[:, :3] + 0.01)
+    path = tmp_path_factory.mktemp("models") / "dnn.npz"
+    model.save(path)
+    return path
+
+
+def _forged(source: Path, target: Path, **params) -> Path:
+    """``source`` rewritten with other params and a valid digest (a careful forger)."""
+    with np.load(source) as archive:
+        raw = {name: archive[name] for name in archive.files}
+    metadata = json.loads(str(raw.pop("__metadata__")))
+    raw.pop("__digest__")
+    metadata["params"].update(params)
+    write_model_file(target, metadata["kind"], metadata["params"], raw)
+    return target
+
+
+@pytest.mark.parametrize(
+    ("params", "message"),
+    [
+        ({"hidden_layers": 3e7}, r"hidden_layers must be an int in \[1, 16\], got 30000000.0"),
+        ({"hidden_layers": 30_000_000}, r"hidden_layers must be an int in \[1, 16\], got 30000000"),
+        ({"units": 10**9}, r"units must be an int in \[1, 4096\]"),
+        ({"hidden_layers": 16, "units": 4096}, "parameters; at most"),
+        ({"hidden_layers": "3"}, "hidden_layers must be an int"),
+        ({"hidden_layers": True}, "hidden_layers must be an int"),
+        ({"epochs": -1}, "epochs must be"),
+        ({"activation": "__import__('os')"}, "activation must be one of"),
+    ],
+)
+def test_a_dnn_header_out_of_bounds_is_refused_before_anything_is_built(dnn_file, tmp_path, params, message):
+    text = _bounded(DNNCalibrator.load, _forged(dnn_file, tmp_path / "forged.npz", **params))
+    assert "forged.npz" in text
+    assert pytest.importorskip("re").search(message, text), text
+
+
+def test_a_dnn_header_that_does_not_fit_its_arrays_is_refused(dnn_file, tmp_path):
+    text = _bounded(DNNCalibrator.load, _forged(dnn_file, tmp_path / "forged.npz", units=9))
+    assert "layer0_weight" in text and "expected float32 (9, 9)" in text
+
+
+def test_a_forest_header_with_a_billion_trees_is_refused(tmp_path):
+    path = tmp_path / "forest.npz"
+    rng = np.random.default_rng(1)
+    X = np.column_stack([rng.uniform(-0.03, 0.03, (40, 3)), rng.uniform(-1, 1, (40, 3))])
+    ForestCalibrator(trees=2).fit(X, X[:, :3]).save(path)
+    text = _bounded(ForestCalibrator.load, _forged(path, tmp_path / "forged.npz", trees=10**9))
+    assert "trees must be an int in [1, 10000]" in text
+
+
+def _zip_of(path: Path, members: dict[str, bytes], compression=zipfile.ZIP_STORED) -> Path:
+    with zipfile.ZipFile(path, "w", compression=compression) as archive:
+        for name, data in members.items():
+            archive.writestr(name, data)
+    return path
+
+
+def _deflated_zeros(path: Path, member: str, total_bytes: int) -> Path:
+    """A zip whose one member is ``total_bytes`` zeros, deflated (a few MB per GB on disk)."""
+    zeros = bytes(64 * 2**20)
+    with (
+        zipfile.ZipFile(path, "w", compression=zipfile.ZIP_DEFLATED, compresslevel=1) as archive,
+        archive.open(member, "w", force_zip64=True) as stream,
+    ):
+        for _ in range(total_bytes // len(zeros)):
+            stream.write(zeros)
+    return path
+
+
+def _npy_bytes(array: np.ndarray) -> bytes:
+    stream = io.BytesIO()
+    np.save(stream, array, allow_pickle=False)
+    return stream.getvalue()
+
+
+def test_a_member_that_inflates_from_1_mb_to_1_gb_is_refused_unread(tmp_path):
+    path = _deflated_zeros(tmp_path / "bomb.npz", "layer0_weight.npy", GIB)
+    assert path.stat().st_size < 8 * 2**20  # a few MB on disk
+    text = _bounded(DNNCalibrator.load, path)
+    assert "inflates to 1,073,741,824 bytes" in text and "at most 268,435,456" in text
+
+
+def test_an_npy_header_larger_than_its_bytes_is_refused(tmp_path):
+    data = bytearray(_npy_bytes(np.zeros(4)))
+    header = data.replace(b"(4,)", b"(1000000000,)", 1)  # claims 8 GB, holds 32 bytes
+    path = _zip_of(tmp_path / "lying.npz", {"x_mean.npy": bytes(header)})
+    text = _bounded(DNNCalibrator.load, path)
+    assert "declares (1000000000,) float64 (8,000,000,000 bytes) but holds" in text
+
+
+def test_an_object_array_is_never_unpickled(tmp_path):
+    stream = io.BytesIO()
+    np.save(stream, np.array([{"a": 1}], dtype=object), allow_pickle=True)
+    path = _zip_of(tmp_path / "pickle.npz", {"x_mean.npy": stream.getvalue()})
+    text = _bounded(DNNCalibrator.load, path)
+    assert "never pickles" in text
+
+
+@pytest.mark.parametrize(
+    ("members", "message"),
+    [
+        ({"notes.txt": b"hello"}, "is not an .npy array"),
+        ({"x.npy": b"\x93NUMPY garbage"}, "no valid npy header"),
+        ({f"a{i}.npy": _npy_bytes(np.zeros(1)) for i in range(10_001)}, "10,001 members"),
+    ],
+    ids=["not-npy", "bad-header", "too-many-members"],
+)
+def test_archives_that_are_not_model_files_are_refused(tmp_path, members, message):
+    text = _bounded(DNNCalibrator.load, _zip_of(tmp_path / "odd.npz", members))
+    assert message in text
+
+
+def test_truncated_and_non_zip_files_are_refused(dnn_file, tmp_path):
+    cut = tmp_path / "cut.npz"
+    cut.write_bytes(dnn_file.read_bytes()[: dnn_file.stat().st_size // 2])
+    assert "not a readable zip archive" in _bounded(DNNCalibrator.load, cut)
+    text_file = tmp_path / "text.npz"
+    text_file.write_text("not a model")
+    assert "not a readable zip archive" in _bounded(DNNCalibrator.load, text_file)
+
+
+def test_deeply_nested_metadata_is_refused(dnn_file, tmp_path):
+    nested = "[" * 100_000 + "]" * 100_000
+    path = _zip_of(
+        tmp_path / "deep.npz", {"__metadata__.npy": _npy_bytes(np.array(nested)), "__digest__.npy": _npy_bytes(np.array("0" * 64))}
+    )
+    assert "metadata is not valid JSON" in _bounded(DNNCalibrator.load, path)
+
+
+def test_data_records_are_read_within_the_same_limits(tmp_path):
+    path = _deflated_zeros(tmp_path / "phase2.npz", "circle.npy", 5 * 64 * 2**20)
+    assert "inflates to" in _bounded(Phase2Data.load, path)
+
+
+def test_read_member_stops_at_the_limit_even_if_the_directory_allows_more(tmp_path):
+    path = _zip_of(tmp_path / "a.zip", {"big": bytes(3 * 2**20)})
+    limits = ArchiveLimits(max_member_bytes=4 * 2**20)
+    with open_archive(path, limits) as archive:
+        assert len(read_member(archive, "big", limits)) == 3 * 2**20
+    with open_archive(path) as archive, pytest.raises(ArchiveLimitError, match="beyond"):
+        read_member(archive, "big", ArchiveLimits(max_member_bytes=2**20))
+
+
+# ---------------------------------------------------------------- agent files (SB3 zip + settings JSON)
+def _agent_files(folder: Path, members: dict[str, bytes], **settings) -> Path:
+    from dvrk_gym.baselines.checkpoints import FORMAT
+    from dvrk_gym.baselines.training import TrainConfig
+    from dvrk_gym.baselines.wrappers import GOAL_CENTER_M, GOAL_HALF_RANGE_M
+
+    values = {
+        "format": FORMAT,
+        "config": TrainConfig(agent="sac", steps=10, camera_resolution=(64, 36)).to_dict(),
+        "policy_kwargs": {"net_arch": [8, 8], "use_sde": False},
+        "goal_scaling": {"center_m": list(GOAL_CENTER_M), "half_range_m": GOAL_HALF_RANGE_M},
+        "env_steps": 10,
+        **settings,
+    }
+    (folder / "model.json").write_text(json.dumps(values))
+    return _zip_of(folder / "model.zip", members)
+
+
+@pytest.mark.parametrize(
+    ("settings", "message"),
+    [
+        ({"policy_kwargs": {"net_arch": [30_000_000]}}, r"net_arch\[0\] must be an int in \[1, 4096\]"),
+        ({"policy_kwargs": {"net_arch": [8] * 40}}, "at most 16 layer sizes"),
+        ({"policy_kwargs": {"net_arch": [8], "activation_fn": "os.system"}}, "policy_kwargs must be an object with keys among"),
+        ({"env_steps": -5}, r"env_steps must be an int in \[0, inf\]"),
+        ({"goal_scaling": None}, "lacks or mangles a setting"),
+        ({"config": {"agent": "sac", "camera_resolution": [10**6, 10**6]}}, "camera_resolution"),
+    ],
+)
+def test_agent_settings_out_of_bounds_are_refused_before_a_network_is_built(tmp_path, settings, message):
+    from dvrk_gym.baselines.checkpoints import load_agent
+
+    text = _bounded(load_agent, _agent_files(tmp_path, {"policy.pth": b""}, **settings))
+    assert pytest.importorskip("re").search(message, text), text
+
+
+def test_agent_settings_that_are_not_json_or_too_large_are_refused(tmp_path):
+    from dvrk_gym.baselines.checkpoints import load_agent
+
+    path = _agent_files(tmp_path, {"policy.pth": b""})
+    (tmp_path / "model.json").write_text('{"format": "dvrk_gym.baselines/1", "config": {')  # cut short
+    assert "is not valid JSON" in _bounded(load_agent, path)
+    (tmp_path / "model.json").write_text(" " * (2**20 + 1))
+    assert "a settings file has at most 1,048,576" in _bounded(load_agent, path)
+
+
+def test_agent_weights_that_inflate_beyond_the_limit_or_hold_objects_are_refused(tmp_path):
+    import torch
+
+    from dvrk_gym.baselines.checkpoints import load_agent
+
+    path = tmp_path / "model.zip"
+    _agent_files(tmp_path, {})
+    _deflated_zeros(path, "policy.pth", 5 * 64 * 2**20)
+    assert "inflates to 335,544,320 bytes" in _bounded(load_agent, path)
+    stream = io.BytesIO()
+    torch.save({"weights": torch.zeros(2), "note": Path("x")}, stream)  # an object only a full unpickler would rebuild
+    _agent_files(tmp_path, {"policy.pth": stream.getvalue()})
+    assert "is not a plain tensor state dict" in _bounded(load_agent, path)

@@ -1,0 +1,239 @@
+"""Run folders: one owner at a time, stale locks taken over, every write whole or absent,
+and cached results cut short or tampered with named, moved aside and made again."""
+
+import json
+import logging
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from faults import ROOT, environment
+
+from dvrk_gym.calibration.models.dnn import DNNCalibrator
+from dvrk_gym.calibration.phase2 import Phase2Data
+from dvrk_gym.reproduce.scheduler import Task, run_tasks
+from dvrk_gym.utils.atomic import atomic_open, atomic_path, atomic_savefig, atomic_write_text, partial_path
+from dvrk_gym.utils.run_folder import LOCK_FILE, RunFolder, RunFolderBusy, read_settings
+
+HOLDER = """
+import sys, time
+from dvrk_gym.utils.run_folder import RunFolder
+folder = RunFolder(sys.argv[1], {"seed": 0})
+print("holding", flush=True)
+time.sleep(600)
+"""
+
+
+@pytest.fixture
+def held_folder(tmp_path):
+    """A run folder owned by another process (its pid), released at the end."""
+    holder = subprocess.Popen(
+        [sys.executable, "-c", HOLDER, str(tmp_path / "run")], stdout=subprocess.PIPE, text=True, env=environment(), cwd=ROOT
+    )
+    try:
+        assert holder.stdout.readline().strip() == "holding"
+        yield tmp_path / "run", holder
+    finally:
+        holder.kill()
+        holder.wait()
+
+
+def test_a_second_process_gets_an_error_naming_the_folder_and_the_owner(held_folder):
+    folder, holder = held_folder
+    with pytest.raises(RunFolderBusy) as busy:
+        RunFolder(folder, {"seed": 0})
+    assert str(folder) in str(busy.value) and f"process {holder.pid}" in str(busy.value)
+
+
+def test_reproduce_and_the_scheduler_refuse_a_folder_in_use(held_folder):
+    from dvrk_gym.reproduce import ReproduceConfig, run_reproduce
+
+    folder, holder = held_folder
+    with pytest.raises(RunFolderBusy, match=f"process {holder.pid}"):
+        run_reproduce(ReproduceConfig(out=folder, progress=False))
+    assert not (folder / "tasks").exists()  # refused before anything ran
+    with pytest.raises(RunFolderBusy):
+        run_tasks([Task("a", dict)], folder, progress=False)
+
+
+def test_a_killed_owners_lock_is_taken_over_with_a_message(held_folder, caplog):
+    folder, holder = held_folder
+    holder.kill()
+    holder.wait()  # killed: the kernel dropped its lock; its pid is still written in the lock file
+    assert json.loads((folder / LOCK_FILE).read_text())["pid"] == holder.pid
+    with caplog.at_level(logging.WARNING, logger="dvrk_gym.utils.run_folder"), RunFolder(folder, {"seed": 0}):
+        assert json.loads((folder / LOCK_FILE).read_text())["pid"] == os.getpid()
+    assert f"taking over the stale lock of process {holder.pid}" in caplog.text and str(folder) in caplog.text
+
+
+def test_a_clean_release_leaves_no_stale_owner(tmp_path, caplog):
+    with RunFolder(tmp_path):
+        pass
+    assert (tmp_path / LOCK_FILE).read_text() == ""
+    with caplog.at_level(logging.WARNING), RunFolder(tmp_path):
+        pass
+    assert "stale" not in caplog.text
+
+
+def test_a_file_named_as_the_folder_is_refused(tmp_path):
+    (tmp_path / "file").write_text("x")
+    with pytest.raises(NotADirectoryError, match="is a file, not a folder"):
+        RunFolder(tmp_path / "file")
+
+
+# ---------------------------------------------------------------- atomic writes
+def test_a_writer_that_fails_half_way_leaves_the_old_file(tmp_path):
+    path = atomic_write_text(tmp_path / "result.json", '{"old": true}')
+    with pytest.raises(RuntimeError, match="disk full"), atomic_open(path, "w") as stream:
+        stream.write('{"new": tr')
+        raise RuntimeError("disk full")
+    assert path.read_text() == '{"old": true}'
+    assert [p.name for p in tmp_path.iterdir()] == ["result.json"]  # no temporary file left
+
+
+def test_a_figure_that_cannot_be_drawn_leaves_nothing(tmp_path):
+    class Broken:
+        def savefig(self, path, **options):
+            Path(path).write_bytes(b"\x89PNG half")
+            raise ValueError("bad figure")
+
+    with pytest.raises(ValueError, match="bad figure"):
+        atomic_savefig(Broken(), tmp_path / "figure.png")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_writer_that_writes_nothing_is_an_error(tmp_path):
+    with pytest.raises(OSError, match="nothing was written"), atomic_path(tmp_path / "model.zip"):
+        pass
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_temporary_files_of_a_killed_write_are_removed_when_the_folder_is_opened(tmp_path):
+    leftover = partial_path(tmp_path / "sub" / "phase1.npz")
+    leftover.parent.mkdir()
+    leftover.write_bytes(b"half")
+    (tmp_path / "keep.json").write_text("{}")
+    with RunFolder(tmp_path):
+        assert not leftover.exists() and (tmp_path / "keep.json").exists()
+
+
+# ---------------------------------------------------------------- corrupt caches
+def _made_again(folder, name, load, value, save, caplog):
+    """Load ``name`` from ``folder`` after it was damaged: the value made again, the warning and the file set aside."""
+    made = []
+    with caplog.at_level(logging.WARNING, logger="dvrk_gym.utils.run_folder"):
+        result = folder.cached(name, lambda: made.append(1) or value, load, save)
+    assert made == [1]
+    assert name in caplog.text and "moved it to" in caplog.text
+    assert folder.file(name + ".corrupt").exists() and folder.file(name).exists()
+    return result
+
+
+@pytest.mark.parametrize(
+    "damage",
+    [lambda data: data[: len(data) // 2], lambda data: b"", lambda data: b"PK\x03\x04" + bytes(100), lambda data: data[:-10]],
+    ids=["half", "empty", "zip-header-only", "tail-cut"],
+)
+def test_a_cut_phase2_file_is_moved_aside_and_made_again(tmp_path, caplog, damage):
+    rng = np.random.default_rng(0)
+    data = Phase2Data(rng.normal(size=(5, 3)), rng.normal(size=(5, 3)), rng.normal(size=(5, 3)), rng.normal(size=(5, 3)), np.arange(5))
+    with RunFolder(tmp_path) as folder:
+        data.save(folder.file("phase2.npz"))
+        folder.file("phase2.npz").write_bytes(damage(folder.file("phase2.npz").read_bytes()))
+        again = _made_again(folder, "phase2.npz", Phase2Data.load, data, lambda value, path: value.save(path), caplog)
+        assert np.array_equal(again.corrected, data.corrected)
+        assert np.array_equal(Phase2Data.load(folder.file("phase2.npz")).corrected, data.corrected)
+
+
+def test_a_tampered_model_file_is_moved_aside_and_made_again(tmp_path, caplog):
+    rng = np.random.default_rng(0)
+    X = np.column_stack([rng.uniform(-0.03, 0.03, (40, 2)), rng.uniform(0.17, 0.2, 40), rng.uniform(-1, 1, (40, 3))])
+    model = DNNCalibrator(hidden_layers=1, units=4, epochs=1, progress=False).fit(X, X[:, :3])
+    with RunFolder(tmp_path) as folder:
+        model.save(folder.file("dnn.npz"))
+        blob = bytearray(folder.file("dnn.npz").read_bytes())
+        blob[len(blob) // 2] ^= 0xFF
+        folder.file("dnn.npz").write_bytes(bytes(blob))
+        again = _made_again(folder, "dnn.npz", DNNCalibrator.load, model, lambda value, path: value.save(path), caplog)
+        assert np.array_equal(again.predict(X), model.predict(X))
+
+
+def _record(name: str, log: str) -> dict:
+    with open(log, "a") as handle:
+        handle.write(name + "\n")
+    return {"name": name}
+
+
+@pytest.mark.parametrize(
+    "content", ['{"name": "a", "wall_s": 0.1', "", "[]", '{"name": "a"}', "\x00\x01"], ids=["cut", "empty", "list", "no-wall", "binary"]
+)
+def test_a_damaged_task_result_is_named_moved_aside_and_run_again(tmp_path, caplog, content):
+    log = str(tmp_path / "log.txt")
+    graph = [Task("a", _record, {"name": "a", "log": log}), Task("b", _record, {"name": "b", "log": log}, needs=("a",))]
+    run_tasks(graph, tmp_path / "cache", progress=False)
+    (tmp_path / "cache" / "a.json").write_text(content)
+    with caplog.at_level(logging.WARNING, logger="dvrk_gym.utils.run_folder"):
+        results = run_tasks(graph, tmp_path / "cache", progress=False)
+    assert "a.json is unreadable" in caplog.text
+    assert Path(log).read_text().split() == ["a", "b", "a"]  # only the damaged task ran again
+    assert results["a"]["name"] == "a" and not results["a"]["cached"] and results["b"]["cached"]
+    assert (tmp_path / "cache" / "a.json.corrupt").read_text() == content
+
+
+def test_a_damaged_settings_stamp_is_an_error_naming_it(tmp_path):
+    (tmp_path / "settings.json").write_text('{"seed": ')
+    with pytest.raises(ValueError, match="settings.json is unreadable"):
+        RunFolder(tmp_path, {"seed": 0})
+    (tmp_path / "settings.json").write_text("[1, 2]")
+    with pytest.raises(ValueError, match="holds list, not the settings object"):
+        read_settings(tmp_path, "settings.json")
+
+
+def test_a_kill_during_a_write_leaves_the_old_result(tmp_path):
+    """A process killed while writing (SIGKILL, no clean-up): the result is the old one or the new one, whole."""
+    path = tmp_path / "result.json"
+    atomic_write_text(path, json.dumps({"value": "old"}))
+    writer = subprocess.Popen(
+        [
+            sys.executable,
+            "-c",
+            "import sys, time\nfrom dvrk_gym.utils.atomic import atomic_open\n"
+            "with atomic_open(sys.argv[1], 'w') as f:\n    f.write('{\"value\": ')\n    f.flush()\n    print('writing', flush=True)\n"
+            "    time.sleep(600)\n",
+            str(path),
+        ],
+        stdout=subprocess.PIPE,
+        text=True,
+        env=environment(),
+    )
+    assert writer.stdout.readline().strip() == "writing"
+    writer.kill()
+    writer.wait()
+    time.sleep(0.1)
+    assert json.loads(path.read_text()) == {"value": "old"}
+    assert len(list(tmp_path.glob(".result.*.partial.json"))) == 1  # what the killed writer left
+    with RunFolder(tmp_path):
+        assert sorted(p.name for p in tmp_path.iterdir()) == sorted([LOCK_FILE, "result.json"])  # the half write is gone
+
+
+def _die_once(flag: str) -> dict:
+    """Kill this (worker) process with SIGKILL the first time; return normally once ``flag`` exists."""
+    if not Path(flag).exists():
+        Path(flag).write_text("died once")
+        os.kill(os.getpid(), 9)
+    return {"survived": True}
+
+
+def test_a_worker_killed_mid_task_fails_the_run_with_its_name_and_the_rerun_completes(tmp_path):
+    from dvrk_gym.reproduce.scheduler import TaskError
+
+    log = str(tmp_path / "log.txt")
+    graph = [Task("fine", _record, {"name": "fine", "log": log}), Task("doomed", _die_once, {"flag": str(tmp_path / "flag")}, cost_s=9)]
+    with pytest.raises(TaskError, match=r"a worker process died while running \[[^]]*'doomed'"):
+        run_tasks(graph, tmp_path / "cache", workers=2, progress=False)
+    results = run_tasks(graph, tmp_path / "cache", workers=2, progress=False)
+    assert results["doomed"] == {**results["doomed"], "survived": True, "cached": False}

@@ -1,0 +1,73 @@
+"""Bring your own calibrator: the two-phase calibrator adds the paper's residual forests to any Phase I regressor."""
+
+import numpy as np
+import pytest
+from sklearn.linear_model import LinearRegression
+from sklearn.neighbors import KNeighborsRegressor
+
+from dvrk_gym.calibration.models.forests import ResidualForests
+from dvrk_gym.calibration.models.two_phase import TwoPhaseCalibrator
+
+
+@pytest.fixture
+def rows():
+    rng = np.random.default_rng(0)
+    position = np.column_stack([rng.uniform(-0.03, 0.03, (300, 2)), rng.uniform(0.17, 0.2, 300)])
+    yaw = rng.choice(np.deg2rad([-90, -45, 0, 45, 90]), 300)
+    X = np.column_stack([position, yaw, rng.uniform(-0.2, 0.4, 300), rng.uniform(-3.1, -2.6, 300)])
+    bias = np.where(X[:, 3:4] > 0, 0.002, -0.001)  # a yaw-dependent offset a linear model of position misses
+    y = X[:, :3] @ np.diag([1.0, -1.0, -1.0]) + bias
+    return X, y
+
+
+def test_a_scikit_learn_phase1_model_gets_the_forests_and_they_remove_its_yaw_error(rows):
+    X, y = rows
+    mine = LinearRegression().fit(X[:, :3], y)
+    wrapped = _PositionOnly(mine)
+    model = TwoPhaseCalibrator(dnn=wrapped, forests=ResidualForests(trees=20, seed=0)).fit_phase2(X, y)
+    phase1_error = np.linalg.norm(wrapped.predict(X) - y, axis=1).mean()
+    two_phase_error = np.linalg.norm(model.predict(X) - y, axis=1).mean()
+    assert two_phase_error < 0.3 * phase1_error
+
+
+def test_an_unfitted_scikit_learn_model_is_fitted_by_fit_phase1(rows):
+    X, y = rows
+    model = TwoPhaseCalibrator(dnn=KNeighborsRegressor(3), forests=ResidualForests(trees=5, seed=0))
+    model.fit_phase1(X, y).fit_phase2(X, y)
+    assert model.predict(X).shape == (300, 3)
+
+
+def test_a_phase1_model_returning_the_wrong_shape_is_named(rows):
+    X, y = rows
+
+    class Broken:
+        def fit(self, X, y):
+            return self
+
+        def predict(self, X):
+            return np.zeros((len(X), 2))
+
+    with pytest.raises(ValueError, match=r"Broken\.predict\(X\)"):
+        TwoPhaseCalibrator(dnn=Broken()).fit_phase2(X, y)
+
+
+def test_saving_a_foreign_phase1_model_is_refused_with_what_to_do(rows, tmp_path):
+    X, y = rows
+    model = TwoPhaseCalibrator(dnn=_PositionOnly(LinearRegression().fit(X[:, :3], y)), forests=ResidualForests(trees=2)).fit_phase2(X, y)
+    with pytest.raises(TypeError, match=r"model\.forests\.save"):
+        model.save(tmp_path / "model.npz")
+    assert not (tmp_path / "model.npz").exists()
+
+
+class _PositionOnly:
+    """A user's model: scikit-learn's regressor on the position columns (no fitted attributes of its own)."""
+
+    def __init__(self, model):
+        self.model = model
+
+    def fit(self, X, y):
+        self.model.fit(X[:, :3], y)
+        return self
+
+    def predict(self, X):
+        return self.model.predict(X[:, :3])
