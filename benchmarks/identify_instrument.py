@@ -109,7 +109,7 @@ def main() -> None:
     repeatability = repeatability_from_jitter(real.image_plane_jitter_mm, plane_jitter, detector_mm)
     print(
         f"\nimage-plane jitter per axis (mm): real rows {real.image_plane_jitter_mm:.3f}, fitted model alone on them {plane_jitter:.3f}, "
-        f"detector {detector_mm:.3f}: repeatability {repeatability * 1e3:.3f} mm RMS (3-D)"
+        f"detector {detector_mm:.3f}: repeatability {repeatability * 1e3:.3f} mm RMS across the shaft"
     )
     print(f"view-axis jitter (mm): real rows {real.view_axis_jitter_mm:.3f}, fitted model alone on them {view_jitter:.3f}")
     miss = match_miss_probability()

@@ -121,5 +121,5 @@ def test_a_camera_and_tape_fit_from_the_start_finds_the_paper_camera(rows):
 
 
 def test_repeatability_takes_what_the_model_and_detector_leave_of_the_jitter():
-    assert repeatability_from_jitter(1.0, 0.6, 0.0) == pytest.approx(0.8e-3 * np.sqrt(3))
+    assert repeatability_from_jitter(1.0, 0.6, 0.0) == pytest.approx(0.8e-3 * np.sqrt(2))
     assert repeatability_from_jitter(0.5, 0.6, 0.1) == 0.0

@@ -193,17 +193,19 @@ def detector_plane_noise_mm(noise: DetectionNoise, depth_m: float) -> float:
 
 
 def repeatability_from_jitter(real_plane_jitter_mm: float, model_plane_jitter_mm: float, detector_plane_mm: float) -> float:
-    """The robot's repeatability (RMS 3-D scatter, m) that the real rows' image-plane jitter leaves.
+    """The robot's repeatability (RMS tip scatter across the shaft, m) that the real rows' image-plane jitter leaves.
 
     Independent noise adds in quadrature to the jitter per axis: what the real rows show
     beyond the fitted model's own jitter over the same rows (:func:`model_jitter_mm`) and
-    the detector's, per axis, times sqrt(3) for the three axes. Measured on the real
-    rows' own sequence, so that it is the robot's and not the exploration's: a simulated
-    Phase I changes orientation more between consecutive rows than the real one did
-    (median pitch change 11.7 against 7.2 degrees), which adds jitter of its own.
+    the detector's, per axis, times sqrt(2) for the two axes across the shaft, where the
+    rotary joints move the tip (:func:`dvrk_gym.sim.robot.cables.repeatability_std`; the
+    shaft is within about 10 degrees of the view axis). Measured on the real rows' own
+    sequence, so that it is the robot's and not the exploration's: a simulated Phase I
+    changes orientation more between consecutive rows than the real one did (median
+    pitch change 11.7 against 7.2 degrees), which adds jitter of its own.
     """
     per_axis = np.sqrt(max(real_plane_jitter_mm**2 - model_plane_jitter_mm**2 - detector_plane_mm**2, 0.0))
-    return float(per_axis * np.sqrt(3.0) * 1e-3)
+    return float(per_axis * np.sqrt(2.0) * 1e-3)
 
 
 @dataclass(frozen=True)

@@ -7,6 +7,7 @@ the new one, never half of one.
 from __future__ import annotations
 
 import json
+import math
 import os
 from pathlib import Path
 from typing import Any
@@ -56,6 +57,11 @@ def format_table(run: FidelityRun) -> str:
     return "\n".join(lines)
 
 
+def _finite_or_none(value: float) -> float | None:
+    """``value``, or None (JSON null) where it is undefined: a yaw without simulated rows has no median pitch."""
+    return value if math.isfinite(value) else None
+
+
 def report_dict(run: FidelityRun) -> dict[str, Any]:
     """The report as JSON-ready data: settings, both statistics, the comparison rows."""
     return {
@@ -70,10 +76,10 @@ def report_dict(run: FidelityRun) -> dict[str, Any]:
         "comparison": [
             {
                 "statistic": row.name,
-                "real": row.real,
-                "sim": row.sim,
+                "real": _finite_or_none(row.real),
+                "sim": _finite_or_none(row.sim),
                 "measure": "difference" if row.share else "ratio",
-                "value": row.difference,
+                "value": _finite_or_none(row.difference),
                 "tolerance": row.tolerance,
                 "passed": row.passed,
             }

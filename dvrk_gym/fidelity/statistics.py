@@ -32,6 +32,7 @@ Definitions (the issue 15 table; on the authors' 1939 rows they give 6.6 mm, 0.8
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from typing import Any
@@ -113,7 +114,8 @@ class FidelityStatistics:
         """The fields as a JSON-ready dict (tuples as lists)."""
         values = asdict(self)
         values["kept_fraction_per_yaw"] = list(self.kept_fraction_per_yaw)
-        values["pitch_median_per_yaw_deg"] = list(self.pitch_median_per_yaw_deg)
+        # A yaw without rows has no median: None (JSON null), not NaN (not JSON).
+        values["pitch_median_per_yaw_deg"] = [None if math.isnan(p) else p for p in self.pitch_median_per_yaw_deg]
         return values
 
 

@@ -102,7 +102,8 @@ class InstrumentValues:
             coupling round), dimensionless.
         backlash_outer_rad: hysteresis gap of outer yaw and pitch, rad.
         backlash_wrist_rad: hysteresis gap of roll, wrist pitch and wrist yaw, rad.
-        repeatability_m: RMS 3-D tip scatter of repeated moves to one command, m.
+        repeatability_m: RMS tip scatter of repeated moves to one command, across the
+            shaft (the rotary joints'), m.
     """
 
     homing_offsets: tuple[float, float, float, float, float, float]
@@ -143,7 +144,7 @@ INSTRUMENT = InstrumentValues(
     wrist_stretch=-0.0861424,
     backlash_outer_rad=0.0,
     backlash_wrist_rad=0.0604368,
-    repeatability_m=0.001271,
+    repeatability_m=0.001038,
 )
 """Fitted: homing offsets of insertion (1.8 mm), roll (-6.4 deg) and wrist pitch (-0.9
 deg), under Gaussian priors of 1 mm and 1 degree (the outer yaw and pitch offsets turn the
@@ -154,8 +155,11 @@ sign: opposite to the nominal coupling); backlash 3.5 degrees in the wrist, none
 outer joints. Repeatability: not fitted, but what the real rows' sample-to-sample jitter in
 the image plane (1.02 mm per axis) leaves after the fitted model's own jitter over the same
 rows (0.70 mm, mostly the wrist backlash) and the detector's (0.16 mm): 0.73 mm per axis,
-1.27 mm in 3-D. The rows cannot tell true repeatability from hysteresis over the moves they
-do not record (63% of the poses were dropped); either way no calibration can learn it."""
+1.04 mm across the shaft, scattered by the five rotary joints (none by the insertion stage:
+the rows' jitter along the view axis is the stereo depth noise's alone, so they show no
+scatter along the shaft; :func:`dvrk_gym.sim.robot.cables.repeatability_std`). The rows
+cannot tell true repeatability from hysteresis over the moves they do not record (63% of
+the poses were dropped); either way no calibration can learn it."""
 
 OUTER_STRETCH_MAGNITUDE_RAD = max(abs(a) for a in INSTRUMENT.outer_stretch_rad)
 """The ``paper`` preset's outer stretch magnitude; the identified amplitudes are gains on it."""

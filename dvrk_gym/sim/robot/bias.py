@@ -77,7 +77,7 @@ class BiasConfig:
             approaches, rad.
         backlash_insertion_m: hysteresis gap of the insertion, m.
         backlash_wrist_rad: hysteresis gap of roll, wrist pitch and wrist yaw, rad.
-        repeatability_m: RMS tip scatter of repeated moves to one command, m.
+        repeatability_m: RMS tip scatter of repeated moves to one command, across the shaft, m.
         around_identified: draw instruments around the one identified from the real rows
             (:mod:`dvrk_gym.sim.identified`): bias_seed 0 is that instrument, bias_seed k
             >= 1 one drawn around it with the identification's spread
@@ -118,7 +118,7 @@ class BiasConfig:
 # (dvrk_gym.sim.identified, where each value's fit, held-out residual and command are
 # given): outer stretch about 0.37 deg (not the 2.6 deg once tuned to the paper's table),
 # wrist stretch 0.09, a wrist backlash of 3.4 deg and no outer one, and a repeatability of
-# about 1.3 mm (what the rows leave unexplained from one row to the next). Gravity sag and
+# about 1.0 mm across the shaft (what the rows leave unexplained from one row to the next). Gravity sag and
 # the insertion's backlash are not separable from the camera pose and the other terms in
 # those rows, so they are left out (0) rather than guessed.
 _PAPER = BiasConfig(
