@@ -153,10 +153,26 @@ MAX_TOOL_SPEED_M_S = 0.06
 """The tool's top speed, about 6 cm/s, m/s (the authors' code: a 10 cm move at "fast" took 1.49 s)."""
 ENDOSCOPE_RESOLUTION_PX = (1920, 1080)
 """The stereo endoscope's images, (width, height), pixels (the authors' ROS camera files)."""
-ENDOSCOPE_FOCAL_PX = 2144.0
-"""The rectified focal length, pixels (the authors' ROS camera files)."""
-ENDOSCOPE_BASELINE_M = 0.0062
-"""The stereo baseline, about 6.2 mm, metres (the authors' ROS camera files)."""
+ENDOSCOPE_FOCAL_PX = 2144.0564
+"""The rectified focal length, pixels: P[0, 0] = P[1, 1] of both cameras in the authors' ROS
+camera files (``config/camera_info_matrices/left.p``, ``right.p`` of :data:`AUTHORS_CODE`,
+read as text). Every row of the real data reprojects with it to whole pixels (to 1e-8 px)."""
+ENDOSCOPE_PRINCIPAL_POINT_PX = (1116.71052, 599.58294)
+"""The rectified principal point (cx, cy) of both cameras, pixels (P[0, 2], P[1, 2] of the
+same files)."""
+ENDOSCOPE_BASELINE_M = 13.24186 / 2144.0564
+"""The stereo baseline the authors triangulated with, metres (6.176 mm): -P[0, 3] / P[0, 0]
+of the right camera's file (P[0, 3] = -13.24186 px m)."""
+MARKER_GATE_PX = 12.0
+"""The authors' Phase I cleaning rule: a row is kept when both cameras found the red tape
+and the right detection lies less than this from where an affine map fitted to the grid
+circles sends the left one, pixels at 1920 x 1080 (``is_this_clean`` in
+``scripts/automatic_trajectory_collector_part2.py`` of :data:`AUTHORS_CODE`)."""
+MARKER_MEDIAN_KERNEL_PX = 9
+"""The authors' red-tape detector median-filters the image and the thresholded mask with
+this kernel (pixels at 1920 x 1080) before it takes the largest contour's centroid,
+truncated to whole pixels (``_get_thresholded_image``, ``_get_contour`` of
+``scripts/automatic_trajectory_collector.py``)."""
 ENDOSCOPE_HEIGHT_M = 0.19
 """The endoscope sits 7.5 in (19 cm) above the workspace, metres."""
 

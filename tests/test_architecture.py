@@ -29,6 +29,7 @@ LAYER_RANKS = {
     "dvrk_gym.paper": 0,
     "dvrk_gym.utils": 0,
     "dvrk_gym.sim.physics": 1,
+    "dvrk_gym.sim.identified": 1,
     "dvrk_gym.sim.robot": 2,
     "dvrk_gym.sim.endoscope": 3,
     "dvrk_gym.sim.world": 4,

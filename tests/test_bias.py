@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from scipy.stats import f_oneway
 
+from dvrk_gym.sim import identified
 from dvrk_gym.sim.robot import ik
 from dvrk_gym.sim.robot import kinematics as kin
 from dvrk_gym.sim.robot.bias import BIAS_PRESETS, BiasConfig, draw_instrument, resolve_bias
@@ -76,33 +77,48 @@ def test_negative_or_nan_magnitude_is_rejected() -> None:
 
 def test_severe_is_about_twice_paper() -> None:
     paper, severe = BIAS_PRESETS["paper"], BIAS_PRESETS["severe"]
-    for field in dataclasses.fields(paper):
-        assert getattr(severe, field.name) == pytest.approx(2 * getattr(paper, field.name))
+    for name in BiasConfig.magnitude_names():
+        assert getattr(severe, name) == pytest.approx(2 * getattr(paper, name))
+    assert severe.around_identified and paper.around_identified
 
 
-def test_paper_rigid_fit_leaves_the_papers_residual(paper_statistics: dict) -> None:
-    # The paper's per-yaw rigid-body calibration left 4.55 mm.
-    assert 3.5 * MM <= paper_statistics["rigid_mean_m"] <= 5.5 * MM
+def test_paper_is_the_identified_instrument_at_seed_0() -> None:
+    instrument = draw_instrument(BIAS_PRESETS["paper"], 0)
+    np.testing.assert_array_equal(instrument.homing_offsets, identified.INSTRUMENT.homing_offsets)
+    stretch = instrument.outer_gains * BIAS_PRESETS["paper"].outer_stretch_rad
+    np.testing.assert_allclose(stretch, identified.INSTRUMENT.outer_stretch_rad)
+    assert instrument.true_dh == kin.PSM_DH
+    assert BIAS_PRESETS["paper"].repeatability_m == identified.INSTRUMENT.repeatability_m
+
+
+def test_paper_rigid_fit_leaves_the_identified_robots_residual(paper_statistics: dict) -> None:
+    # The identified instrument's own error after a rigid fit per yaw (measured: 1.36 mm
+    # mean, 0.79 mm without the repeatability); the paper's 4.55 mm rigid-body error is
+    # mostly stereo depth noise, which the endoscope adds (tests/test_world.py).
+    assert 1.0 * MM <= paper_statistics["rigid_mean_m"] <= 1.8 * MM
     assert paper_statistics["raw_mean_m"] > paper_statistics["rigid_mean_m"]
 
 
-def test_paper_smooth_model_removes_most_but_not_all(paper_statistics: dict) -> None:
-    # The paper's two-phase calibration left 1.08 mm: hysteresis and noise remain.
-    assert 0.7 * MM <= paper_statistics["smooth_mean_m"] <= 1.5 * MM
-    assert paper_statistics["smooth_mean_m"] < 0.3 * paper_statistics["rigid_mean_m"]
+def test_paper_smooth_model_learns_the_cables_but_not_the_noise() -> None:
+    quiet = CableModel(dataclasses.replace(BIAS_PRESETS["paper"], repeatability_m=0.0), bias_seed=0)
+    statistics = bias_statistics(quiet, np.random.default_rng(1), STATISTICS_SAMPLES)
+    # Measured: 0.79 mm after the rigid fits, 0.47 mm after a smooth model (the wrist's
+    # hysteresis is left); with the identified repeatability both rise to about 1.3 mm.
+    assert statistics["smooth_mean_m"] < 0.7 * statistics["rigid_mean_m"]
+    assert 0.3 * MM <= statistics["smooth_mean_m"] <= 0.7 * MM
 
 
 def test_paper_rigid_residual_differs_between_yaw_groups() -> None:
-    model = CableModel(BIAS_PRESETS["paper"], bias_seed=0)
-    # The differences are about 15% of a residual whose sd is half its mean: it takes
-    # a few thousand samples to show them clearly.
+    # Without the repeatability (which buries it in noise: ANOVA p = 0.1 at 3000 samples),
+    # the identified cables leave 0.70-0.85 mm by yaw group (measured), a 20% spread.
+    model = CableModel(dataclasses.replace(BIAS_PRESETS["paper"], repeatability_m=0.0), bias_seed=0)
     samples = sample_bias(model, np.random.default_rng(1), 3000)
     norms = np.linalg.norm(per_yaw_rigid_residuals(samples), axis=1)
     groups = [norms[samples.yaw_group == g] for g in range(len(kin.PAPER_YAWS_RAD))]
     # Positions are drawn alike for every yaw, so only orientation can separate them.
     assert f_oneway(*groups).pvalue < 1e-4
     means = np.array([group.mean() for group in groups])
-    assert means.max() - means.min() > 0.08 * means.mean()
+    assert means.max() - means.min() > 0.1 * means.mean()
 
 
 @pytest.mark.parametrize(
@@ -132,7 +148,9 @@ def test_paper_hysteresis_gap_is_at_least_0_3_mm(paper_statistics: dict) -> None
 
 
 def test_opposite_approaches_land_on_opposite_sides() -> None:
-    model = CableModel(BIAS_PRESETS["paper"], bias_seed=0)
+    # Every joint with play (the identified instrument has none in its outer joints).
+    config = BiasConfig(backlash_outer_rad=0.4 * np.pi / 180, backlash_insertion_m=0.4e-3, backlash_wrist_rad=0.5 * np.pi / 180)
+    model = CableModel(config, bias_seed=0)
     q_cmd = _commands(1)[0]
     delta = APPROACH_DELTA
     model.reset(q_cmd - delta)
@@ -168,7 +186,8 @@ def test_the_model_uses_the_instrument_its_seed_draws_and_cannot_change_it() -> 
 def test_another_seed_gives_another_instrument() -> None:
     config = BIAS_PRESETS["paper"]
     first, other = CableModel(config, bias_seed=11), CableModel(config, bias_seed=12)
-    assert first.true_dh != other.true_dh
+    assert not np.array_equal(first.instrument.homing_offsets, other.instrument.homing_offsets)
+    assert not np.array_equal(first.instrument.outer_gains, other.instrument.outer_gains)
     q_cmd = _commands(1)[0]
     first.reset(q_cmd)
     other.reset(q_cmd)
@@ -184,7 +203,7 @@ def test_noise_is_drawn_once_per_move_from_the_passed_generator() -> None:
     assert not np.array_equal(noisy[0], noisy[1])
     assert np.array_equal(model.true_joints(q_cmd), quiet)  # no generator, no noise
     tip_scatter = [np.linalg.norm(kin.touch_point(q, model.true_dh) - kin.touch_point(quiet, model.true_dh)) for q in noisy]
-    assert max(tip_scatter) < 1.0 * MM
+    assert max(tip_scatter) < 4.0 * model.config.repeatability_m
 
 
 def test_reported_pose_is_never_the_truth_under_paper() -> None:

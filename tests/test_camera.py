@@ -8,8 +8,9 @@ import pybullet
 import pytest
 from pybullet_utils import bullet_client
 
+from dvrk_gym import paper
+from dvrk_gym.sim import identified
 from dvrk_gym.sim.endoscope.camera import (
-    CAMERA_DISTANCE_M,
     PAPER_BASELINE_M,
     PAPER_INTRINSICS,
     WORKSPACE_CENTER_M,
@@ -18,7 +19,8 @@ from dvrk_gym.sim.endoscope.camera import (
     StereoCamera,
     default_camera_pose,
 )
-from dvrk_gym.sim.endoscope.noise import PixelNoise
+from dvrk_gym.sim.endoscope.detection import detect_marker, median_kernel_px
+from dvrk_gym.sim.endoscope.noise import DetectionNoise, PixelNoise, whole_pixels
 
 SPHERE_RADIUS_M = 0.0015
 CENTROID_TOL_PX = 0.3  # per point, any resolution; measured max 0.16 px (1920) / 0.23 px (640), silhouette digitisation
@@ -32,6 +34,13 @@ WINDOW_SHADING_TOL_LEVELS = 1
 WINDOW_ANY_DIFF_FRACTION_TOL = 1e-4
 WINDOW_EDGE_FLIP_FRACTION_TOL = 1e-5
 CENTRE = np.asarray(WORKSPACE_CENTER_M)
+_U, _, _VT = np.linalg.svd([[-0.965, -0.145, -0.219], [-0.115, 0.983, -0.144], [0.236, -0.114, -0.965]])
+AIMED_POSE = np.eye(4)
+AIMED_POSE[:3, :3] = _U @ _VT
+AIMED_POSE[:3, 3] = CENTRE - 0.19 * AIMED_POSE[:3, 2]
+"""A camera looking down about 15 degrees from the vertical with its optical axis through
+the workspace centre at 0.19 m: every sphere below lies well inside its images, clear of
+the shaft."""
 SPHERE_OFFSETS_M = [
     (0.0, 0.0, 0.003),
     (-0.035, -0.035, 0.002),
@@ -85,13 +94,14 @@ def full_frames(scene):
 def test_intrinsics_scaling_keeps_pixel_centres_consistent() -> None:
     small = PAPER_INTRINSICS.scaled(640, 360)
     assert (small.width, small.height) == (640, 360)
-    np.testing.assert_allclose([small.fx, small.fy, small.cx, small.cy], [2144 / 3, 2144 / 3, 319.5, 179.5])
+    f, (cx, cy) = paper.ENDOSCOPE_FOCAL_PX, paper.ENDOSCOPE_PRINCIPAL_POINT_PX
+    np.testing.assert_allclose([small.fx, small.fy, small.cx, small.cy], [f / 3, f / 3, (cx + 0.5) / 3 - 0.5, (cy + 0.5) / 3 - 0.5])
     points = np.array([[0.01, -0.02, 0.2], [-0.03, 0.01, 0.15]])
     full_uv, _ = StereoCamera(PAPER_INTRINSICS).project_camera_frame(points)
     small_uv, _ = StereoCamera(small).project_camera_frame(points)
     np.testing.assert_allclose(small_uv, (full_uv + 0.5) / 3.0 - 0.5, atol=1e-9)
     back = small.scaled(1920, 1080)
-    np.testing.assert_allclose([back.fx, back.cx, back.cy], [2144, 959.5, 539.5])
+    np.testing.assert_allclose([back.fx, back.cx, back.cy], [f, cx, cy])
 
 
 def test_project_triangulate_round_trip_on_random_points() -> None:
@@ -118,14 +128,34 @@ def test_right_camera_is_offset_by_baseline_along_x() -> None:
     np.testing.assert_allclose(view_right @ right_centre_world, [0, 0, 0, 1], atol=1e-15)
 
 
-def test_default_pose_is_0_19_m_from_workspace_centre_and_tilted_10_to_20_deg() -> None:
+def test_default_pose_is_the_identified_one_above_the_workspace_and_sees_it() -> None:
     pose = default_camera_pose()
     np.testing.assert_allclose(pose[:3, :3].T @ pose[:3, :3], np.eye(3), atol=1e-12)
     assert np.linalg.det(pose[:3, :3]) == pytest.approx(1.0)
-    centre_cam = StereoCamera(pose=pose).to_camera_frame(CENTRE)[0]
-    np.testing.assert_allclose(centre_cam, [0.0, 0.0, CAMERA_DISTANCE_M], atol=1e-12)
-    tilt_deg = np.degrees(np.arccos(-pose[2, 2]))
-    assert 10.0 < tilt_deg < 20.0
+    np.testing.assert_allclose(pose[:3, 3], identified.CAMERA.position_base_m)
+    # The paper: 7.5 in (19 cm) above the workspace; identified: 18 cm, 9.7 deg from the vertical.
+    assert 0.17 < pose[2, 3] - CENTRE[2] < 0.20
+    assert 5.0 < np.degrees(np.arccos(-pose[2, 2])) < 15.0
+    # The real rows' detections span u 684-1422 px, v 75-798 px: the workspace is in view.
+    left, right = StereoCamera(pose=pose).project(CENTRE + [[0.03, 0.03, 0.0], [-0.03, -0.03, 0.0]])
+    for uv in (left, right):
+        assert np.all((uv > 0) & (uv < [PAPER_INTRINSICS.width, PAPER_INTRINSICS.height]))
+
+
+def test_triangulation_uses_the_distance_between_the_pixels_as_the_authors_did() -> None:
+    # ROS's projectPixelTo3d with disparity |left - right|: a row mismatch deepens nothing but
+    # shortens the depth; x and y come from the left pixel.
+    camera = StereoCamera()
+    left, right = np.array([[1000.0, 400.0]]), np.array([[930.0, 405.0]])
+    z = PAPER_INTRINSICS.fx * PAPER_BASELINE_M / np.hypot(70.0, 5.0)
+    expected = [(1000.0 - PAPER_INTRINSICS.cx) * z / PAPER_INTRINSICS.fx, (400.0 - PAPER_INTRINSICS.cy) * z / PAPER_INTRINSICS.fy, z]
+    np.testing.assert_allclose(camera.triangulate(left, right)[0], expected)
+
+
+def test_a_short_calibrated_baseline_scales_triangulated_positions() -> None:
+    camera = StereoCamera(baseline_m=0.0065, calibrated_baseline_m=0.0060)
+    point = np.array([[0.01, -0.02, 0.18]])
+    np.testing.assert_allclose(camera.triangulate(*camera.project_camera_frame(point)), point * 0.0060 / 0.0065)
 
 
 def test_gl_matrices_reproduce_projection_with_tinyrenderer_sampling() -> None:
@@ -185,7 +215,7 @@ def test_window_render_equals_full_frame_crop(scene, full_frames) -> None:
 def test_sphere_centroids_across_workspace_match_projection_and_triangulate(scene, intrinsics) -> None:
     """Full-res uses windows (validated above); 640x360 renders full frames."""
     client, sphere = scene
-    camera = StereoCamera(intrinsics)
+    camera = StereoCamera(intrinsics, pose=AIMED_POSE)
     scale = intrinsics.width / PAPER_INTRINSICS.width
     errors, depth_errors = [], []
     for offset in SPHERE_OFFSETS_M:
@@ -282,3 +312,38 @@ def test_no_pixel_noise_draws_nothing_and_returns_the_detection(noise: PixelNois
 def test_pixel_noise_rejects_a_negative_or_nan_sigma_and_an_empty_width(sigma: float, width: int) -> None:
     with pytest.raises(ValueError, match="sigma_px_at_1080p|width_px"):
         PixelNoise(sigma, width)
+
+
+def test_whole_pixels_truncate_on_the_1080p_grid_at_any_resolution() -> None:
+    np.testing.assert_array_equal(whole_pixels(np.array([[10.2, 20.9], [10.99, -0.4]]), 1920), [[10.0, 20.0], [10.0, -1.0]])
+    # At 640 px wide a 1080p pixel is a third of a pixel: 10.2 px is 1080p pixel 31.6 -> 31.
+    np.testing.assert_allclose(whole_pixels(np.array([10.2, 5.0]), 640), [(31 + 0.5) / 3 - 0.5, (16 + 0.5) / 3 - 0.5])
+
+
+def test_detection_noise_draws_outliers_and_misses_at_their_rates() -> None:
+    rng = np.random.default_rng(0)
+    noise = DetectionNoise(core_px=1.0, outlier_px=5.0, outlier_probability=0.2, miss_probability=0.3)
+    errors = np.array([noise.sample(rng) for _ in range(20000)])
+    assert np.var(errors) == pytest.approx(0.8 * 1.0 + 0.2 * 25.0, rel=0.05)
+    assert np.mean([noise.misses(rng) for _ in range(20000)]) == pytest.approx(0.3, abs=0.01)
+    np.testing.assert_allclose(noise.sample(np.random.default_rng(1), 640) * 3, noise.sample(np.random.default_rng(1), 1920))
+    assert not DetectionNoise(1.0, 1.0, 0.0).misses(rng)
+    with pytest.raises(ValueError, match="miss_probability"):
+        DetectionNoise(1.0, 1.0, 0.0, miss_probability=1.5)
+    with pytest.raises(ValueError, match="core_px"):
+        DetectionNoise(-1.0, 1.0, 0.0)
+
+
+def test_the_median_filter_drops_a_sliver_but_keeps_the_tape() -> None:
+    image = np.zeros((60, 60, 3), np.uint8)
+    image[10:30, 10:30] = (220, 10, 10)  # the tape seen face-on: 20 x 20 px
+    image[40:42, 5:55] = (220, 10, 10)  # a sliver two pixels thin, larger than the tape would need to be found
+    assert detect_marker(image, median_px=1).area_px == 400
+    found = detect_marker(image, median_px=median_kernel_px(1920))
+    np.testing.assert_allclose(found.centroid, [19.5, 19.5], atol=0.5)
+    sliver_only = image.copy()
+    sliver_only[10:30, 10:30] = 0
+    assert detect_marker(sliver_only, median_px=1) is not None and detect_marker(sliver_only, median_px=9) is None
+    assert [median_kernel_px(w) for w in (1920, 960, 640, 320)] == [9, 3, 3, 1]
+    with pytest.raises(ValueError, match="median_px"):
+        detect_marker(image, median_px=4)

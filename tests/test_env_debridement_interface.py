@@ -34,7 +34,7 @@ def test_detections_triangulate_to_the_true_centres_and_give_the_yaw(make):
     obs, _ = env.reset(seed=3)
     world, table = env.unwrapped.world, env.unwrapped.table
     assert obs["fragment_seen"].sum() == 8
-    truth = world.camera.to_camera_frame(table.true_fragment_positions())
+    truth = world.camera.depth_scale * world.camera.to_camera_frame(table.true_fragment_positions())  # as the authors triangulate
     yaws = np.array([f.yaw() for f in table.fragments])
     for position, angle in zip(obs["fragment_positions"], obs["fragment_angles"]):
         distances = np.linalg.norm(truth - position, axis=1)
@@ -42,7 +42,7 @@ def test_detections_triangulate_to_the_true_centres_and_give_the_yaw(make):
         assert distances[i] < 7e-4
         error = (image_angle_to_yaw(float(angle)) - yaws[i] + math.pi / 2) % math.pi - math.pi / 2
         assert abs(error) < math.radians(6.0)
-    u = np.array([world.camera.project(world.camera.to_world(p))[0][0, 0] for p in obs["fragment_positions"]])
+    u = np.array([world.camera.project(world.camera.to_world(p / world.camera.depth_scale))[0][0, 0] for p in obs["fragment_positions"]])
     assert np.all(np.diff(u) < 0)  # the receptacle's side of the image first
 
 
@@ -160,6 +160,7 @@ def test_debride_command_writes_the_trial_table(tmp_path, capsys):
 
     from dvrk_gym.calibration.models.rigid import RigidBodyCalibrator
     from dvrk_gym.cli.debridement import add_commands
+    from dvrk_gym.sim import identified
     from dvrk_gym.sim.endoscope.camera import StereoCamera
 
     rng = np.random.default_rng(0)
@@ -171,7 +172,8 @@ def test_debride_command_writes_the_trial_table(tmp_path, capsys):
         reference = tool_pose(WORKSPACE_CENTER_M + [0.0, 0.0, 0.01], yaw)
         offset = kin.touch_point(ik.inverse_kinematics(reference)) - reference[:3, 3]
         for tip in tips:
-            rows.append([*camera.to_camera_frame(tip)[0], yaw, pitch, roll])
+            # As the world's endoscope triangulates: scaled by its identified depth scale.
+            rows.append([*camera.to_camera_frame(tip)[0] * identified.CAMERA.depth_scale, yaw, pitch, roll])
             targets.append(tip - offset)
     RigidBodyCalibrator().fit(np.array(rows), np.array(targets)).save(tmp_path / "rbt.npz")
     (tmp_path / "pipeline_config.json").write_text(json.dumps({"bias": "none", "bias_seed": 0}))

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from dvrk_gym.calibration.phase1 import PaperExplorationPolicy, Phase1Data, clean_mask, collect_phase1
+from dvrk_gym.calibration.phase1 import PaperExplorationPolicy, Phase1Data, clean_mask, collect_phase1, left_to_right_map
 from dvrk_gym.envs import exploration as ex
 
 
@@ -42,30 +42,42 @@ def test_reported_pose_is_the_command_and_truth_differs_under_paper_bias(make_en
     assert 0.008 < nominal_tip_offset < 0.013  # the tip is about a jaw length from the reported point
 
 
-def test_paper_policy_moves_about_a_millimetre_per_pause_with_three_rotations():
+def test_paper_policy_moves_about_a_millimetre_per_pause_with_its_own_and_three_random_rotations():
     policy = PaperExplorationPolicy(seed=0)
     start = {"reported_pose": np.array([0.01, 0.02, -0.15, 0, 0, 0], dtype=np.float32)}
     policy.reset(start)
-    actions = np.array([policy(start) for _ in range(30)])
+    actions = np.array([policy(start) for _ in range(40)])
     positions = actions[:, :3]
-    assert np.all(positions[0::3] == positions[1::3]) and np.all(positions[1::3] == positions[2::3])
-    steps = np.linalg.norm(np.diff(positions[::3], axis=0), axis=1)
+    for k in range(1, 4):
+        assert np.all(positions[0::4] == positions[k::4])
+    steps = np.linalg.norm(np.diff(positions[::4], axis=0), axis=1)
     assert np.all(steps <= 0.001 + 1e-6) and np.median(steps) == pytest.approx(0.001, abs=1e-6)
+    # The authors' code records the trajectory's orientation first at every pause.
+    np.testing.assert_array_equal(actions[0::4, 3:], np.tile(actions[0, 3:], (10, 1)))
     yaw, pitch, roll = np.degrees(actions[:, 3:]).T
     assert yaw.min() >= -90 and yaw.max() <= 90 and pitch.min() >= -15 and pitch.max() <= 25
     assert roll.min() >= -180 and roll.max() <= -150
-    assert len(np.unique(yaw)) == len(yaw)
+    random_yaws = np.delete(yaw, np.s_[0::4])
+    assert len(np.unique(random_yaws)) == len(random_yaws)
+    assert np.abs(np.diff(yaw)).max() <= 150.0 + 1e-4  # no extreme flips
 
 
-def test_cleaning_rule_keeps_only_agreeing_stereo_pairs():
-    left = np.array([[100.0, 50.0], [100.0, 50.0], [np.nan, np.nan], [100.0, 50.0]])
-    right = np.array([[90.0, 50.5], [90.0, 58.0], [90.0, 50.0], [90.0, 50.0]])
-    position = np.array([[0.0, 0.0, 0.18], [0.0, 0.0, 0.18], [np.nan] * 3, [0.0, 0.0, 5.0]])
-    areas = np.array([[900.0, 880.0], [900.0, 900.0], [0.0, 900.0], [900.0, 900.0]])
-    np.testing.assert_array_equal(clean_mask(left, right, position, areas, image_width=1920), [True, False, False, False])
-    slivers = np.tile(left[:1], (4, 1)), np.tile(right[:1], (4, 1)), np.tile(position[:1], (4, 1))
-    areas = np.array([[1000.0, 1000.0], [990.0, 1010.0], [1000.0, 150.0], [120.0, 130.0]])
-    np.testing.assert_array_equal(clean_mask(*slivers, areas, image_width=1920), [True, True, False, False])
+def test_cleaning_rule_keeps_pairs_within_12_px_of_the_grid_map():
+    # Right = left shifted 70 px left (a plane at constant disparity), fitted from four points.
+    grid_left = np.array([[800.0, 200.0], [1300.0, 200.0], [800.0, 700.0], [1300.0, 700.0]])
+    grid_right = grid_left - [70.0, 0.0]
+    to_right = left_to_right_map(grid_left, grid_right)
+    left = np.array([[1000.0, 400.0], [1000.0, 400.0], [1000.0, 400.0], [np.nan, np.nan], [1000.0, 400.0]])
+    right = np.array([[930.0, 400.0], [930.0, 411.0], [922.0, 391.0], [930.0, 400.0], [930.0, 412.5]])
+    np.testing.assert_array_equal(clean_mask(left, right, to_right, image_width=1920), [True, True, False, False, False])
+    # At 640 px wide the gate is 4 px.
+    assert list(clean_mask(left / 3, right / 3, left_to_right_map(grid_left / 3, grid_right / 3), image_width=640)) == [
+        True,
+        True,
+        False,
+        False,
+        False,
+    ]
 
 
 @pytest.mark.slow

@@ -1,10 +1,13 @@
 """GridTouch-v0: goals, touches, the paper's error measures and Phase II corrections."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 
 from dvrk_gym.envs.grid_touch import N_CIRCLES, SURFACE_Z_M, tool_pose
 from dvrk_gym.sim.robot import kinematics as kin
+from dvrk_gym.sim.robot.bias import BIAS_PRESETS
 
 
 def _nominal_action(env, circle_index: int, yaw: float = 0.0) -> np.ndarray:
@@ -72,11 +75,13 @@ def test_perfect_robot_touches_the_centre(make_env):
 
 
 def test_biased_robot_misses_and_the_correction_puts_it_right(make_env):
-    env = make_env("dvrk_gym/GridTouch-v0", bias="paper", correction_noise_m=0.0)
+    # The identified instrument without its repeatability: what is left is the cables' bias.
+    quiet = dataclasses.replace(BIAS_PRESETS["paper"], repeatability_m=0.0)
+    env = make_env("dvrk_gym/GridTouch-v0", bias=quiet, correction_noise_m=0.0)
     env.reset(seed=0, options={"circle": 10})
     action = _nominal_action(env, 10)
     _, reward, _, _, info = env.step(action)
-    assert info["mm_error"] > 0.5
+    assert info["mm_error"] > 0.2  # the identified cables alone: 0.36 mm at circle 10, yaw 0
     corrected = action.copy()
     corrected[:3] += info["human_correction"]
     env.reset(seed=0, options={"circle": 10})

@@ -23,6 +23,7 @@ REFERENCE = FidelityStatistics(
     kept_fraction_per_yaw=(0.1, 0.3, 0.3, 0.2, 0.1),
     pitch_p5_deg=-10.0,
     pitch_p95_deg=20.0,
+    pitch_median_per_yaw_deg=(10.0, 8.0, -1.0, -3.0, -1.0),
     cv_linear_mm2=4.0,
     cv_forest_mm2=5.0,
 )
@@ -40,13 +41,24 @@ def test_ratios_within_25_percent_and_shares_within_006_pass():
         "kept share of raw rows",
     ):
         assert verdicts_near[name] and not verdicts_far[name], name
-    assert len(verdicts_near) == 14 and all(verdicts_near.values())
+    assert len(verdicts_near) == 19 and all(verdicts_near.values())
+
+
+def test_median_pitch_per_yaw_passes_within_5_degrees_absolute():
+    near = dataclasses.replace(REFERENCE, pitch_median_per_yaw_deg=(14.9, 3.1, -1.0, -3.0, -1.0))
+    far = dataclasses.replace(REFERENCE, pitch_median_per_yaw_deg=(15.1, 8.0, -1.0, -3.0, -11.8))
+    near_rows = {row.name: row for row in compare(REFERENCE, near, 0.37, 0.37)}
+    far_rows = {row.name: row for row in compare(REFERENCE, far, 0.37, 0.37)}
+    assert near_rows["median pitch at yaw -90 (deg)"].passed and near_rows["median pitch at yaw -45 (deg)"].passed
+    assert not far_rows["median pitch at yaw -90 (deg)"].passed and not far_rows["median pitch at yaw +90 (deg)"].passed
+    assert far_rows["median pitch at yaw +90 (deg)"].difference == pytest.approx(-10.8)
+    assert far_rows["median pitch at yaw +90 (deg)"].target == "|diff| <= 5"
 
 
 def test_cross_validation_rows_are_left_out_when_not_run():
     sim = dataclasses.replace(REFERENCE, cv_linear_mm2=None, cv_forest_mm2=None)
     names = [row.name for row in compare(REFERENCE, sim, 0.37, 0.37)]
-    assert len(names) == 12 and not any("CV" in name for name in names)
+    assert len(names) == 17 and not any("CV" in name for name in names)
 
 
 def test_atomic_write_replaces_whole_or_keeps_the_old_file(tmp_path):
@@ -79,5 +91,8 @@ def test_fidelity_command_writes_finite_numbers_with_the_real_rows_in_the_real_c
     assert report["real"] == real
     assert report["sim"]["raw_rows"] == 2 * 93 and 10 <= report["sim"]["rows"] <= report["sim"]["raw_rows"]
     for row in report["comparison"]:
+        if row["sim"] is None:  # two trajectories may keep no row at some yaw: no median pitch there, and a fail
+            assert row["statistic"].startswith("median pitch at yaw") and not row["passed"], row
+            continue
         assert math.isfinite(row["real"]) and math.isfinite(row["sim"]) and math.isfinite(row["value"]), row
     assert report["passed"] == sum(row["passed"] for row in report["comparison"])

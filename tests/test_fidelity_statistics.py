@@ -21,6 +21,7 @@ def test_real_rows_give_the_issues_real_robot_column():
     assert round(stats.image_plane_jitter_mm, 1) == 1.0
     assert [round(f, 2) for f in stats.kept_fraction_per_yaw] == [0.13, 0.30, 0.28, 0.20, 0.09]
     assert (round(stats.pitch_p5_deg), round(stats.pitch_p95_deg)) == (-11, 21)
+    assert [round(p, 1) for p in stats.pitch_median_per_yaw_deg] == [11.7, 7.6, -1.0, -3.0, -1.1]
     assert round(stats.cv_linear_mm2, 2) == 3.76
     assert round(stats.cv_forest_mm2, 1) == 5.0
     json.dumps(stats.to_dict())

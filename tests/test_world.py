@@ -7,10 +7,8 @@ from dvrk_gym.envs.exploration import sample_paper_poses
 from dvrk_gym.sim.physics.scene import grid_circle_centers
 from dvrk_gym.sim.robot import ik
 from dvrk_gym.sim.robot import kinematics as kin
+from dvrk_gym.sim.robot.body import marker_corners
 from dvrk_gym.sim.world import DvrkWorld, WorldConfig
-
-MIN_FACE_AREA_PX = 100
-"""About an eighth of the tape's area seen face-on at 1920 x 1080 (about 840 px)."""
 
 
 @pytest.fixture(scope="module")
@@ -26,32 +24,26 @@ def _paper_poses(n: int, seed: int = 0):
 
 @pytest.mark.slow
 def test_pixel_detection_agrees_with_geometric_visibility(full_hd_world):
-    """Seen whole: the detected centre is within 1 px of the projected centre.
-    Hidden from every sample ray: not detected.
-
-    "Seen whole" also asks for at least MIN_FACE_AREA_PX of tape: seen edge-on, the
-    0.1 mm tape is a sliver a pixel wide whose centroid cannot beat the pixel grid (the
-    Phase I cleaning rule drops those too)."""
+    """Mostly seen (over half the sample rays reach the tape's faces that face the camera):
+    detected, inside the tape's projected bounding box. Hidden from every sample ray: not
+    detected. (The tape is folded over a jaw's edge, so which of its sides the camera sees
+    moves the centroid within that box.)"""
     world = full_hd_world
-    whole = hidden = 0
+    seen = hidden = 0
     for pose in _paper_poses(120):
         world.move_to(pose)
         detection = world.observe_marker()
-        expected_left, expected_right = world.camera.project(world.true_marker_position())
-        sides = (
-            ("left", detection.left_uv, expected_left[0], detection.left_area_px),
-            ("right", detection.right_uv, expected_right[0], detection.right_area_px),
-        )
-        for side, uv, expected, area in sides:
+        corners_left, corners_right = world.camera.project(marker_corners(world.q_true, world.cable.true_dh))
+        for side, uv, corners in (("left", detection.left_uv, corners_left), ("right", detection.right_uv, corners_right)):
             fraction = world.marker_visible_fraction(side)
-            if fraction == 1.0 and area >= MIN_FACE_AREA_PX:
-                whole += 1
-                assert np.isfinite(uv).all(), f"{side} camera missed a fully visible marker"
-                assert np.linalg.norm(uv - expected) < 1.0
+            if fraction > 0.5:
+                seen += 1
+                assert np.isfinite(uv).all(), f"{side} camera missed a mostly visible marker"
+                assert np.all(uv >= corners.min(axis=0) - 0.5) and np.all(uv <= corners.max(axis=0) + 0.5)
             elif fraction == 0.0:
                 hidden += 1
                 assert not np.isfinite(uv).all(), f"{side} camera saw a marker the wrist hides"
-    assert whole >= 10 and hidden >= 10  # the sample must exercise both checks
+    assert seen >= 10 and hidden >= 10  # the sample must exercise both checks
 
 
 def test_all_35_circles_are_detected_near_their_projections(full_hd_world):
@@ -60,14 +52,17 @@ def test_all_35_circles_are_detected_near_their_projections(full_hd_world):
     left, right = full_hd_world.camera.project(grid_circle_centers())
     detected_left = np.array([d.left_uv for d in grid])
     assert np.abs(detected_left - left).max() < 0.5
-    positions = full_hd_world.camera.to_world(np.array([d.camera_position for d in grid]))
+    # The authors' triangulation scales positions by the camera's depth scale (its short baseline).
+    camera = full_hd_world.camera
+    positions = camera.to_world(np.array([d.camera_position for d in grid]) / camera.depth_scale)
     assert np.abs(positions - grid_circle_centers()).max() < 0.5e-3  # triangulated to half a mm
 
 
 def test_triangulate_of_project_is_identity(full_hd_world):
     camera = full_hd_world.camera
     points = grid_circle_centers() + [0.0, 0.0, 0.01]
-    np.testing.assert_allclose(camera.to_world(camera.triangulate(*camera.project(points))), points, atol=1e-12)
+    triangulated = camera.triangulate(*camera.project(points))
+    np.testing.assert_allclose(camera.to_world(triangulated / camera.depth_scale), points, atol=1e-12)
 
 
 def test_reported_pose_is_nominal_kinematics_and_truth_differs_under_bias():
@@ -126,3 +121,21 @@ def test_bad_world_config_is_a_clear_error():
         WorldConfig(camera_resolution=(0, 10))
     with pytest.raises(ValueError, match="pixel_noise_px"):
         WorldConfig(pixel_noise_px=-1.0)
+
+
+def test_noisy_detections_are_whole_pixels_and_their_depth_follows_the_disparity(full_hd_world):
+    world = full_hd_world
+    rng = np.random.default_rng(0)
+    seen = 0
+    for pose in _paper_poses(40, seed=3):
+        world.move_to(pose)
+        detection = world.observe_marker(noise_rng=rng)
+        if not detection.seen_both:
+            continue
+        seen += 1
+        for uv in (detection.left_uv, detection.right_uv):
+            np.testing.assert_array_equal(uv, np.floor(uv))
+        disparity = np.linalg.norm(detection.left_uv - detection.right_uv)
+        depth = world.camera.intrinsics.fx * world.camera.calibrated_baseline_m / disparity
+        assert detection.camera_position[2] == pytest.approx(depth)
+    assert seen >= 5

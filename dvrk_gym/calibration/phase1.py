@@ -3,7 +3,12 @@
 The paper ran 57 trajectories from the four workspace corners, pausing about every
 millimetre to take three random rotations (yaw U[-90, 90], pitch U[-15, 25], roll
 U[-180, -150] degrees), and kept the samples where both cameras saw the red marker at the
-same place: 1,939 of 5,256 (37%); the rest the wrist hid.
+same place: 1,939 of 5,256 (37%); the rest the wrist hid. The authors' code
+(:data:`dvrk_gym.paper.AUTHORS_CODE`) gives the details followed here: at each pause it
+records the trajectory's own orientation first and then the three random ones, a new yaw
+at most 150 degrees from the last; and "the same place" means that the right camera's
+detection lies less than 12 px from where an affine map, fitted to the grid circles seen by
+both cameras, sends the left one (:func:`clean_mask`).
 """
 
 from __future__ import annotations
@@ -18,27 +23,23 @@ from dvrk_gym import paper
 from dvrk_gym.calibration.records import ArrayRecord
 from dvrk_gym.envs.exploration import PITCH_RANGE_RAD, ROLL_RANGE_RAD, SAFE_X_M, SAFE_Y_M, SAFE_Z_M, YAW_RANGE_RAD
 
-ROW_TOLERANCE_PX = 2.0
-"""Rectified views agree when their rows differ by at most this, at 1920 x 1080."""
-MIN_AREA_FRACTION = 0.2
-"""A blob smaller than this fraction of the data's 95th-percentile blob area is the tape
-seen nearly edge-on, often clipped by the shaft: its centroid is unreliable (measured:
-rejecting these cuts detections more than 2 px off from 24% to 10%)."""
-DEPTH_RANGE_M = (0.10, 0.30)
-"""A triangulated depth outside this range is a mismatched pair, not the marker."""
+MAX_YAW_STEP_RAD = float(np.deg2rad(150.0))
+"""The authors' sampler redraws a yaw more than this from the previous one (no extreme flips), rad."""
 
 
 class PaperExplorationPolicy:
-    """The paper's Phase I protocol as a policy from observation to action.
+    """The paper's Phase I protocol, as the authors' code ran it, as a policy from observation to action.
 
-    Each trajectory heads for a random target in the safe ranges in steps of about
-    ``step_m``; at every pause it commands ``rotations_per_pause`` random orientations.
-    On reaching a target it draws another.
+    Each trajectory draws its own orientation and a random target in the safe ranges, and
+    heads for the target in steps of about ``step_m``. At every pause it commands the
+    trajectory's orientation, then ``rotations_per_pause`` random ones, each yaw within
+    150 degrees of the one before. On reaching a target it draws another.
 
     Args:
         seed: seeds the policy's own generator (targets and rotations).
         step_m: distance between pauses, metres (the paper: about 1 mm).
-        rotations_per_pause: random orientations commanded at each pause (the paper: 3).
+        rotations_per_pause: random orientations commanded at each pause after the
+            trajectory's own (the paper: 3).
     """
 
     def __init__(
@@ -53,26 +54,35 @@ class PaperExplorationPolicy:
         self.rotations_per_pause = int(rotations_per_pause)
         self._position: np.ndarray | None = None
         self._target = np.zeros(3)
-        self._rotations_left = 0
+        self._home_rotation = np.zeros(3)
+        self._last_yaw = 0.0
+        self._poses_left = 0
 
     def reset(self, observation: dict[str, np.ndarray]) -> None:
         """Start a new trajectory from the reported position in ``observation``."""
         self._position = np.asarray(observation["reported_pose"][:3], dtype=float)
+        self._home_rotation = self._draw_rotation(None)
         self._target = self._draw_target()
-        self._rotations_left = self.rotations_per_pause
+        self._poses_left = self.rotations_per_pause + 1
 
     def __call__(self, observation: dict[str, np.ndarray]) -> np.ndarray:
         """The next action (bx, by, bz, yaw, pitch, roll), base frame, metres and radians."""
         if self._position is None:
             self.reset(observation)
-        if self._rotations_left == 0:
+        if self._poses_left == 0:
             self._advance()
-            self._rotations_left = self.rotations_per_pause
-        self._rotations_left -= 1
+            self._poses_left = self.rotations_per_pause + 1
+        first = self._poses_left == self.rotations_per_pause + 1
+        self._poses_left -= 1
+        rotation = self._home_rotation if first else self._draw_rotation(self._last_yaw)
+        self._last_yaw = float(rotation[0])
+        return np.concatenate([self._position, rotation]).astype(np.float32)
+
+    def _draw_rotation(self, previous_yaw: float | None) -> np.ndarray:
         yaw = self.rng.uniform(*YAW_RANGE_RAD)
-        pitch = self.rng.uniform(*PITCH_RANGE_RAD)
-        roll = self.rng.uniform(*ROLL_RANGE_RAD)
-        return np.concatenate([self._position, [yaw, pitch, roll]]).astype(np.float32)
+        while previous_yaw is not None and abs(yaw - previous_yaw) > MAX_YAW_STEP_RAD:
+            yaw = self.rng.uniform(*YAW_RANGE_RAD)
+        return np.array([yaw, self.rng.uniform(*PITCH_RANGE_RAD), self.rng.uniform(*ROLL_RANGE_RAD)])
 
     def _draw_target(self) -> np.ndarray:
         return np.array([self.rng.uniform(*SAFE_X_M), self.rng.uniform(*SAFE_Y_M), self.rng.uniform(*SAFE_Z_M)])
@@ -135,24 +145,55 @@ class Phase1Data(ArrayRecord):
         return self.reported_position
 
 
-def clean_mask(
-    left_px: np.ndarray, right_px: np.ndarray, camera_position: np.ndarray, areas_px: np.ndarray, image_width: int
-) -> np.ndarray:
-    """The paper's cleaning rule: both cameras saw the marker, at the same place.
+def left_to_right_map(left_px: np.ndarray, right_px: np.ndarray) -> np.ndarray:
+    """The authors' affine map from left to right pixels, fitted to points seen by both cameras.
 
-    A row is kept when both detections exist, their rows agree within
-    ``ROW_TOLERANCE_PX`` (scaled to the image width; a rectified pair sees a point on the
-    same row), the triangulated depth lies in ``DEPTH_RANGE_M``, and neither blob is a
-    sliver (smaller than ``MIN_AREA_FRACTION`` of the 95th-percentile blob area).
+    Least squares over the points where both are finite (the grid circles: where a point
+    of the paper's plane appears in the right image, given where it appears in the left).
+
+    Args:
+        left_px: (N, 2) left pixels (NaN where unseen).
+        right_px: (N, 2) right pixels (NaN where unseen).
+
+    Returns:
+        (3, 2) matrix M with ``right ~= [u_left, v_left, 1] @ M``.
+
+    Raises:
+        ValueError: fewer than three points seen by both cameras.
     """
-    tolerance = ROW_TOLERANCE_PX * image_width / 1920.0
-    seen = np.isfinite(left_px).all(axis=1) & np.isfinite(right_px).all(axis=1) & np.isfinite(camera_position).all(axis=1)
-    rows_agree = np.abs(np.nan_to_num(left_px[:, 1] - right_px[:, 1], nan=np.inf)) <= tolerance
-    depth = np.nan_to_num(camera_position[:, 2], nan=-1.0)
-    seen_areas = areas_px[seen]
-    typical = np.percentile(seen_areas, 95) if seen_areas.size else 0.0
-    big_enough = areas_px.min(axis=1) >= MIN_AREA_FRACTION * typical
-    return seen & rows_agree & (depth >= DEPTH_RANGE_M[0]) & (depth <= DEPTH_RANGE_M[1]) & big_enough
+    both = np.isfinite(left_px).all(axis=1) & np.isfinite(right_px).all(axis=1)
+    if both.sum() < 3:
+        raise ValueError(f"an affine left-to-right map needs at least 3 points seen by both cameras, got {int(both.sum())}")
+    design = np.hstack([left_px[both], np.ones((int(both.sum()), 1))])
+    return np.linalg.lstsq(design, right_px[both], rcond=None)[0]
+
+
+def clean_mask(left_px: np.ndarray, right_px: np.ndarray, left_to_right: np.ndarray, image_width: int) -> np.ndarray:
+    """The authors' cleaning rule: both cameras saw the marker, at the same place.
+
+    A row is kept when both detections exist and the right one lies less than
+    :data:`dvrk_gym.paper.MARKER_GATE_PX` (12 px at 1920 wide, scaled to image_width) from
+    where ``left_to_right`` (:func:`left_to_right_map` of the grid circles) sends the left
+    one. The gate holds the row mismatch and the disparity's departure from the grid
+    plane's together, so a row up to 11 px off is kept, as in the real data.
+
+    Args:
+        left_px: (N, 2) left detections, pixels (NaN when unseen).
+        right_px: (N, 2) right detections, pixels (NaN when unseen).
+        left_to_right: (3, 2) affine map, see :func:`left_to_right_map`.
+        image_width: width of the images, pixels.
+    """
+    gate = paper.MARKER_GATE_PX * image_width / paper.ENDOSCOPE_RESOLUTION_PX[0]
+    seen = np.isfinite(left_px).all(axis=1) & np.isfinite(right_px).all(axis=1)
+    expected = np.hstack([np.nan_to_num(left_px), np.ones((len(left_px), 1))]) @ left_to_right
+    distance = np.linalg.norm(np.nan_to_num(right_px) - expected, axis=1)
+    return seen & (distance < gate)
+
+
+def grid_left_to_right_map(env: gym.Env) -> np.ndarray:
+    """:func:`left_to_right_map` of the grid circles as the env's endoscope sees them (pixels only)."""
+    grid = env.unwrapped.world.observe_grid()
+    return left_to_right_map(np.array([d.left_uv for d in grid]), np.array([d.right_uv for d in grid]))
 
 
 def _or_nan(value: np.ndarray | None, size: int) -> np.ndarray:
@@ -194,7 +235,7 @@ def collect_phase1(env: gym.Env, policy: PaperExplorationPolicy, n_trajectories:
             rows["trajectory"].append(k)
     arrays = {name: np.array(values) for name, values in rows.items()}
     width = env.unwrapped.config.camera_resolution[0]
-    kept = clean_mask(arrays["left_px"], arrays["right_px"], arrays["camera_position"], arrays["areas_px"], width)
+    kept = clean_mask(arrays["left_px"], arrays["right_px"], grid_left_to_right_map(env), width)
     return Phase1Data(**arrays, kept=kept)
 
 

@@ -7,6 +7,7 @@ the new one, never half of one.
 from __future__ import annotations
 
 import json
+import math
 import os
 from pathlib import Path
 from typing import Any
@@ -14,7 +15,7 @@ from typing import Any
 import numpy as np
 from matplotlib.figure import Figure
 
-from dvrk_gym.fidelity.comparison import RELATIVE_TOLERANCE, SHARE_TOLERANCE, ComparisonRow, FidelityRun
+from dvrk_gym.fidelity.comparison import PITCH_MEDIAN_TOLERANCE_DEG, RELATIVE_TOLERANCE, SHARE_TOLERANCE, ComparisonRow, FidelityRun
 from dvrk_gym.fidelity.statistics import PAPER_YAWS_DEG, rigid_residuals_camera
 from dvrk_gym.utils.atomic import atomic_savefig, atomic_write_text
 
@@ -29,7 +30,7 @@ _BINS = 40
 
 def _difference(row: ComparisonRow) -> str:
     if row.share:
-        return f"diff {row.difference:+.3f}"
+        return f"diff {row.difference:+.3f}" if row.tolerance < 1.0 else f"diff {row.difference:+.1f}"
     return f"ratio {row.difference:.2f}"
 
 
@@ -50,25 +51,36 @@ def format_table(run: FidelityRun) -> str:
         )
     lines.append(
         f"{run.passed} of {len(run.rows)} statistics within target "
-        f"(ratio within {RELATIVE_TOLERANCE:.0%}, shares within {SHARE_TOLERANCE:.2f} absolute)"
+        f"(ratio within {RELATIVE_TOLERANCE:.0%}, shares within {SHARE_TOLERANCE:.2f} absolute, "
+        f"median pitches within {PITCH_MEDIAN_TOLERANCE_DEG:.0f} degrees)"
     )
     return "\n".join(lines)
+
+
+def _finite_or_none(value: float) -> float | None:
+    """``value``, or None (JSON null) where it is undefined: a yaw without simulated rows has no median pitch."""
+    return value if math.isfinite(value) else None
 
 
 def report_dict(run: FidelityRun) -> dict[str, Any]:
     """The report as JSON-ready data: settings, both statistics, the comparison rows."""
     return {
         "settings": run.settings,
-        "targets": {"relative_tolerance": RELATIVE_TOLERANCE, "share_tolerance": SHARE_TOLERANCE},
+        "targets": {
+            "relative_tolerance": RELATIVE_TOLERANCE,
+            "share_tolerance": SHARE_TOLERANCE,
+            "pitch_median_tolerance_deg": PITCH_MEDIAN_TOLERANCE_DEG,
+        },
         "real": run.real.to_dict(),
         "sim": {**run.sim.to_dict(), "raw_rows": run.sim_raw_rows},
         "comparison": [
             {
                 "statistic": row.name,
-                "real": row.real,
-                "sim": row.sim,
+                "real": _finite_or_none(row.real),
+                "sim": _finite_or_none(row.sim),
                 "measure": "difference" if row.share else "ratio",
-                "value": row.difference,
+                "value": _finite_or_none(row.difference),
+                "tolerance": row.tolerance,
                 "passed": row.passed,
             }
             for row in run.rows

@@ -32,6 +32,7 @@ Definitions (the issue 15 table; on the authors' 1939 rows they give 6.6 mm, 0.8
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from typing import Any
@@ -88,6 +89,10 @@ class FidelityStatistics:
         kept_fraction_per_yaw: fraction of rows nearest each of ``PAPER_YAWS_DEG``.
         pitch_p5_deg: 5th percentile of the rows' pitch, degrees.
         pitch_p95_deg: 95th percentile of the rows' pitch, degrees.
+        pitch_median_per_yaw_deg: median pitch of the rows nearest each of
+            ``PAPER_YAWS_DEG``, degrees (nan for a yaw without rows). The touches of
+            GridTouch use one pitch per yaw (0 at yaw -90 to 10 at yaw 90), so a yaw whose
+            kept rows lie far from it leaves the DNN extrapolating there.
         cv_linear_mm2: contiguous 10-fold CV of linear regression, mm^2 (None if not run).
         cv_forest_mm2: the same for the random forest, mm^2 (None if not run).
     """
@@ -101,6 +106,7 @@ class FidelityStatistics:
     kept_fraction_per_yaw: tuple[float, ...]
     pitch_p5_deg: float
     pitch_p95_deg: float
+    pitch_median_per_yaw_deg: tuple[float, ...]
     cv_linear_mm2: float | None
     cv_forest_mm2: float | None
 
@@ -108,6 +114,8 @@ class FidelityStatistics:
         """The fields as a JSON-ready dict (tuples as lists)."""
         values = asdict(self)
         values["kept_fraction_per_yaw"] = list(self.kept_fraction_per_yaw)
+        # A yaw without rows has no median: None (JSON null), not NaN (not JSON).
+        values["pitch_median_per_yaw_deg"] = [None if math.isnan(p) else p for p in self.pitch_median_per_yaw_deg]
         return values
 
 
@@ -198,6 +206,9 @@ def fidelity_statistics(
         kept_fraction_per_yaw=tuple(float(f) for f in np.bincount(groups, minlength=len(PAPER_YAWS_RAD)) / X.shape[0]),
         pitch_p5_deg=float(np.percentile(pitch_deg, PITCH_PERCENTILES[0])),
         pitch_p95_deg=float(np.percentile(pitch_deg, PITCH_PERCENTILES[1])),
+        pitch_median_per_yaw_deg=tuple(
+            float(np.median(pitch_deg[groups == g])) if np.any(groups == g) else float("nan") for g in range(len(PAPER_YAWS_RAD))
+        ),
         cv_linear_mm2=linear,
         cv_forest_mm2=forest,
     )

@@ -23,9 +23,16 @@ from typing import Protocol
 
 import numpy as np
 
-from dvrk_gym.sim.endoscope.camera import PAPER_INTRINSICS, PixelWindow, StereoCamera, default_camera_pose
-from dvrk_gym.sim.endoscope.detection import Blob, detect_circles, detect_marker, match_to_expected
-from dvrk_gym.sim.endoscope.noise import PixelNoise
+from dvrk_gym.sim.endoscope.camera import (
+    PAPER_BASELINE_M,
+    PAPER_INTRINSICS,
+    TRUE_BASELINE_M,
+    PixelWindow,
+    StereoCamera,
+    default_camera_pose,
+)
+from dvrk_gym.sim.endoscope.detection import Blob, detect_circles, detect_marker, match_to_expected, median_kernel_px
+from dvrk_gym.sim.endoscope.noise import IDENTIFIED_MARKER_NOISE, DetectionNoise, PixelNoise, whole_pixels
 from dvrk_gym.sim.endoscope.stereo import StereoDetection, stereo_detection
 from dvrk_gym.sim.physics.client import Physics
 from dvrk_gym.sim.physics.scene import CIRCLE_RADIUS_M, SceneBodies, build_scene, grid_circle_centers
@@ -65,8 +72,10 @@ class WorldConfig:
         camera_pose: T_base_leftcam (4x4, metres); None for the paper's set-up. Hidden
             from agents: they only see pixels.
         pixel_noise_px: standard deviation of the noise added to every detected pixel
-            coordinate, at 1920 x 1080 (scaled with the resolution); models the sub-pixel
-            jitter of a real endoscope's detections.
+            coordinate, at 1920 x 1080 (scaled with the resolution), on top of
+            ``marker_noise`` for the red marker.
+        marker_noise: the red-tape detector's own error in each camera (the identified
+            one by default: :data:`dvrk_gym.sim.identified.MARKER_DETECTION_NOISE`).
     """
 
     camera_resolution: tuple[int, int] = (PAPER_INTRINSICS.width, PAPER_INTRINSICS.height)
@@ -76,6 +85,7 @@ class WorldConfig:
     motion: MotionLimits = field(default_factory=MotionLimits)
     camera_pose: np.ndarray | None = None
     pixel_noise_px: float = 0.0
+    marker_noise: DetectionNoise = IDENTIFIED_MARKER_NOISE
 
     def __post_init__(self) -> None:
         check_float_fields("WorldConfig", self, {"pixel_noise_px": (0.0, MAX_PIXEL_NOISE_PX, False)})
@@ -149,7 +159,9 @@ class DvrkWorld:
         width, height = self.config.camera_resolution
         self.camera = StereoCamera(
             intrinsics=PAPER_INTRINSICS.scaled(int(width), int(height)),
+            baseline_m=TRUE_BASELINE_M,
             pose=default_camera_pose() if self.config.camera_pose is None else self.config.camera_pose,
+            calibrated_baseline_m=PAPER_BASELINE_M,
         )
         self.pixel_noise = PixelNoise(self.config.pixel_noise_px, self.camera.intrinsics.width)
         """The detection noise of every pixel the endoscope reports (scaled to this resolution)."""
@@ -274,7 +286,9 @@ class DvrkWorld:
         """Find the red marker in both endoscope images.
 
         Args:
-            noise_rng: draws the configured pixel noise (None: exact detections).
+            noise_rng: draws the detector's error and the configured pixel noise, and
+                the detections come in whole pixels as the authors' did (None: exact
+                sub-pixel centroids, no noise).
 
         The detection runs on rendered pixels. Only the window where the marker can
         appear gets rendered: the bounding box of its corners' projections plus a margin,
@@ -285,13 +299,21 @@ class DvrkWorld:
         left_uv, right_uv = self.camera.project(marker_corners(self.q_true, self.cable.true_dh))
         left = self._detect_in_window("left", left_uv)
         right = self._detect_in_window("right", right_uv)
-        return stereo_detection(self.camera, self._with_noise(left, noise_rng), self._with_noise(right, noise_rng))
+        return stereo_detection(self.camera, self._as_detected(left, noise_rng), self._as_detected(right, noise_rng))
 
-    def _with_noise(self, blob: Blob | None, noise_rng: np.random.Generator | None) -> Blob | None:
-        """``blob`` with the configured pixel noise on its centroid; ``blob`` itself without noise or generator."""
-        if blob is None or noise_rng is None or self.pixel_noise.sigma_px == 0.0:
-            return blob
-        return Blob(self.pixel_noise.apply(blob.centroid, noise_rng), blob.area_px, blob.touches_border)
+    def _as_detected(self, blob: Blob | None, noise_rng: np.random.Generator | None) -> Blob | None:
+        """``blob`` as a real detector reports it; ``blob`` itself without a generator.
+
+        With a generator: the tape detector's own misses and error (``config.marker_noise``,
+        drawn per camera), then the configured extra pixel noise, then whole pixels of the
+        paper's 1080p grid (the authors' detector truncated its centroids).
+        """
+        if blob is None or noise_rng is None or self.config.marker_noise.misses(noise_rng):
+            return None if noise_rng is not None else blob
+        width = self.camera.intrinsics.width
+        centroid = blob.centroid + self.config.marker_noise.sample(noise_rng, width)
+        centroid = whole_pixels(self.pixel_noise.apply(centroid, noise_rng), width)
+        return Blob(centroid, blob.area_px, blob.touches_border)
 
     def marker_visible_fraction(self, side: str) -> float:
         """Geometric visibility of the marker from one camera, without rendering.
@@ -312,14 +334,16 @@ class DvrkWorld:
 
     def _detect_in_window(self, side: str, corners_uv: np.ndarray) -> Blob | None:
         k = self.camera.intrinsics
-        low = np.floor(corners_uv.min(axis=0)).astype(int) - MARKER_WINDOW_MARGIN_PX
-        high = np.ceil(corners_uv.max(axis=0)).astype(int) + MARKER_WINDOW_MARGIN_PX
+        # The median filter reads half its kernel beyond the blob: render that much more.
+        margin = MARKER_WINDOW_MARGIN_PX + median_kernel_px(k.width) // 2
+        low = np.floor(corners_uv.min(axis=0)).astype(int) - margin
+        high = np.ceil(corners_uv.max(axis=0)).astype(int) + margin
         low = np.maximum(low, 0)
         high = np.minimum(high, [k.width - 1, k.height - 1])
         if np.any(high < low):  # entirely outside the image
             return None
         window = PixelWindow(int(low[0]), int(low[1]), int(high[0] - low[0] + 1), int(high[1] - low[1] + 1))
-        blob = detect_marker(self.camera.render(self.physics.client, side, window))
+        blob = detect_marker(self.camera.render(self.physics.client, side, window), median_px=median_kernel_px(k.width))
         if blob is None:
             return None
         return Blob(blob.centroid + [window.u0, window.v0], blob.area_px, blob.touches_border)

@@ -21,22 +21,21 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 import pybullet
+from scipy.spatial.transform import Rotation
 
 from dvrk_gym import paper
+from dvrk_gym.sim import identified
 
 if TYPE_CHECKING:
     from pybullet_utils.bullet_client import BulletClient
 
 PAPER_BASELINE_M = paper.ENDOSCOPE_BASELINE_M
+"""The baseline the authors' stereo calibration gives, and triangulates with, metres."""
 WORKSPACE_CENTER_M = (0.040, 0.042, -0.164)
-CAMERA_DISTANCE_M = paper.ENDOSCOPE_HEIGHT_M
-# Camera -> base rotation fitted to the paper authors' data (columns = camera
-# x, y, z axes expressed in the base frame); orthonormalised in default_camera_pose.
-_PAPER_ROTATION_BASE_CAM = (
-    (-0.965, -0.145, -0.219),
-    (-0.115, 0.983, -0.144),
-    (0.236, -0.114, -0.965),
-)
+TRUE_BASELINE_M = PAPER_BASELINE_M / identified.CAMERA.depth_scale
+"""The baseline the simulated endoscope renders with, metres: the authors' triangulated
+positions are ``depth_scale`` (0.95) times the true ones (:data:`dvrk_gym.sim.identified.CAMERA`),
+which a stereo calibration 5% short in baseline does."""
 # Where TinyRenderer samples pixel (u, v) relative to the OpenCV pixel centre,
 # expressed as offsets added before normalising to NDC (measured, see module doc).
 _TINY_SAMPLE_OFFSET_U_PX = 0.0
@@ -98,7 +97,10 @@ class CameraIntrinsics:
         )
 
 
-PAPER_INTRINSICS = CameraIntrinsics(*paper.ENDOSCOPE_RESOLUTION_PX, paper.ENDOSCOPE_FOCAL_PX, paper.ENDOSCOPE_FOCAL_PX, 959.5, 539.5)
+PAPER_INTRINSICS = CameraIntrinsics(
+    *paper.ENDOSCOPE_RESOLUTION_PX, paper.ENDOSCOPE_FOCAL_PX, paper.ENDOSCOPE_FOCAL_PX, *paper.ENDOSCOPE_PRINCIPAL_POINT_PX
+)
+"""The authors' rectified cameras (their ROS camera files): 1920 x 1080, f = 2144.06 px."""
 
 
 @dataclass(frozen=True)
@@ -120,13 +122,14 @@ class PixelWindow:
 
 
 def default_camera_pose() -> np.ndarray:
-    """Return T_world_leftcam (4x4): the paper's rotation, optical axis through the
-    workspace centre at ``CAMERA_DISTANCE_M`` (0.19 m, ~15 deg from straight down)."""
-    u, _, vt = np.linalg.svd(np.asarray(_PAPER_ROTATION_BASE_CAM, dtype=float))
-    rotation = u @ np.diag([1.0, 1.0, np.linalg.det(u @ vt)]) @ vt
+    """Return T_world_leftcam (4x4, metres): the endoscope's pose identified from the authors' rows.
+
+    :data:`dvrk_gym.sim.identified.CAMERA`: about 0.19 m above the workspace, looking down
+    about 10 degrees from the vertical.
+    """
     pose = np.eye(4)
-    pose[:3, :3] = rotation
-    pose[:3, 3] = np.asarray(WORKSPACE_CENTER_M) - CAMERA_DISTANCE_M * rotation[:, 2]
+    pose[:3, :3] = Rotation.from_rotvec(identified.CAMERA.rotation_vector).as_matrix()
+    pose[:3, 3] = identified.CAMERA.position_base_m
     return pose
 
 
@@ -148,7 +151,11 @@ class StereoCamera:
 
     Args:
         intrinsics: Intrinsics of each camera (pixels).
-        baseline_m: Distance between the optical centres in metres (> 0).
+        baseline_m: Distance between the optical centres in metres (> 0): what the
+            cameras see.
+        calibrated_baseline_m: The baseline :meth:`triangulate` assumes, metres (> 0; None:
+            baseline_m). A stereo calibration that got it wrong scales every triangulated
+            position by calibrated_baseline_m / baseline_m.
         pose: T_world_leftcam (4x4, metres); defaults to :func:`default_camera_pose`.
         near_m: Near clipping plane for rendering, metres.
         far_m: Far clipping plane for rendering, metres.
@@ -159,6 +166,7 @@ class StereoCamera:
         intrinsics: CameraIntrinsics = PAPER_INTRINSICS,
         baseline_m: float = PAPER_BASELINE_M,
         pose: np.ndarray | None = None,
+        calibrated_baseline_m: float | None = None,
         near_m: float = 0.01,
         far_m: float = 1.0,
     ) -> None:
@@ -166,6 +174,9 @@ class StereoCamera:
             raise ValueError(f"intrinsics must be CameraIntrinsics, got {type(intrinsics).__name__}")
         if not np.isfinite(baseline_m) or baseline_m <= 0:
             raise ValueError(f"baseline_m must be finite and > 0, got {baseline_m!r}")
+        calibrated_baseline_m = baseline_m if calibrated_baseline_m is None else calibrated_baseline_m
+        if not np.isfinite(calibrated_baseline_m) or calibrated_baseline_m <= 0:
+            raise ValueError(f"calibrated_baseline_m must be finite and > 0, got {calibrated_baseline_m!r}")
         if not (np.isfinite(near_m) and np.isfinite(far_m) and 0 < near_m < far_m):
             raise ValueError(f"need 0 < near_m < far_m (finite), got {near_m!r}, {far_m!r}")
         pose = default_camera_pose() if pose is None else np.array(pose, dtype=float)
@@ -180,11 +191,17 @@ class StereoCamera:
             raise ValueError("pose must be a rigid transform (orthonormal rotation, det +1)")
         self.intrinsics = intrinsics
         self.baseline_m = float(baseline_m)
+        self.calibrated_baseline_m = float(calibrated_baseline_m)
         self.near_m = float(near_m)
         self.far_m = float(far_m)
         self._pose = pose
         self._pose.flags.writeable = False
         self._cam_from_world = np.linalg.inv(pose)
+
+    @property
+    def depth_scale(self) -> float:
+        """Triangulated positions over true ones: calibrated_baseline_m / baseline_m (1: a right calibration)."""
+        return self.calibrated_baseline_m / self.baseline_m
 
     @property
     def pose(self) -> np.ndarray:
@@ -225,8 +242,12 @@ class StereoCamera:
     def triangulate(self, left_uv: np.ndarray, right_uv: np.ndarray) -> np.ndarray:
         """Triangulate matched pixels (N, 2) of the rectified pair into the LEFT camera frame.
 
-        Depth is ``z = fx * baseline / (u_left - u_right)``; the row used is the mean
-        of both rows (least squares for a rectified pair).
+        As the authors did (``camera_pixels_to_camera_coords`` in their code, ROS's
+        ``StereoCameraModel.projectPixelTo3d``): the disparity is the distance between the
+        left and the right pixel, ``d = |left - right|``, so a row mismatch adds to it;
+        depth is ``z = fx * calibrated_baseline_m / d`` and the left pixel gives x and y.
+        For a pair on the same row, and a calibration that got the baseline right, this is
+        the exact inverse of :meth:`project_camera_frame`.
 
         Returns:
             (N, 3) positions in metres, left camera frame.
@@ -238,14 +259,13 @@ class StereoCamera:
         right = _as_points(right_uv, 2, "right_uv")
         if left.shape != right.shape:
             raise ValueError(f"left_uv and right_uv shapes differ: {left.shape} vs {right.shape}")
-        disparity = left[:, 0] - right[:, 0]
-        bad = np.flatnonzero(disparity <= 0)
+        bad = np.flatnonzero(left[:, 0] - right[:, 0] <= 0)
         if bad.size:
-            raise ValueError(f"non-positive disparity in row(s) {bad.tolist()}: {disparity[bad].tolist()} px")
+            raise ValueError(f"non-positive disparity in row(s) {bad.tolist()}: {(left[bad, 0] - right[bad, 0]).tolist()} px")
         k = self.intrinsics
-        z = k.fx * self.baseline_m / disparity
+        z = k.fx * self.calibrated_baseline_m / np.linalg.norm(left - right, axis=1)
         x = (left[:, 0] - k.cx) * z / k.fx
-        y = (0.5 * (left[:, 1] + right[:, 1]) - k.cy) * z / k.fy
+        y = (left[:, 1] - k.cy) * z / k.fy
         return np.stack([x, y, z], axis=1)
 
     def view_matrix(self, side: str) -> list[float]:

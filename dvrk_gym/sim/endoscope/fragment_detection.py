@@ -174,6 +174,7 @@ class FragmentObserver:
             k.scaled(max(16, k.width // self.scale), max(16, k.height // self.scale)),
             baseline_m=camera.baseline_m,
             pose=camera.pose,
+            calibrated_baseline_m=camera.calibrated_baseline_m,
             near_m=camera.near_m,
             far_m=camera.far_m,
         )

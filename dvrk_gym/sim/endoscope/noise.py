@@ -1,4 +1,5 @@
-"""Pixel noise of the endoscope's detections: one Gaussian model for every detector.
+"""Pixel noise of the endoscope's detections: a Gaussian model for every detector, the red
+tape detector's own error (:class:`DetectionNoise`) and its whole pixels (:func:`whole_pixels`).
 
 A detection's noise is given as a standard deviation in pixels of the paper's 1920 x 1080
 images (:data:`~dvrk_gym.sim.endoscope.camera.PAPER_INTRINSICS`), so one setting means the
@@ -15,9 +16,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from dvrk_gym.sim import identified
 from dvrk_gym.sim.endoscope.camera import PAPER_INTRINSICS
 
-__all__ = ["PAPER_WIDTH_PX", "PixelNoise"]
+__all__ = ["PAPER_WIDTH_PX", "PixelNoise", "DetectionNoise", "IDENTIFIED_MARKER_NOISE", "whole_pixels"]
 
 PAPER_WIDTH_PX: int = PAPER_INTRINSICS.width
 """Width of the paper's images (1920 px), at which a pixel-noise setting is given."""
@@ -62,3 +64,78 @@ class PixelNoise:
         if rng is None or sigma_px == 0.0:
             return uv
         return uv + rng.normal(0.0, sigma_px, size=2)
+
+
+@dataclass(frozen=True)
+class DetectionNoise:
+    """Error of one camera's centroid of a detected blob: a Gaussian core and rare outliers.
+
+    Each camera's detection of the red tape errs by its own draw; a rectified pair's rows
+    then differ by the difference of two draws, and so does its disparity (depth noise
+    follows from it). A real detector errs so: the thresholded tape's outline flickers by a
+    pixel or so, and now and then a specular highlight or the jaw's shadow cuts a piece off
+    one camera's blob and moves its centroid several pixels. Values in pixels of a 1920 x
+    1080 image; the identified ones, and how, are in
+    :mod:`dvrk_gym.sim.identified`.
+
+    Attributes:
+        core_px: sd of the usual error on each of u and v, px at 1080p (>= 0).
+        outlier_px: sd of the error of an outlying detection on each of u and v, px at 1080p (>= 0).
+        outlier_probability: chance that a detection is an outlier, in [0, 1].
+        miss_probability: chance that the detector finds no tape in an image where it is
+            in view, in [0, 1].
+    """
+
+    core_px: float
+    outlier_px: float
+    outlier_probability: float
+    miss_probability: float = 0.0
+
+    def __post_init__(self) -> None:
+        for name in ("core_px", "outlier_px"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0):
+                raise ValueError(f"DetectionNoise.{name} = {value}; expected a finite value >= 0 px")
+        for name in ("outlier_probability", "miss_probability"):
+            value = getattr(self, name)
+            if not 0.0 <= value <= 1.0:
+                raise ValueError(f"DetectionNoise.{name} = {value}; expected a value in [0, 1]")
+
+    def misses(self, rng: np.random.Generator) -> bool:
+        """Whether the detector misses the tape in one image: one uniform draw (none when miss_probability is 0)."""
+        return self.miss_probability > 0.0 and bool(rng.uniform() < self.miss_probability)
+
+    def sample(self, rng: np.random.Generator, width_px: int = PAPER_WIDTH_PX) -> np.ndarray:
+        """One detection's error (du, dv), pixels of an image width_px wide.
+
+        Draws, in this order: one uniform (outlier or not), then two normals.
+        """
+        outlier = rng.uniform() < self.outlier_probability
+        sigma = self.outlier_px if outlier else self.core_px
+        return rng.normal(0.0, sigma, size=2) * (width_px / PAPER_WIDTH_PX)
+
+
+IDENTIFIED_MARKER_NOISE = DetectionNoise(
+    identified.MARKER_DETECTION_NOISE.core_px,
+    identified.MARKER_DETECTION_NOISE.outlier_px,
+    identified.MARKER_DETECTION_NOISE.outlier_probability,
+    identified.MARKER_DETECTION_NOISE.miss_probability,
+)
+"""The red-tape detector's error identified from the real rows (:data:`dvrk_gym.sim.identified.MARKER_DETECTION_NOISE`)."""
+
+
+def whole_pixels(uv: np.ndarray, width_px: int) -> np.ndarray:
+    """uv truncated to whole pixels of the paper's 1920 x 1080 grid, as the authors' detector did.
+
+    Their detector took ``int()`` of the contour's centroid: the floor, for the positive
+    coordinates of an image. At another width the same 1080p grid is used, so depth steps
+    as the real camera's do at any rendering resolution.
+
+    Args:
+        uv: (..., 2) pixel coordinates of an image width_px wide (OpenCV convention, pixel
+            centres at integers).
+        width_px: the image's width, pixels.
+    """
+    scale = PAPER_WIDTH_PX / width_px
+    paper_uv = (np.asarray(uv, dtype=float) + 0.5) * scale - 0.5
+    return (np.floor(paper_uv) + 0.5) / scale - 0.5

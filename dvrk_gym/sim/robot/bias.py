@@ -18,6 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from dvrk_gym.sim import identified
 from dvrk_gym.sim.robot import kinematics as kin
 
 __all__ = [
@@ -26,6 +27,7 @@ __all__ = [
     "resolve_bias",
     "Instrument",
     "draw_instrument",
+    "identified_instrument",
     "homing_offsets",
     "perturbed_dh",
     "wrist_coupling",
@@ -75,7 +77,12 @@ class BiasConfig:
             approaches, rad.
         backlash_insertion_m: hysteresis gap of the insertion, m.
         backlash_wrist_rad: hysteresis gap of roll, wrist pitch and wrist yaw, rad.
-        repeatability_m: RMS tip scatter of repeated moves to one command, m.
+        repeatability_m: RMS tip scatter of repeated moves to one command, across the shaft, m.
+        around_identified: draw instruments around the one identified from the real rows
+            (:mod:`dvrk_gym.sim.identified`): bias_seed 0 is that instrument, bias_seed k
+            >= 1 one drawn around it with the identification's spread
+            (:func:`identified_instrument`). The homing and tool sds above are then unused.
+            False: around the nominal instrument, with those sds.
     """
 
     homing_offset_rad: float = 0.0
@@ -89,63 +96,47 @@ class BiasConfig:
     backlash_insertion_m: float = 0.0
     backlash_wrist_rad: float = 0.0
     repeatability_m: float = 0.0
+    around_identified: bool = False
 
     def __post_init__(self) -> None:
-        for field in dataclasses.fields(self):
-            value = getattr(self, field.name)
+        for name in self.magnitude_names():
+            value = getattr(self, name)
             if not (np.isfinite(value) and value >= 0):
-                raise ValueError(f"BiasConfig.{field.name} = {value}; expected a finite value >= 0")
+                raise ValueError(f"BiasConfig.{name} = {value}; expected a finite value >= 0")
+
+    @classmethod
+    def magnitude_names(cls) -> tuple[str, ...]:
+        """The names of the fields that are magnitudes (all but ``around_identified``)."""
+        return tuple(f.name for f in dataclasses.fields(cls) if f.name != "around_identified")
 
     def scaled(self, factor: float) -> BiasConfig:
         """This configuration with every magnitude multiplied by factor (>= 0)."""
-        return BiasConfig(**{f.name: getattr(self, f.name) * factor for f in dataclasses.fields(self)})
+        return dataclasses.replace(self, **{name: getattr(self, name) * factor for name in self.magnitude_names()})
 
 
-# Why the `paper` magnitudes. Tuned with bias_statistics so that over the paper's
-# workspace and rotation ranges one rigid fit per paper yaw leaves about 4.5 mm (the
-# paper's rigid-body calibration left 4.55 mm) and a smooth error model leaves about
-# 0.9 mm (its two-phase DNN + RF calibration left 1.08 mm).
-# - homing 0.5 deg / 0.5 mm: potentiometer homing is good to about a degree. Nearly
-#   rigid in effect: it sets the raw error, not what a calibration leaves.
-# - tool 0.3 mm / 0.2 deg: machining and assembly tolerance of a reusable instrument.
-# - wrist stretch 0.07: 0.7 deg of error per 10 deg of wrist deflection, saturating
-#   near 2 deg; tip errors of a few tenths of a mm through the 10-19 mm wrist levers
-#   (raised from 0.05 when the outer stretch came down, so pitch alone still moves the
-#   tip error by more than 0.15 mm).
-# - sag 1 mm for a horizontal shaft at full insertion; the paper's shaft hangs within
-#   30 deg of the vertical at 0.16-0.20 m, where it sags 0.1-0.2 mm.
-# - outer stretch 2.6 deg (slope 0.33 rad/rad at the unloaded pose): NOT a measured
-#   cable figure. A rigid-fit residual of 4.5 mm over a 70 mm workspace is a distortion
-#   of about 10%; every plausible term above together leaves under 1 mm. This term
-#   carries the rest, standing in for what the paper's rigid fit could not remove,
-#   which on the real system also holds the stereo camera's own distortion (1 px of
-#   disparity is about 2.7 mm of depth). Final value from the paper's whole calibration
-#   table (issue 5; `dvrk-gym evaluate` with the paper's budgets), where the camera-based
-#   rigid fit also carries the tape's 2.8 mm offset from the touch point and the grid's
-#   edge circles: 3.2 deg gave RBT 6.12 mm (+34%), 2.6 deg gives 4.88 / 2.53 / 0.85 mm
-#   for RBT / DNN / DNN+RF (paper 4.55 / 2.14 / 1.08), 2.2 deg 4.10 / 2.26 / 0.98 but
-#   leaves the robot-only rigid residual here under 3.5 mm.
-# - backlash 0.4 deg outer (1.2-1.5 mm at the tissue), 0.4 mm insertion, 0.5 deg
-#   wrist; repeatability 0.15 mm: with moves approached from random directions these
-#   are most of what a smooth model cannot learn.
+# The `paper` magnitudes are the instrument identified from the authors' real Phase I rows
+# (dvrk_gym.sim.identified, where each value's fit, held-out residual and command are
+# given): outer stretch about 0.37 deg (not the 2.6 deg once tuned to the paper's table),
+# wrist stretch 0.09, a wrist backlash of 3.4 deg and no outer one, and a repeatability of
+# about 1.0 mm across the shaft (what the rows leave unexplained from one row to the next). Gravity sag and
+# the insertion's backlash are not separable from the camera pose and the other terms in
+# those rows, so they are left out (0) rather than guessed.
 _PAPER = BiasConfig(
-    homing_offset_rad=0.5 * _DEG,
-    homing_offset_m=0.5e-3,
-    tool_length_m=0.3e-3,
-    tool_twist_rad=0.2 * _DEG,
-    outer_stretch_rad=2.6 * _DEG,
-    wrist_stretch=0.07,
-    sag_m=1.0e-3,
-    backlash_outer_rad=0.4 * _DEG,
-    backlash_insertion_m=0.4e-3,
-    backlash_wrist_rad=0.5 * _DEG,
-    repeatability_m=0.15e-3,
+    outer_stretch_rad=identified.OUTER_STRETCH_MAGNITUDE_RAD,
+    wrist_stretch=abs(identified.INSTRUMENT.wrist_stretch),
+    backlash_outer_rad=identified.INSTRUMENT.backlash_outer_rad,
+    backlash_wrist_rad=identified.INSTRUMENT.backlash_wrist_rad,
+    repeatability_m=identified.INSTRUMENT.repeatability_m,
+    around_identified=True,
 )
 BIAS_PRESETS: dict[str, BiasConfig] = {
     "none": BiasConfig(),
     "paper": _PAPER,
     "severe": _PAPER.scaled(2.0),
 }
+"""``none``: the robot goes where told. ``paper``: the identified instrument (bias_seed 0)
+and instruments drawn around it (bias_seed >= 1). ``severe``: ``paper`` with every
+magnitude doubled."""
 
 
 def resolve_bias(bias: str | BiasConfig) -> BiasConfig:
@@ -188,9 +179,12 @@ class Instrument:
 def draw_instrument(config: BiasConfig, bias_seed: int) -> Instrument:
     """The instrument of seed bias_seed: the same seed draws the same instrument.
 
-    The draws come from one generator in a fixed order: homing offsets, DH table,
-    wrist coupling, outer gains.
+    Around the nominal instrument, the draws come from one generator in a fixed order:
+    homing offsets, DH table, wrist coupling, outer gains. Around the identified one, see
+    :func:`identified_instrument`.
     """
+    if config.around_identified:
+        return identified_instrument(config, bias_seed)
     rng = np.random.default_rng(bias_seed)
     offsets = homing_offsets(config, rng)
     true_dh = perturbed_dh(config, rng)
@@ -239,3 +233,30 @@ def wrist_coupling(rng: np.random.Generator) -> np.ndarray:
 def outer_stretch_gains(rng: np.random.Generator) -> np.ndarray:
     """One instrument's (2,) factors on the outer yaw / pitch stretch, each ~ N(1, INSTRUMENT_SPREAD)."""
     return 1.0 + INSTRUMENT_SPREAD * rng.normal(0.0, 1.0, 2)
+
+
+def identified_instrument(config: BiasConfig, bias_seed: int) -> Instrument:
+    """The identified instrument (bias_seed 0), or one drawn around it (bias_seed >= 1).
+
+    The identified values (:data:`dvrk_gym.sim.identified.INSTRUMENT`) are its homing
+    offsets, its signed outer-stretch amplitudes (as gains on config.outer_stretch_rad) and
+    its signed wrist stretch (as the sign and size of the coupling on config.wrist_stretch);
+    its DH table is the nominal one. A config scaled from ``paper`` scales them with it. Instrument k >= 1 adds to each identified value a
+    normal draw with that value's sd over the identification's block bootstrap
+    (:data:`dvrk_gym.sim.identified.INSTRUMENT_SD`), in this order: homing offsets (6),
+    outer amplitudes (2), wrist stretch (1): an instrument the real rows could not tell
+    from the identified one.
+    """
+    values, sd = identified.INSTRUMENT, identified.INSTRUMENT_SD
+    offsets = np.array(values.homing_offsets)
+    amplitudes = np.array(values.outer_stretch_rad)
+    wrist = values.wrist_stretch
+    if bias_seed != 0:
+        rng = np.random.default_rng(bias_seed)
+        offsets = offsets + rng.normal(0.0, 1.0, _N_JOINTS) * np.array(sd.homing_offsets)
+        amplitudes = amplitudes + rng.normal(0.0, 1.0, 2) * np.array(sd.outer_stretch_rad)
+        wrist = wrist + rng.normal() * sd.wrist_stretch
+    # Relative to the identified magnitudes, so that a scaled config scales the stretch.
+    gains = amplitudes / identified.OUTER_STRETCH_MAGNITUDE_RAD
+    coupling = NOMINAL_WRIST_COUPLING * (wrist / abs(values.wrist_stretch))
+    return Instrument(_frozen(offsets), kin.PSM_DH, _frozen(coupling), _frozen(gains))

@@ -31,7 +31,7 @@ from __future__ import annotations
 import numpy as np
 
 from dvrk_gym.sim.robot import kinematics as kin
-from dvrk_gym.sim.robot.bias import BiasConfig, draw_instrument
+from dvrk_gym.sim.robot.bias import BiasConfig, Instrument, draw_instrument
 
 __all__ = [
     "CableModel",
@@ -74,6 +74,8 @@ INSERTION_MAX_M = float(kin.JOINT_UPPER[2])
 # jaw's distance off the shaft axis for roll, wrist offset + jaw for wrist pitch, the jaw
 # for wrist yaw.
 TIP_LEVER_ARMS_M = _frozen([0.17, 0.17, 1.0, 0.010, 0.019, 0.010])
+INSERTION_JOINT = 2
+ROTARY_JOINTS = (0, 1, 3, 4, 5)
 # Hysteresis: each joint's loop is a sum of equally weighted play operators whose
 # half-widths are these fractions of the largest; a sum of plays gives the rounded loops
 # and minor loops of friction-loaded cables instead of one hard dead band.
@@ -168,10 +170,18 @@ def hysteresis_output(plays: np.ndarray, q_cmd: np.ndarray) -> np.ndarray:
 def repeatability_std(config: BiasConfig) -> np.ndarray:
     """Per-joint sd (6,) rad / m of the per-move noise.
 
-    Each joint's share moves the tip by repeatability_m / sqrt(6) (RMS) through its lever
-    arm, so the six together scatter the tip by about repeatability_m.
+    The five rotary joints scatter the tip: each one's share moves it by
+    repeatability_m / sqrt(5) (RMS) through its lever arm, so together they scatter it by
+    about repeatability_m, across the shaft (the paper's plane, nearly the image plane).
+    The insertion stage gets none: what identifies the repeatability is the real rows'
+    jitter in the image plane (:mod:`dvrk_gym.sim.identified`); their jitter along the view
+    axis, where an insertion error would show, is the stereo depth noise's alone (the
+    fidelity report's view-axis jitter, 5.2 mm real against as much simulated without
+    any robot scatter), so the rows give no scatter along the shaft to model.
     """
-    return config.repeatability_m / np.sqrt(_N_JOINTS) / TIP_LEVER_ARMS_M
+    std = config.repeatability_m / np.sqrt(len(ROTARY_JOINTS)) / TIP_LEVER_ARMS_M
+    std[INSERTION_JOINT] = 0.0
+    return std
 
 
 def play_radii(config: BiasConfig) -> np.ndarray:
@@ -198,6 +208,8 @@ class CableModel:
         config: Error magnitudes.
         bias_seed: Seed of the instrument: the same seed draws the same offsets, DH
             table and coupling.
+        instrument: This instrument instead of the one bias_seed draws (for fitting an
+            instrument to data: :mod:`dvrk_gym.fidelity.identify`).
 
     Attributes:
         config: The BiasConfig in use.
@@ -206,10 +218,10 @@ class CableModel:
         true_dh: The instrument's true DH table (PSM_DH under the ``none`` preset).
     """
 
-    def __init__(self, config: BiasConfig, bias_seed: int = 0) -> None:
+    def __init__(self, config: BiasConfig, bias_seed: int = 0, instrument: Instrument | None = None) -> None:
         self.config = config
         self.bias_seed = bias_seed
-        self.instrument = draw_instrument(config, bias_seed)
+        self.instrument = draw_instrument(config, bias_seed) if instrument is None else instrument
         self.true_dh = self.instrument.true_dh
         self._radii = play_radii(config)
         self._noise_std = repeatability_std(config)

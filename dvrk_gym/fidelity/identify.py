@@ -1,0 +1,250 @@
+"""Identify the paper's instrument from the authors' real Phase I rows: fit, held-out check, uncertainty.
+
+Three steps, each on a training part of the rows (the first ``TRAIN_FRACTION`` in
+collection order) and judged on the held-out rest:
+
+1. The deterministic parameters (:data:`~dvrk_gym.fidelity.instrument_model.PARAMETERS`:
+   camera pose and depth scale, tape position, homing offsets, cable stretch, backlash) by
+   maximum a posteriori least squares (``scipy.optimize.least_squares``, Huber loss, the
+   parameters' Gaussian priors) on the pixel residuals of every row: left u, v and the
+   disparity, each divided by its RMS after a first fit of the camera and tape alone.
+   Their spread by a moving-block bootstrap of the training rows (blocks of
+   ``BOOTSTRAP_BLOCK`` rows keep the residuals' serial correlation).
+2. The red-tape detector's error (:class:`~dvrk_gym.sim.endoscope.noise.DetectionNoise`)
+   by maximum likelihood on the rows' left/right row differences (:mod:`.detector_noise`).
+3. The two noise parameters the real rows pin down only through their statistics: the
+   robot's repeatability, from the sample-to-sample jitter in the image plane
+   (:func:`~dvrk_gym.fidelity.statistics.fidelity_statistics`) that the fitted model and
+   the detector leave on the real rows (:func:`repeatability_from_jitter`), and the
+   detector's misses, from the share of rows kept against a simulated Phase I
+   (:func:`match_miss_probability`).
+
+``python benchmarks/identify_instrument.py`` runs it all and prints every figure quoted in
+:mod:`dvrk_gym.sim.identified`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import least_squares
+from scipy.spatial.transform import Rotation
+
+from dvrk_gym import paper
+from dvrk_gym.calibration.phase1 import PaperExplorationPolicy, collect_phase1
+from dvrk_gym.envs.exploration import CalibrationExplorationEnv
+from dvrk_gym.fidelity.instrument_model import PARAMETERS, initial_vector, predict_camera_points, predict_pixels
+from dvrk_gym.fidelity.statistics import fidelity_statistics
+from dvrk_gym.sim.endoscope.camera import WORKSPACE_CENTER_M
+from dvrk_gym.sim.endoscope.noise import IDENTIFIED_MARKER_NOISE, DetectionNoise
+from dvrk_gym.sim.robot.bias import BIAS_PRESETS
+
+__all__ = [
+    "TRAIN_FRACTION",
+    "BOOTSTRAP_BLOCK",
+    "CAMERA_AND_TAPE",
+    "InstrumentFit",
+    "split",
+    "start_camera_pose",
+    "fit_parameters",
+    "residual_rms",
+    "bootstrap_sd",
+    "model_jitter_mm",
+    "detector_plane_noise_mm",
+    "repeatability_from_jitter",
+    "MissMatch",
+    "match_miss_probability",
+]
+
+logger = logging.getLogger(__name__)
+
+TRAIN_FRACTION = 0.7
+"""The first 70% of the rows (in collection order) train; the rest is held out."""
+BOOTSTRAP_BLOCK = 50
+"""Rows per block of the moving-block bootstrap: the residuals' serial correlation fades
+over about 20 rows (lag-10 autocorrelation of the depth residual 0.28, lag 50 0.06)."""
+HUBER_SCALE = 2.0
+"""Residuals beyond this many of their scale count linearly (the detector's outliers)."""
+CAMERA_AND_TAPE = tuple(range(10))
+"""Indices of the camera and tape parameters: the first fit, and the baseline model."""
+START_HEIGHT_M = 0.19
+"""The fit starts from a camera this far straight above the workspace centre, metres (the paper: 7.5 in)."""
+
+
+START_TILT_RAD = np.deg2rad(10.0)
+"""The start's camera looks down this far from the vertical: straight down is a half turn
+from the base frame, where the fit's rotation vector is singular."""
+
+
+def start_camera_pose() -> np.ndarray:
+    """T_base_leftcam (4x4) the fit starts from: looking down on the workspace centre from START_HEIGHT_M, image x along -x."""
+    pose = np.eye(4)
+    pose[:3, :3] = Rotation.from_rotvec([0.0, np.pi - START_TILT_RAD, 0.0]).as_matrix()
+    pose[:3, 3] = np.array(WORKSPACE_CENTER_M) - START_HEIGHT_M * pose[:3, 2]
+    return pose
+
+
+@dataclass(frozen=True)
+class InstrumentFit:
+    """A fitted parameter vector and how well it predicts the rows.
+
+    Attributes:
+        theta: the parameters (:data:`~dvrk_gym.fidelity.instrument_model.PARAMETERS` order).
+        scales: (3,) the residual scales used (u, v, disparity), px.
+        free: indices of the parameters fitted (the others stay at their initial values).
+    """
+
+    theta: np.ndarray
+    scales: np.ndarray
+    free: tuple[int, ...]
+
+
+def split(n_rows: int, train_fraction: float = TRAIN_FRACTION) -> tuple[np.ndarray, np.ndarray]:
+    """Training and held-out row indices: the first train_fraction of the rows, and the rest."""
+    if not 0.0 < train_fraction < 1.0:
+        raise ValueError(f"train_fraction = {train_fraction}; expected a value in (0, 1)")
+    cut = int(round(train_fraction * n_rows))
+    return np.arange(cut), np.arange(cut, n_rows)
+
+
+def _residuals(free_values: np.ndarray, fit: InstrumentFit, commands: np.ndarray, pixels: np.ndarray) -> np.ndarray:
+    theta = fit.theta.copy()
+    theta[list(fit.free)] = free_values
+    scaled = ((predict_pixels(theta, commands) - pixels) / fit.scales).ravel()
+    priors = [theta[i] / PARAMETERS[i].prior_sd for i in fit.free if PARAMETERS[i].prior_sd is not None]
+    return np.concatenate([scaled, np.asarray(priors, dtype=float)])
+
+
+def _least_squares(fit: InstrumentFit, commands: np.ndarray, pixels: np.ndarray) -> InstrumentFit:
+    start = fit.theta[list(fit.free)]
+    result = least_squares(
+        _residuals, start, args=(fit, commands, pixels), x_scale="jac", diff_step=1e-5, loss="huber", f_scale=HUBER_SCALE
+    )
+    theta = fit.theta.copy()
+    theta[list(fit.free)] = result.x
+    logger.info("fit of %d parameters: cost %.1f after %d evaluations", len(fit.free), result.cost, result.nfev)
+    return InstrumentFit(theta, fit.scales, fit.free)
+
+
+def fit_parameters(commands: np.ndarray, pixels: np.ndarray, free: tuple[int, ...] | None = None) -> InstrumentFit:
+    """MAP fit of the parameters to rows (commands (N, 6), pixels (N, 3) from :func:`real_pixels`).
+
+    First the camera and tape alone with unit scales; the residual RMS of that fit per
+    component (u, v, disparity) becomes the scale of each residual; then the parameters
+    ``free`` (default: all) from there.
+    """
+    free = tuple(range(len(PARAMETERS))) if free is None else tuple(free)
+    first = _least_squares(InstrumentFit(initial_vector(start_camera_pose()), np.ones(3), CAMERA_AND_TAPE), commands, pixels)
+    scales = residual_rms(first.theta, commands, pixels)
+    return _least_squares(InstrumentFit(first.theta, scales, free), commands, pixels)
+
+
+def residual_rms(theta: np.ndarray, commands: np.ndarray, pixels: np.ndarray) -> np.ndarray:
+    """RMS of the pixel residuals (u, v, disparity), (3,) px."""
+    return np.sqrt(np.mean((predict_pixels(theta, commands) - pixels) ** 2, axis=0))
+
+
+def camera_residual_rms_mm(theta: np.ndarray, commands: np.ndarray, X: np.ndarray) -> np.ndarray:
+    """RMS of the camera-frame residuals (x, y, z), (3,) mm."""
+    return np.sqrt(np.mean((predict_camera_points(theta, commands) - X[:, :3]) ** 2, axis=0)) * 1e3
+
+
+def bootstrap_sd(
+    fit: InstrumentFit, commands: np.ndarray, pixels: np.ndarray, replicates: int, seed: int = 0, block: int = BOOTSTRAP_BLOCK
+) -> np.ndarray:
+    """sd of each parameter over a moving-block bootstrap of the rows, (n_parameters,).
+
+    Each replicate draws ``len(rows) / block`` blocks of ``block`` contiguous rows with
+    replacement, joins them in the drawn order and refits the free parameters from
+    ``fit`` (with its residual scales). Parameters not fitted get sd 0.
+    """
+    if replicates < 2:
+        raise ValueError(f"replicates = {replicates}; a standard deviation needs at least 2")
+    rng = np.random.default_rng(seed)
+    n = len(commands)
+    starts = rng.integers(0, n - block + 1, size=(replicates, n // block))
+    estimates = []
+    for k, row_starts in enumerate(starts):
+        rows = (row_starts[:, None] + np.arange(block)).ravel()
+        estimates.append(_least_squares(fit, commands[rows], pixels[rows]).theta)
+        logger.info("bootstrap replicate %d of %d done", k + 1, replicates)
+    return np.std(np.array(estimates), axis=0, ddof=1)
+
+
+def model_jitter_mm(theta: np.ndarray, commands: np.ndarray, X: np.ndarray, y: np.ndarray) -> tuple[float, float]:
+    """The fitted model's own jitter: the fidelity statistics of its noiseless predictions for the rows.
+
+    Returns:
+        (view-axis jitter, image-plane jitter per axis), mm, as
+        :func:`~dvrk_gym.fidelity.statistics.fidelity_statistics` measures them on the real rows.
+    """
+    predicted = np.hstack([predict_camera_points(theta, commands), X[:, 3:]])
+    statistics = fidelity_statistics(predicted, y, cross_validation=False)
+    return statistics.view_axis_jitter_mm, statistics.image_plane_jitter_mm
+
+
+def detector_plane_noise_mm(noise: DetectionNoise, depth_m: float) -> float:
+    """RMS error per image-plane axis of a left detection with this noise, truncated to whole pixels, mm at depth_m."""
+    per_axis_px = np.sqrt((1 - noise.outlier_probability) * noise.core_px**2 + noise.outlier_probability * noise.outlier_px**2 + 1 / 12)
+    return float(per_axis_px * depth_m / paper.ENDOSCOPE_FOCAL_PX * 1e3)
+
+
+def repeatability_from_jitter(real_plane_jitter_mm: float, model_plane_jitter_mm: float, detector_plane_mm: float) -> float:
+    """The robot's repeatability (RMS tip scatter across the shaft, m) that the real rows' image-plane jitter leaves.
+
+    Independent noise adds in quadrature to the jitter per axis: what the real rows show
+    beyond the fitted model's own jitter over the same rows (:func:`model_jitter_mm`) and
+    the detector's, per axis, times sqrt(2) for the two axes across the shaft, where the
+    rotary joints move the tip (:func:`dvrk_gym.sim.robot.cables.repeatability_std`; the
+    shaft is within about 10 degrees of the view axis). Measured on the real rows' own
+    sequence, so that it is the robot's and not the exploration's: a simulated Phase I
+    changes orientation more between consecutive rows than the real one did (median
+    pitch change 11.7 against 7.2 degrees), which adds jitter of its own.
+    """
+    per_axis = np.sqrt(max(real_plane_jitter_mm**2 - model_plane_jitter_mm**2 - detector_plane_mm**2, 0.0))
+    return float(per_axis * np.sqrt(2.0) * 1e-3)
+
+
+@dataclass(frozen=True)
+class MissMatch:
+    """The detector's miss probability matched to the real rows' kept share.
+
+    Attributes:
+        miss_probability: the detector's chance of missing the tape in one image.
+        sim_kept_share: kept share of a simulated Phase I without misses.
+        real_kept_share: the real collection's kept share (1939 / 5256).
+        sim_plane_jitter_mm: that simulation's image-plane jitter per axis (no
+            repeatability), mm, for the record.
+    """
+
+    miss_probability: float
+    sim_kept_share: float
+    real_kept_share: float
+    sim_plane_jitter_mm: float
+
+
+def match_miss_probability(n_trajectories: int = paper.PHASE1_TRAJECTORIES, seed: int = 0) -> MissMatch:
+    """The detector's misses from the share of rows kept, with one simulated Phase I.
+
+    Collects the paper's Phase I on the identified instrument (without repeatability)
+    with a detector that never misses. A miss in either camera loses a row, so the kept
+    share goes as (1 - miss)^2: miss = 1 - sqrt(real share / simulated share). (The rows
+    cannot tell a missed detection from one the 12 px gate threw out.)
+    """
+    config = dataclasses.replace(BIAS_PRESETS["paper"], repeatability_m=0.0)
+    env = CalibrationExplorationEnv(bias=config, max_steps=paper.PHASE1_POSES_PER_TRAJECTORY)
+    try:
+        world = env.world
+        world.config = dataclasses.replace(world.config, marker_noise=dataclasses.replace(IDENTIFIED_MARKER_NOISE, miss_probability=0.0))
+        data = collect_phase1(env, PaperExplorationPolicy(seed=seed), n_trajectories, seed=seed, progress=False)
+    finally:
+        env.close()
+    kept = data.cleaned()
+    sim_share = data.n_kept / data.n_raw
+    real_share = paper.PHASE1_KEPT_SAMPLES / paper.PHASE1_RAW_SAMPLES
+    miss = 1.0 - np.sqrt(min(real_share / sim_share, 1.0))
+    jitter = fidelity_statistics(kept.X, kept.y, cross_validation=False).image_plane_jitter_mm
+    return MissMatch(float(miss), float(sim_share), float(real_share), float(jitter))
