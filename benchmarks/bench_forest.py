@@ -1,16 +1,16 @@
 """Forest prediction: the calibrators' forests against scikit-learn's own ``predict``, on one batch.
 
-Run: python benchmarks/bench_forest.py [--rows 10000] [--trees 100] [--repeats 7]
+Run: python benchmarks/bench_forest.py [--rows 10000] [--trees 100] [--repeats 15]
 
 Two forests of 100 trees, fitted as the package fits them: the model search's forest
 (``ForestCalibrator``, the authors' 1,939 real Phase I rows, 9 encoded features) and one
 yaw group of the paper's Phase II residual forests (``ResidualForests``, 35 rows of 3
 features: the forests a debridement policy queries). For each, the best of ``--repeats``
-wall times of ``RandomForestRegressor.predict`` and of the package's prediction
+wall times (taken in turn) of ``RandomForestRegressor.predict`` and of the package's prediction
 (:func:`~dvrk_gym.calibration.models.forests.forest_predict`, alone and through the
 calibrator with its input checks and encoding) on a ``--rows`` batch and on one row, their
 ratio (above 1: the package is faster), and whether the predictions are identical bit for
-bit. One thread (scikit-learn's ``n_jobs=None``). Takes about 20 s.
+bit. One thread (scikit-learn's ``n_jobs=None``). Takes about 30 s.
 """
 
 from __future__ import annotations
@@ -28,15 +28,18 @@ from dvrk_gym.calibration.models.forests import ForestCalibrator, ResidualForest
 PHASE2_CIRCLES = 35  # rows of one yaw group of Phase II
 
 
-def _best_s(call: Callable[[], object], repeats: int) -> float:
-    """The shortest of ``repeats`` wall times of ``call()``, seconds (after one warm-up call)."""
-    call()
-    times = []
-    for _ in range(repeats):
-        start = time.perf_counter()
+def _best_s(calls: list[Callable[[], object]], repeats: int) -> list[float]:
+    """The shortest of ``repeats`` wall times of each call, seconds: one warm-up call each, then the calls
+    taken in turn, so that other jobs on the machine slow each of them alike."""
+    times: list[list[float]] = [[] for _ in calls]
+    for call in calls:
         call()
-        times.append(time.perf_counter() - start)
-    return min(times)
+    for _ in range(repeats):
+        for call, taken in zip(calls, times):
+            start = time.perf_counter()
+            call()
+            taken.append(time.perf_counter() - start)
+    return [min(taken) for taken in times]
 
 
 def _report(name: str, forest, features: np.ndarray, wrapped: Callable[[np.ndarray], np.ndarray], inputs: np.ndarray, repeats: int) -> None:
@@ -44,9 +47,14 @@ def _report(name: str, forest, features: np.ndarray, wrapped: Callable[[np.ndarr
     print(f"{name}: {len(forest.estimators_)} trees, {forest.n_features_in_} features; identical to scikit-learn's predict: {identical}")
     print(f"  {'rows':>6}{'sklearn ms':>12}{'forest_predict ms':>19}{'ratio':>8}{'calibrator ms':>15}{'ratio':>8}")
     for rows in (len(features), 1):
-        sklearn_s = _best_s(lambda rows=rows: forest.predict(features[:rows]), repeats)
-        ours_s = _best_s(lambda rows=rows: forest_predict(forest, features[:rows]), repeats)
-        wrapped_s = _best_s(lambda rows=rows: wrapped(inputs[:rows]), repeats)
+        sklearn_s, ours_s, wrapped_s = _best_s(
+            [
+                lambda rows=rows: forest.predict(features[:rows]),
+                lambda rows=rows: forest_predict(forest, features[:rows]),
+                lambda rows=rows: wrapped(inputs[:rows]),
+            ],
+            repeats,
+        )
         print(
             f"  {rows:>6}{1e3 * sklearn_s:>12.2f}{1e3 * ours_s:>19.2f}{sklearn_s / ours_s:>8.2f}"
             f"{1e3 * wrapped_s:>15.2f}{sklearn_s / wrapped_s:>8.2f}"
@@ -57,7 +65,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--rows", type=int, default=10_000, help="rows of the batch (default: %(default)s)")
     parser.add_argument("--trees", type=int, default=100, help="trees of each forest (default: %(default)s)")
-    parser.add_argument("--repeats", type=int, default=7, help="timed calls, the best kept (default: %(default)s)")
+    parser.add_argument("--repeats", type=int, default=15, help="timed calls of each, the best kept (default: %(default)s)")
     args = parser.parse_args()
     rng = np.random.default_rng(0)
 

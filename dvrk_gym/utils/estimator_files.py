@@ -59,6 +59,7 @@ _SKOPS_ERRORS = (
     RecursionError,
     zipfile.BadZipFile,
 )
+"""What skops raises on a file it cannot build (its refusal of an untrusted type is a TypeError)."""
 
 
 class EstimatorFileError(ValueError):
@@ -148,15 +149,5 @@ def load_estimator(data: bytes, trusted: Sequence[str], limits: ArchiveLimits = 
     _check_schema(schema, allowed)
     try:
         return skops.io.loads(data, trusted=sorted(allowed))
-    except (
-        ValueError,
-        TypeError,
-        KeyError,
-        AttributeError,
-        IndexError,
-        OverflowError,
-        MemoryError,
-        RecursionError,
-        zipfile.BadZipFile,
-    ) as error:
+    except _SKOPS_ERRORS as error:
         raise EstimatorFileError(f"skops refused it ({type(error).__name__}: {str(error)[:300]})") from None

@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 from sklearn.ensemble import RandomForestRegressor
 from sklearn.tree import DecisionTreeRegressor
+from sklearn.tree._tree import Tree  # the node arrays' class, named in FOREST_TYPES
 
 from dvrk_gym import paper
 from dvrk_gym.calibration.models.features import (
@@ -98,6 +99,8 @@ def _check_tree(tree: Any, index: int, n_features: int, n_outputs: int) -> None:
     if type(tree) is not DecisionTreeRegressor or tree.n_features_in_ != n_features or tree.n_outputs_ != n_outputs:
         raise ValueError(f"tree {index} is not a fitted DecisionTreeRegressor of {n_features} features and {n_outputs} outputs")
     structure = tree.tree_
+    if type(structure) is not Tree:
+        raise ValueError(f"tree {index}'s tree_ is a {type(structure).__name__}, not scikit-learn's Tree")
     if structure.n_features != n_features or structure.n_outputs != n_outputs or structure.max_n_classes != 1:
         raise ValueError(f"tree {index} has {structure.n_features} features and {structure.n_outputs} outputs")
     nodes = structure.node_count

@@ -155,7 +155,9 @@ def write_model_file(path: PathLike, kind: str, layout: Mapping[str, Any], parts
     entries = {MANIFEST: json.dumps(manifest, indent=1, sort_keys=True).encode("utf-8"), **members}
     with atomic_open(path) as stream, zipfile.ZipFile(stream, "w", compression=zipfile.ZIP_STORED) as archive:
         for name, data in entries.items():
-            archive.writestr(zipfile.ZipInfo(name, date_time=_FIXED_TIME), data)
+            info = zipfile.ZipInfo(name, date_time=_FIXED_TIME)
+            info.external_attr = 0o644 << 16  # rw-r--r-- when unzipped
+            archive.writestr(info, data)
 
 
 def retired_format_message(path: PathLike) -> str:
