@@ -265,7 +265,7 @@ def test_bad_names_are_refused_with_the_valid_ones(tmp_path):
         plot_curves({}, tmp_path / "x.png", metric="pixels")
     with pytest.raises(ValueError, match="dnn\\+rf"):
         calibration_debridement_rows(tmp_path, calibrators=["svm"])
-    with pytest.raises(FileNotFoundError, match="rbt.npz"):
+    with pytest.raises(FileNotFoundError, match="rbt.zip"):
         calibration_debridement_rows(tmp_path, calibrators=["rbt"])
 
 

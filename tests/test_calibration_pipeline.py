@@ -147,7 +147,7 @@ def test_pipeline_runs_end_to_end_resumes_and_refuses_other_settings(tmp_path):
     first = run_calibration(tmp_path, config, progress=False)
     assert set(first["models"]) == {"RBT", "DNN", "DNN+RF"}
     assert set(first["table"]["DNN"]) == {label for label, _ in YAW_SETTINGS}
-    for name in ("phase1.npz", "rbt.npz", "dnn.npz", "phase2.npz", "two_phase.npz", "calibration_table.json", "calibration_error_maps.png"):
+    for name in ("phase1.npz", "rbt.zip", "dnn.zip", "phase2.npz", "two_phase.zip", "calibration_table.json", "calibration_error_maps.png"):
         assert (tmp_path / name).exists()
     summary = json.loads((tmp_path / "calibration_table.json").read_text())["summary"]
     assert np.isfinite(summary["DNN+RF"]["all settings"]["mm"]["mean"])

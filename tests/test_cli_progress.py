@@ -4,7 +4,18 @@ import pytest
 
 from dvrk_gym.cli.main import build_parser, main
 
-LONG_COMMANDS = [["reproduce"], ["collect"], ["calibrate"], ["evaluate"], ["debride"], ["baseline", "train"], ["baseline", "evaluate"]]
+LONG_COMMANDS = [
+    ["reproduce"],
+    ["collect"],
+    ["calibrate"],
+    ["evaluate"],
+    ["search"],
+    ["fidelity"],
+    ["sweep"],
+    ["debride"],
+    ["baseline", "train"],
+    ["baseline", "evaluate"],
+]
 
 
 @pytest.mark.parametrize("command", LONG_COMMANDS, ids=" ".join)
@@ -24,3 +35,24 @@ def test_collect_with_no_progress_draws_no_bar(tmp_path, capsys):
 def test_collect_without_the_flag_draws_its_bar(tmp_path, capsys):
     assert main(["collect", "--trajectories", "1", "--resolution", "320", "180", "--out", str(tmp_path)]) == 0
     assert "Phase I trajectories" in capsys.readouterr().err  # so the test above can fail
+
+
+@pytest.fixture
+def linear_search(monkeypatch):
+    """``dvrk-gym search`` with only the linear models on 300 rows: its bar, in seconds."""
+    from dvrk_gym.calibration import search
+
+    real = search.run_search
+
+    def linear_only(X, y, **kwargs):
+        linear = [spec for spec in search.paper_models(quick=True) if spec.family == "Lin"]
+        return real(X[:300], y[:300], models=linear, **kwargs)
+
+    monkeypatch.setattr(search, "run_search", linear_only)
+
+
+@pytest.mark.parametrize("flag", [True, False], ids=["no-progress", "progress"])
+def test_search_draws_its_bar_unless_told_not_to(linear_search, tmp_path, capsys, flag):
+    arguments = ["search", "--quick", "--out", str(tmp_path), *(["--no-progress"] if flag else [])]
+    assert main(arguments) == 0
+    assert ("model search" in capsys.readouterr().err) is not flag

@@ -175,7 +175,7 @@ def test_debride_command_writes_the_trial_table(tmp_path, capsys):
             # As the world's endoscope triangulates: scaled by its identified depth scale.
             rows.append([*camera.to_camera_frame(tip)[0] * identified.CAMERA.depth_scale, yaw, pitch, roll])
             targets.append(tip - offset)
-    RigidBodyCalibrator().fit(np.array(rows), np.array(targets)).save(tmp_path / "rbt.npz")
+    RigidBodyCalibrator().fit(np.array(rows), np.array(targets)).save(tmp_path / "rbt.zip")
     (tmp_path / "pipeline_config.json").write_text(json.dumps({"bias": "none", "bias_seed": 0}))
     parser = argparse.ArgumentParser()
     add_commands(parser.add_subparsers(dest="command"))

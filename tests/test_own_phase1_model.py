@@ -55,8 +55,8 @@ def test_saving_a_foreign_phase1_model_is_refused_with_what_to_do(rows, tmp_path
     X, y = rows
     model = TwoPhaseCalibrator(dnn=_PositionOnly(LinearRegression().fit(X[:, :3], y)), forests=ResidualForests(trees=2)).fit_phase2(X, y)
     with pytest.raises(TypeError, match=r"model\.forests\.save"):
-        model.save(tmp_path / "model.npz")
-    assert not (tmp_path / "model.npz").exists()
+        model.save(tmp_path / "model.zip")
+    assert not (tmp_path / "model.zip").exists()
 
 
 class _PositionOnly:

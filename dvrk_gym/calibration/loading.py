@@ -15,8 +15,15 @@ from typing import Any
 
 from dvrk_gym.calibration.models.dnn import DNNCalibrator
 from dvrk_gym.calibration.models.rigid import RigidBodyCalibrator
+from dvrk_gym.calibration.models.serialization import ModelFileError, retired_format_message
 from dvrk_gym.calibration.models.two_phase import TwoPhaseCalibrator
-from dvrk_gym.calibration.pipeline import CALIBRATOR_FILES, PipelineConfig, read_pipeline_settings, run_calibration
+from dvrk_gym.calibration.pipeline import (
+    CALIBRATOR_FILES,
+    RETIRED_CALIBRATOR_FILES,
+    PipelineConfig,
+    read_pipeline_settings,
+    run_calibration,
+)
 
 logger = logging.getLogger(__name__)
 
@@ -39,12 +46,17 @@ def load_calibrator(folder: str | os.PathLike, name: str, bias: str = "paper", b
 
     Raises:
         ValueError: an unknown calibrator name.
+        ModelFileError: the folder holds the calibrator only in the retired ``.npz`` format (the
+            message gives the command that makes it again), or its model file is bad.
     """
     if name not in CALIBRATOR_FILES:
         raise ValueError(f"unknown calibrator {name!r}; expected one of {sorted(CALIBRATOR_FILES)}")
     folder = Path(folder)
     settings = read_pipeline_settings(folder) or {"bias": bias, "bias_seed": bias_seed}
     path = folder / CALIBRATOR_FILES[name]
+    retired = folder / RETIRED_CALIBRATOR_FILES[name]
+    if not path.exists() and retired.exists():
+        raise ModelFileError(retired_format_message(retired))
     if not path.exists():
         logger.warning("%s has no %s: running the calibration pipeline there (cached stages)", folder, path.name)
         run_calibration(folder, PipelineConfig.from_settings(settings), benchmark=False)

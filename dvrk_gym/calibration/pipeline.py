@@ -32,8 +32,10 @@ logger = logging.getLogger(__name__)
 
 SETTINGS_STAMP = "pipeline_config.json"
 """The file of a calibration run folder that holds its settings (:class:`PipelineConfig`)."""
-CALIBRATOR_FILES = {"rbt": "rbt.npz", "dnn": "dnn.npz", "dnn+rf": "two_phase.npz"}
+CALIBRATOR_FILES = {"rbt": "rbt.zip", "dnn": "dnn.zip", "dnn+rf": "two_phase.zip"}
 """The model file of each calibrator in a calibration run folder, by the calibrator's name."""
+RETIRED_CALIBRATOR_FILES = {"rbt": "rbt.npz", "dnn": "dnn.npz", "dnn+rf": "two_phase.npz"}
+"""The same in the retired ``.npz`` format, which is no longer read (``calibrate`` makes the new files beside them)."""
 BENCHMARK_SEED_OFFSET = BENCHMARK_SEED
 """The benchmark's seed is the run's seed plus this (so run seed 0 gives calibration_table's default)."""
 

@@ -1,17 +1,74 @@
-"""Data sets as frozen dataclasses of arrays, saved as plain ``.npz`` (never pickles)."""
+"""Data sets as frozen dataclasses of arrays, saved as plain ``.npz`` (never pickles).
+
+Reading bounds every size before anything is allocated: the archive's declared sizes
+(:data:`DATA_FILE_LIMITS`, through :mod:`dvrk_gym.utils.bounded_zip`), and each ``.npy``
+header's shape and dtype against the bytes that follow it; object (pickled) arrays are refused.
+"""
 
 from __future__ import annotations
 
+import io
+import math
 from dataclasses import fields
 from os import PathLike
 from typing import TypeVar
 
 import numpy as np
 
-from dvrk_gym.calibration.models.serialization import ModelFileError, read_arrays
 from dvrk_gym.utils.atomic import atomic_open
+from dvrk_gym.utils.bounded_zip import ArchiveLimitError, ArchiveLimits, open_archive, read_member
 
+__all__ = ["DATA_FILE_LIMITS", "ArrayRecord", "read_npz_arrays"]
+
+DATA_FILE_LIMITS = ArchiveLimits(max_file_bytes=512 * 2**20, max_members=10_000, max_member_bytes=256 * 2**20, max_total_bytes=512 * 2**20)
+"""What a data file may hold: 512 MiB on disk and inflated, 256 MiB an array, 10,000 arrays
+(the paper's Phase I, 5,301 rows, takes about 0.5 MB)."""
+_ALLOWED_KINDS = "fiub"  # float, signed and unsigned integer, bool
+_MAX_NPY_HEADER_BYTES = 10_000
 _Record = TypeVar("_Record", bound="ArrayRecord")
+
+
+def _npy_array(path: str | PathLike, name: str, data: bytes) -> np.ndarray:
+    """One ``.npy`` member parsed from its bytes: the header's shape and dtype are checked
+    against the bytes actually there before any array is made."""
+    stream = io.BytesIO(data)
+    try:
+        version = np.lib.format.read_magic(stream)
+        if version not in ((1, 0), (2, 0)):
+            raise ValueError(f"npy format version {version}; expected 1.0 or 2.0")
+        read_header = np.lib.format.read_array_header_1_0 if version == (1, 0) else np.lib.format.read_array_header_2_0
+        shape, fortran_order, dtype = read_header(stream, max_header_size=_MAX_NPY_HEADER_BYTES)
+    except (ValueError, SyntaxError, TypeError, EOFError) as error:
+        raise ValueError(f"{path}: member {name!r} has no valid npy header: {error}") from None
+    if dtype.hasobject or dtype.kind not in _ALLOWED_KINDS:
+        raise ValueError(f"{path}: member {name!r} has dtype {dtype}; only numeric and bool arrays are read (never pickles)")
+    count = math.prod(shape)
+    held = len(data) - stream.tell()
+    if count * dtype.itemsize != held:
+        raise ValueError(f"{path}: member {name!r} declares {shape} {dtype} ({count * dtype.itemsize:,} bytes) but holds {held:,} bytes")
+    array = np.frombuffer(data, dtype=dtype, count=count, offset=stream.tell())
+    return array.reshape(shape, order="F" if fortran_order else "C").copy()
+
+
+def read_npz_arrays(path: str | PathLike) -> dict[str, np.ndarray]:
+    """Every array of an ``.npz``, read within :data:`DATA_FILE_LIMITS` (sizes checked before anything is inflated).
+
+    Raises:
+        ValueError: no such file, not a zip within the limits, a member that is not a numeric
+            ``.npy`` array, or a header that does not fit its bytes.
+    """
+    try:
+        with open_archive(path, DATA_FILE_LIMITS) as archive:
+            arrays = {}
+            for member in archive.namelist():
+                if not member.endswith(".npy"):
+                    raise ValueError(f"{path}: member {member!r} is not an .npy array")
+                arrays[member[: -len(".npy")]] = _npy_array(path, member, read_member(archive, member, DATA_FILE_LIMITS))
+            return arrays
+    except FileNotFoundError:
+        raise ValueError(f"{path}: no such file") from None
+    except ArchiveLimitError as error:
+        raise ValueError(f"not an .npz file within the size limits: {error}") from None
 
 
 class ArrayRecord:
@@ -27,8 +84,8 @@ class ArrayRecord:
         """Read a file written by :meth:`save`; refuse files of another kind or with pickles."""
         names = {f.name for f in fields(cls)}
         try:
-            data = read_arrays(path)  # sizes bounded, headers checked against the bytes, never a pickle
-        except ModelFileError as error:
+            data = read_npz_arrays(path)
+        except ValueError as error:
             raise ValueError(f"{path} is not a readable {cls.__name__} file: {error}") from None
         if set(data) != names:
             raise ValueError(f"{path} is not {cls.__name__} data: arrays {sorted(data)}, expected {sorted(names)}")

@@ -59,12 +59,12 @@ def _run_collect(args: argparse.Namespace) -> int:
 
 
 def _run_calibrate(args: argparse.Namespace) -> int:
-    from dvrk_gym.calibration.pipeline import run_calibration
+    from dvrk_gym.calibration.pipeline import CALIBRATOR_FILES, run_calibration
 
     result = run_calibration(writable_folder(args.out), _config(args), progress=not args.no_progress, benchmark=False)
     phase1 = result["phase1"]
     print(f"Phase I: {phase1.n_raw} raw, {phase1.n_kept} kept; Phase II: {len(result['phase2'].circle)} corrections")
-    print(f"models in {args.out}: rbt.npz, dnn.npz, two_phase.npz (safe to load: no pickles)")
+    print(f"models in {args.out}: {', '.join(CALIBRATOR_FILES.values())} (skops forests, safetensors weights: no pickles)")
     return 0
 
 
@@ -122,7 +122,8 @@ def _run_search(args: argparse.Namespace) -> int:
         X, y = clean.X, clean.y
         source = str(args.data)
     split = args.split or ("contiguous" if args.data == "paper" else "shuffled")
-    results = run_search(X, y, folds=args.folds, seed=args.seed, quick=args.quick, shuffle=split == "shuffled")
+    shuffle, progress = split == "shuffled", not args.no_progress
+    results = run_search(X, y, folds=args.folds, seed=args.seed, quick=args.quick, shuffle=shuffle, progress=progress)
     caption = f"{search_caption(results)} Data: {source}, {len(X)} rows."
     print(format_table(results, caption))
     with atomic_path(args.out / "model_search.png") as temporary:
@@ -192,4 +193,5 @@ def add_commands(subparsers: argparse._SubParsersAction) -> None:
     )
     search.add_argument("--seed", type=int, default=0, help="seeds the models, and shuffled folds (default: %(default)s)")
     search.add_argument("--quick", action="store_true", help="a few models, few epochs, 3 folds")
+    add_progress_option(search)
     search.set_defaults(func=_run_search)

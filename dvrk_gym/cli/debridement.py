@@ -20,7 +20,7 @@ from dvrk_gym.cli.options import add_instrument_options, add_progress_option, wr
 
 def _run_debride(args: argparse.Namespace) -> int:
     from dvrk_gym.calibration.loading import load_calibrator
-    from dvrk_gym.calibration.pipeline import CALIBRATOR_FILES
+    from dvrk_gym.calibration.pipeline import CALIBRATOR_FILES, RETIRED_CALIBRATOR_FILES
     from dvrk_gym.calibration.policy import CalibratedPolicy
     from dvrk_gym.envs.debridement import fragment_target
     from dvrk_gym.evaluation.trials import cell_label, cell_name, format_trial_table, run_debridement, save_cell
@@ -28,7 +28,8 @@ def _run_debride(args: argparse.Namespace) -> int:
     if args.trials < 1:
         raise ValueError(f"--trials must be >= 1, got {args.trials}")
     model_file = args.calibration / CALIBRATOR_FILES[args.calibrator]
-    if not args.calibrate and not model_file.exists():
+    retired = args.calibration / RETIRED_CALIBRATOR_FILES[args.calibrator]  # load_calibrator says how to remake it
+    if not args.calibrate and not model_file.exists() and not retired.exists():
         found = "has no " + model_file.name if args.calibration.is_dir() else "does not exist"
         raise FileNotFoundError(
             f"--calibration {args.calibration} {found}; give the folder of a calibration run ('dvrk-gym calibrate'), "

@@ -4,12 +4,13 @@ A zip's central directory declares each member's size, and a member of a few kil
 inflate to gigabytes. :func:`open_archive` refuses an archive whose members, or whose
 declared sizes, exceed :class:`ArchiveLimits` before anything is inflated, and
 :func:`read_member` reads a member in chunks and stops as soon as it holds more than it
-declared or than the limit allows. Model files (``.npz``) and agent files
-(stable-baselines3's ``.zip``) are read through here.
+declared or than the limit allows. Model files, the skops archives inside them, data
+records (``.npz``) and agent files (stable-baselines3's ``.zip``) are read through here.
 """
 
 from __future__ import annotations
 
+import io
 import os
 import zipfile
 from dataclasses import dataclass
@@ -40,40 +41,46 @@ class ArchiveLimits:
     max_total_bytes: int = 512 * MIB
 
 
-def open_archive(path: str | os.PathLike, limits: ArchiveLimits = ArchiveLimits()) -> zipfile.ZipFile:
-    """Open a zip archive whose declared sizes are all within ``limits`` (close it after use).
+def open_archive(source: str | os.PathLike | bytes, limits: ArchiveLimits = ArchiveLimits()) -> zipfile.ZipFile:
+    """Open a zip archive, a file or bytes in memory, whose declared sizes are all within ``limits`` (close it after use).
 
     Raises:
         FileNotFoundError: no such file.
         ArchiveLimitError: not a zip archive, or larger than the limits.
     """
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"{path}: no such file")
-    size = path.stat().st_size
+    if isinstance(source, bytes):
+        name, size, opened = "archive in memory", len(source), io.BytesIO(source)
+    else:
+        path = Path(source)
+        if not path.is_file():
+            raise FileNotFoundError(f"{path}: no such file")
+        name, size, opened = str(path), path.stat().st_size, path
     if size > limits.max_file_bytes:
-        raise ArchiveLimitError(f"{path}: {size:,} bytes; at most {limits.max_file_bytes:,} are read")
+        raise ArchiveLimitError(f"{name}: {size:,} bytes; at most {limits.max_file_bytes:,} are read")
     try:
-        archive = zipfile.ZipFile(path)
+        archive = zipfile.ZipFile(opened)
     except (zipfile.BadZipFile, OSError, ValueError, EOFError) as error:
-        raise ArchiveLimitError(f"{path}: not a readable zip archive ({error})") from None
+        raise ArchiveLimitError(f"{name}: not a readable zip archive ({error})") from None
     try:
-        members = archive.infolist()
-        if len(members) > limits.max_members:
-            raise ArchiveLimitError(f"{path}: {len(members):,} members; at most {limits.max_members:,} are read")
-        for member in members:
-            if member.file_size > limits.max_member_bytes:
-                raise ArchiveLimitError(
-                    f"{path}: member {member.filename!r} inflates to {member.file_size:,} bytes "
-                    f"({member.compress_size:,} compressed); at most {limits.max_member_bytes:,} are read"
-                )
-        total = sum(member.file_size for member in members)
-        if total > limits.max_total_bytes:
-            raise ArchiveLimitError(f"{path}: members inflate to {total:,} bytes together; at most {limits.max_total_bytes:,} are read")
+        _check_declared_sizes(name, archive.infolist(), limits)
     except BaseException:
         archive.close()
         raise
     return archive
+
+
+def _check_declared_sizes(name: str, members: list[zipfile.ZipInfo], limits: ArchiveLimits) -> None:
+    if len(members) > limits.max_members:
+        raise ArchiveLimitError(f"{name}: {len(members):,} members; at most {limits.max_members:,} are read")
+    for member in members:
+        if member.file_size > limits.max_member_bytes:
+            raise ArchiveLimitError(
+                f"{name}: member {member.filename!r} inflates to {member.file_size:,} bytes "
+                f"({member.compress_size:,} compressed); at most {limits.max_member_bytes:,} are read"
+            )
+    total = sum(member.file_size for member in members)
+    if total > limits.max_total_bytes:
+        raise ArchiveLimitError(f"{name}: members inflate to {total:,} bytes together; at most {limits.max_total_bytes:,} are read")
 
 
 def read_member(archive: zipfile.ZipFile, name: str, limits: ArchiveLimits = ArchiveLimits()) -> bytes:
@@ -84,6 +91,7 @@ def read_member(archive: zipfile.ZipFile, name: str, limits: ArchiveLimits = Arc
         ArchiveLimitError: the member inflates beyond its declared size or the limit, or is corrupt.
     """
     info = archive.getinfo(name)
+    source = archive.filename or "archive in memory"
     allowed = min(info.file_size, limits.max_member_bytes)
     chunks, total = [], 0
     try:
@@ -91,10 +99,10 @@ def read_member(archive: zipfile.ZipFile, name: str, limits: ArchiveLimits = Arc
             while chunk := stream.read(min(_CHUNK_BYTES, allowed + 1 - total)):
                 total += len(chunk)
                 if total > allowed:
-                    raise ArchiveLimitError(f"{archive.filename}: member {name!r} inflates beyond its declared {info.file_size:,} bytes")
+                    raise ArchiveLimitError(f"{source}: member {name!r} inflates beyond its declared {info.file_size:,} bytes")
                 chunks.append(chunk)
     except (zipfile.BadZipFile, OSError, EOFError, NotImplementedError, ValueError) as error:
         if isinstance(error, ArchiveLimitError):
             raise
-        raise ArchiveLimitError(f"{archive.filename}: member {name!r} is corrupt ({type(error).__name__}: {error})") from None
+        raise ArchiveLimitError(f"{source}: member {name!r} is corrupt ({type(error).__name__}: {error})") from None
     return b"".join(chunks)

@@ -92,7 +92,7 @@ def test_debride_refuses_a_calibration_folder_without_a_model(capsys, tmp_path, 
     if exists:
         calibration.mkdir()
     start = time.perf_counter()
-    word = "has no two_phase.npz" if exists else "does not exist"
+    word = "has no two_phase.zip" if exists else "does not exist"
     _fails_in_one_line(capsys, ["debride", "--calibration", str(calibration), "--out", str(tmp_path / "out")], word, "--calibrate")
     assert time.perf_counter() - start < 30.0 and not (tmp_path / "out").exists()
     assert files_in(calibration) == set()  # no calibration was started in it

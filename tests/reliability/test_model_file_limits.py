@@ -1,12 +1,13 @@
-"""Model and agent files from elsewhere: every size bounded before anything is allocated.
+"""Model, data and agent files from elsewhere: every size bounded before anything is allocated.
 
-A forger can write a valid digest (it is no signature), so each test writes a file whose
+A forger can write valid digests (they are no signature), so each test writes a file whose
 header is consistent and whose sizes are not: the load must refuse it quickly, naming
 what is wrong, and without growing the process.
 """
 
 import io
 import json
+import struct
 import time
 import zipfile
 from pathlib import Path
@@ -14,10 +15,11 @@ from pathlib import Path
 import numpy as np
 import psutil
 import pytest
+from model_forgery import ARRAYS, MANIFEST, edit_manifest, edit_params, edit_skops, read_members, resign, write_members
 
 from dvrk_gym.calibration.models.dnn import DNNCalibrator
 from dvrk_gym.calibration.models.forests import ForestCalibrator
-from dvrk_gym.calibration.models.serialization import ModelFileError, write_model_file
+from dvrk_gym.calibration.models.serialization import ModelFileError
 from dvrk_gym.calibration.phase2 import Phase2Data
 from dvrk_gym.utils.bounded_zip import ArchiveLimitError, ArchiveLimits, open_archive, read_member
 
@@ -35,25 +37,32 @@ def _bounded(load, path):
     return str(raised.value)
 
 
-@pytest.fixture(scope="module")
-def dnn_file(tmp_path_factory):
+def _rows(rows: int = 60) -> np.ndarray:
     rng = np.random.default_rng(0)
-    X = np.column_stack([rng.uniform(-0.03, 0.03, (60, 2)), rng.uniform(0.17, 0.2, 60), rng.uniform(-1, 1, (60, 3))])
-    model = DNNCalibrator(hidden_layers=1, units=8, epochs=2, progress=False).fit(X, X[:, :3] + 0.01)
-    path = tmp_path_factory.mktemp("models") / "dnn.npz"
-    model.save(path)
+    return np.column_stack([rng.uniform(-0.03, 0.03, (rows, 2)), rng.uniform(0.17, 0.2, rows), rng.uniform(-1, 1, (rows, 3))])
+
+
+@pytest.fixture(scope="module")
+def model_files(tmp_path_factory) -> dict[str, bytes]:
+    X = _rows()
+    folder = tmp_path_factory.mktemp("models")
+    DNNCalibrator(hidden_layers=1, units=8, epochs=2, progress=False).fit(X, X[:, :3] + 0.01).save(folder / "dnn.zip")
+    ForestCalibrator(trees=2).fit(X, X[:, :3]).save(folder / "forest.zip")
+    return {name: (folder / f"{name}.zip").read_bytes() for name in ("dnn", "forest")}
+
+
+@pytest.fixture
+def dnn_file(model_files, tmp_path) -> Path:
+    path = tmp_path / "forged.zip"
+    path.write_bytes(model_files["dnn"])
     return path
 
 
-def _forged(source: Path, target: Path, **params) -> Path:
-    """``source`` rewritten with other params and a valid digest (a careful forger)."""
-    with np.load(source) as archive:
-        raw = {name: archive[name] for name in archive.files}
-    metadata = json.loads(str(raw.pop("__metadata__")))
-    raw.pop("__digest__")
-    metadata["params"].update(params)
-    write_model_file(target, metadata["kind"], metadata["params"], raw)
-    return target
+@pytest.fixture
+def forest_file(model_files, tmp_path) -> Path:
+    path = tmp_path / "forged.zip"
+    path.write_bytes(model_files["forest"])
+    return path
 
 
 @pytest.mark.parametrize(
@@ -69,23 +78,19 @@ def _forged(source: Path, target: Path, **params) -> Path:
         ({"activation": "__import__('os')"}, "activation must be one of"),
     ],
 )
-def test_a_dnn_header_out_of_bounds_is_refused_before_anything_is_built(dnn_file, tmp_path, params, message):
-    text = _bounded(DNNCalibrator.load, _forged(dnn_file, tmp_path / "forged.npz", **params))
-    assert "forged.npz" in text
+def test_a_dnn_header_out_of_bounds_is_refused_before_anything_is_built(dnn_file, params, message):
+    text = _bounded(DNNCalibrator.load, edit_params(dnn_file, **params))
+    assert "forged.zip" in text
     assert pytest.importorskip("re").search(message, text), text
 
 
-def test_a_dnn_header_that_does_not_fit_its_arrays_is_refused(dnn_file, tmp_path):
-    text = _bounded(DNNCalibrator.load, _forged(dnn_file, tmp_path / "forged.npz", units=9))
+def test_a_dnn_header_that_does_not_fit_its_arrays_is_refused(dnn_file):
+    text = _bounded(DNNCalibrator.load, edit_params(dnn_file, units=9))
     assert "layer0_weight" in text and "expected float32 (9, 9)" in text
 
 
-def test_a_forest_header_with_a_billion_trees_is_refused(tmp_path):
-    path = tmp_path / "forest.npz"
-    rng = np.random.default_rng(1)
-    X = np.column_stack([rng.uniform(-0.03, 0.03, (40, 3)), rng.uniform(-1, 1, (40, 3))])
-    ForestCalibrator(trees=2).fit(X, X[:, :3]).save(path)
-    text = _bounded(ForestCalibrator.load, _forged(path, tmp_path / "forged.npz", trees=10**9))
+def test_a_forest_header_with_a_billion_trees_is_refused(forest_file):
+    text = _bounded(ForestCalibrator.load, edit_params(forest_file, trees=10**9))
     assert "trees must be an int in [1, 10000]" in text
 
 
@@ -96,15 +101,15 @@ def _zip_of(path: Path, members: dict[str, bytes], compression=zipfile.ZIP_STORE
     return path
 
 
-def _deflated_zeros(path: Path, member: str, total_bytes: int) -> Path:
-    """A zip whose one member is ``total_bytes`` zeros, deflated (a few MB per GB on disk)."""
+def _deflated_zeros(path, member: str, total_bytes: int, others: dict[str, bytes] | None = None):
+    """A zip (a path or a stream) whose member ``member`` is ``total_bytes`` zeros, deflated (a few MB per GB)."""
     zeros = bytes(64 * 2**20)
-    with (
-        zipfile.ZipFile(path, "w", compression=zipfile.ZIP_DEFLATED, compresslevel=1) as archive,
-        archive.open(member, "w", force_zip64=True) as stream,
-    ):
-        for _ in range(total_bytes // len(zeros)):
-            stream.write(zeros)
+    with zipfile.ZipFile(path, "w", compression=zipfile.ZIP_DEFLATED, compresslevel=1) as archive:
+        for name, data in (others or {}).items():
+            archive.writestr(name, data)
+        with archive.open(member, "w", force_zip64=True) as stream:
+            for _ in range(total_bytes // len(zeros)):
+                stream.write(zeros)
     return path
 
 
@@ -115,62 +120,93 @@ def _npy_bytes(array: np.ndarray) -> bytes:
 
 
 def test_a_member_that_inflates_from_1_mb_to_1_gb_is_refused_unread(tmp_path):
-    path = _deflated_zeros(tmp_path / "bomb.npz", "layer0_weight.npy", GIB)
+    path = _deflated_zeros(tmp_path / "bomb.zip", ARRAYS, GIB)
     assert path.stat().st_size < 8 * 2**20  # a few MB on disk
     text = _bounded(DNNCalibrator.load, path)
     assert "inflates to 1,073,741,824 bytes" in text and "at most 268,435,456" in text
 
 
-def test_an_npy_header_larger_than_its_bytes_is_refused(tmp_path):
-    data = bytearray(_npy_bytes(np.zeros(4)))
-    header = data.replace(b"(4,)", b"(1000000000,)", 1)  # claims 8 GB, holds 32 bytes
-    path = _zip_of(tmp_path / "lying.npz", {"x_mean.npy": bytes(header)})
-    text = _bounded(DNNCalibrator.load, path)
-    assert "declares (1000000000,) float64 (8,000,000,000 bytes) but holds" in text
+def test_a_skops_member_whose_own_member_inflates_to_1_gb_is_refused_unread(forest_file):
+    members = read_members(forest_file)
+    inner = _deflated_zeros(io.BytesIO(), "0.npy", GIB, {"schema.json": read_members(io.BytesIO(members["forest.skops"]))["schema.json"]})
+    members["forest.skops"] = inner.getvalue()
+    write_members(forest_file, resign(members))
+    text = _bounded(ForestCalibrator.load, forest_file)
+    assert "forest.skops" in text and "inflates to 1,073,741,824 bytes" in text and "at most 134,217,728" in text
 
 
-def test_an_object_array_is_never_unpickled(tmp_path):
-    stream = io.BytesIO()
-    np.save(stream, np.array([{"a": 1}], dtype=object), allow_pickle=True)
-    path = _zip_of(tmp_path / "pickle.npz", {"x_mean.npy": stream.getvalue()})
-    text = _bounded(DNNCalibrator.load, path)
-    assert "never pickles" in text
+def test_a_safetensors_header_declaring_8_gb_over_32_bytes_is_refused_before_allocation(dnn_file):
+    header = json.dumps({"x_mean": {"dtype": "F64", "shape": [10**9], "data_offsets": [0, 8 * 10**9]}}).encode()
+    members = read_members(dnn_file)
+    members[ARRAYS] = struct.pack("<Q", len(header)) + header + bytes(32)
+    write_members(dnn_file, resign(members))
+    assert "arrays.safetensors is not readable by safetensors" in _bounded(DNNCalibrator.load, dnn_file)
+
+
+def test_a_manifest_declaring_a_huge_array_is_refused_before_any_member_is_read(dnn_file):
+    edit_manifest(dnn_file, lambda manifest: manifest["arrays"]["x_mean"].update(shape=[10**6, 10**6]))
+    assert "declares shape [1000000, 1000000]: over 268,435,456 bytes" in _bounded(DNNCalibrator.load, dnn_file)
+
+
+def test_a_skops_schema_nested_too_deeply_is_refused(forest_file):
+    members = read_members(forest_file)
+    members["forest.skops"] = _zip_of(io.BytesIO(), {"schema.json": b"[" * 100_000 + b"]" * 100_000}).getvalue()
+    write_members(forest_file, resign(members))
+    assert "unreadable skops archive" in _bounded(ForestCalibrator.load, forest_file)
+
+
+def test_a_skops_schema_of_another_protocol_is_refused(forest_file):
+    edit_skops(forest_file, "forest.skops", lambda schema, files: schema.update(protocol=99))
+    assert "skops protocol 99; expected one of [2]" in _bounded(ForestCalibrator.load, forest_file)
 
 
 @pytest.mark.parametrize(
     ("members", "message"),
     [
-        ({"notes.txt": b"hello"}, "is not an .npy array"),
-        ({"x.npy": b"\x93NUMPY garbage"}, "no valid npy header"),
-        ({f"a{i}.npy": _npy_bytes(np.zeros(1)) for i in range(10_001)}, "10,001 members"),
+        ({"notes.txt": b"hello"}, "no model.json; not a dvrk_gym model file"),
+        ({f"a{i}.skops": b"" for i in range(65)}, "65 members; at most 64"),
+        ({MANIFEST: b"[]"}, "is not a dvrk_gym.model manifest"),
     ],
-    ids=["not-npy", "bad-header", "too-many-members"],
+    ids=["no-manifest", "too-many-members", "not-a-manifest"],
 )
 def test_archives_that_are_not_model_files_are_refused(tmp_path, members, message):
-    text = _bounded(DNNCalibrator.load, _zip_of(tmp_path / "odd.npz", members))
+    text = _bounded(DNNCalibrator.load, _zip_of(tmp_path / "odd.zip", members))
     assert message in text
 
 
 def test_truncated_and_non_zip_files_are_refused(dnn_file, tmp_path):
-    cut = tmp_path / "cut.npz"
+    cut = tmp_path / "cut.zip"
     cut.write_bytes(dnn_file.read_bytes()[: dnn_file.stat().st_size // 2])
     assert "not a readable zip archive" in _bounded(DNNCalibrator.load, cut)
-    text_file = tmp_path / "text.npz"
+    text_file = tmp_path / "text.zip"
     text_file.write_text("not a model")
     assert "not a readable zip archive" in _bounded(DNNCalibrator.load, text_file)
 
 
-def test_deeply_nested_metadata_is_refused(dnn_file, tmp_path):
-    nested = "[" * 100_000 + "]" * 100_000
-    path = _zip_of(
-        tmp_path / "deep.npz", {"__metadata__.npy": _npy_bytes(np.array(nested)), "__digest__.npy": _npy_bytes(np.array("0" * 64))}
-    )
-    assert "metadata is not valid JSON" in _bounded(DNNCalibrator.load, path)
-
-
+# ---------------------------------------------------------------- data records (.npz)
 def test_data_records_are_read_within_the_same_limits(tmp_path):
     path = _deflated_zeros(tmp_path / "phase2.npz", "circle.npy", 5 * 64 * 2**20)
     assert "inflates to" in _bounded(Phase2Data.load, path)
+
+
+def test_a_data_record_npy_header_larger_than_its_bytes_is_refused(tmp_path):
+    data = bytearray(_npy_bytes(np.zeros(4)))
+    header = data.replace(b"(4,)", b"(1000000000,)", 1)  # claims 8 GB, holds 32 bytes
+    path = _zip_of(tmp_path / "lying.npz", {"circle.npy": bytes(header)})
+    assert "declares (1000000000,) float64 (8,000,000,000 bytes) but holds" in _bounded(Phase2Data.load, path)
+
+
+@pytest.mark.parametrize(
+    ("member", "message"),
+    [(b"\x93NUMPY garbage", "no valid npy header"), (None, "never pickles")],
+    ids=["bad-header", "object-array"],
+)
+def test_a_data_record_that_is_not_plain_arrays_is_refused(tmp_path, member, message):
+    if member is None:
+        stream = io.BytesIO()
+        np.save(stream, np.array([{"a": 1}], dtype=object), allow_pickle=True)
+        member = stream.getvalue()
+    assert message in _bounded(Phase2Data.load, _zip_of(tmp_path / "odd.npz", {"circle.npy": member}))
 
 
 def test_read_member_stops_at_the_limit_even_if_the_directory_allows_more(tmp_path):

@@ -154,11 +154,11 @@ def test_a_tampered_model_file_is_moved_aside_and_made_again(tmp_path, caplog):
     X = np.column_stack([rng.uniform(-0.03, 0.03, (40, 2)), rng.uniform(0.17, 0.2, 40), rng.uniform(-1, 1, (40, 3))])
     model = DNNCalibrator(hidden_layers=1, units=4, epochs=1, progress=False).fit(X, X[:, :3])
     with RunFolder(tmp_path) as folder:
-        model.save(folder.file("dnn.npz"))
-        blob = bytearray(folder.file("dnn.npz").read_bytes())
+        model.save(folder.file("dnn.zip"))
+        blob = bytearray(folder.file("dnn.zip").read_bytes())
         blob[len(blob) // 2] ^= 0xFF
-        folder.file("dnn.npz").write_bytes(bytes(blob))
-        again = _made_again(folder, "dnn.npz", DNNCalibrator.load, model, lambda value, path: value.save(path), caplog)
+        folder.file("dnn.zip").write_bytes(bytes(blob))
+        again = _made_again(folder, "dnn.zip", DNNCalibrator.load, model, lambda value, path: value.save(path), caplog)
         assert np.array_equal(again.predict(X), model.predict(X))
 
 

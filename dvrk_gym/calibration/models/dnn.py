@@ -20,8 +20,8 @@ from torch import nn
 from tqdm import tqdm
 
 from dvrk_gym import paper
-from dvrk_gym.calibration.models.features import check_inputs, check_targets, encode_euler
-from dvrk_gym.calibration.models.serialization import SavableModel, require_array, require_names
+from dvrk_gym.calibration.models.features import EULER_FEATURES, calibrator_layout, check_inputs, check_targets, encode_euler
+from dvrk_gym.calibration.models.serialization import ModelParts, SavableModel, require_array, require_names
 from dvrk_gym.utils.checks import check_bool, check_choice, check_float, check_int
 
 __all__ = ["ACTIVATIONS", "DEFAULT_BATCH_SIZE", "DEFAULT_LEARNING_RATE", "DNNCalibrator"]
@@ -204,7 +204,11 @@ class DNNCalibrator(SavableModel):
     def _layer_names(self) -> list[str]:
         return [f"layer{i}" for i in range(self.hidden_layers + 1)]
 
-    def _export(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+    def layout(self) -> dict[str, Any]:
+        """Inputs (m, rad), the network's encoded features (standardised), outputs (m)."""
+        return calibrator_layout(EULER_FEATURES)
+
+    def _export(self) -> ModelParts:
         if self.network_ is None or self.x_mean_ is None or self.x_scale_ is None or self.y_mean_ is None or self.y_scale_ is None:
             raise ValueError("DNNCalibrator.save called before fit")
         linears = [layer for layer in self.network_ if isinstance(layer, nn.Linear)]
@@ -212,31 +216,33 @@ class DNNCalibrator(SavableModel):
         for name, layer in zip(self._layer_names(), linears):
             arrays[f"{name}_weight"] = layer.weight.detach().numpy().copy()
             arrays[f"{name}_bias"] = layer.bias.detach().numpy().copy()
-        return self._params(), arrays
+        return ModelParts(self._params(), arrays)
 
     @classmethod
-    def _restore(cls, params: Mapping[str, Any], arrays: Mapping[str, np.ndarray]) -> DNNCalibrator:
-        model = cls(**params, progress=False)  # checks the sizes against fixed bounds before anything is built
-        names = model._layer_names()
+    def _from_params(cls, params: Mapping[str, Any]) -> DNNCalibrator:
+        return cls(**params, progress=False)  # checks the sizes against fixed bounds before anything is read or built
+
+    def _load_parts(self, parts: ModelParts) -> None:
+        arrays = parts.arrays
+        names = self._layer_names()
+        require_names(parts.estimators, set(), "estimators")
         require_names(arrays, {"x_mean", "x_scale", "y_mean", "y_scale"} | {f"{n}_{part}" for n in names for part in ("weight", "bias")})
-        widths = [_INPUT_FEATURES] + [model.units] * model.hidden_layers + [_OUTPUTS]
+        widths = [_INPUT_FEATURES] + [self.units] * self.hidden_layers + [_OUTPUTS]
         for name, fan_in, fan_out in zip(names, widths[:-1], widths[1:]):  # the file's arrays fit the header before it is built
             require_array(arrays, f"{name}_weight", (fan_out, fan_in), np.float32)
             require_array(arrays, f"{name}_bias", (fan_out,), np.float32)
-        model.x_mean_ = require_array(arrays, "x_mean", (_INPUT_FEATURES,), np.float64)
-        model.x_scale_ = require_array(arrays, "x_scale", (_INPUT_FEATURES,), np.float64)
-        model.y_mean_ = require_array(arrays, "y_mean", (_OUTPUTS,), np.float64)
-        model.y_scale_ = require_array(arrays, "y_scale", (_OUTPUTS,), np.float64)
-        if np.any(model.x_scale_ <= 0.0) or np.any(model.y_scale_ <= 0.0):
+        x_scale = require_array(arrays, "x_scale", (_INPUT_FEATURES,), np.float64)
+        y_scale = require_array(arrays, "y_scale", (_OUTPUTS,), np.float64)
+        if np.any(x_scale <= 0.0) or np.any(y_scale <= 0.0):
             raise ValueError("x_scale and y_scale must be positive")
-        network = _build_network(model.hidden_layers, model.units, model.activation)
-        linears = [layer for layer in network if isinstance(layer, nn.Linear)]
+        network = _build_network(self.hidden_layers, self.units, self.activation)
         state = {}
-        for index, (name, layer) in enumerate(zip(names, linears)):
-            shape = (layer.out_features, layer.in_features)
-            state[f"{2 * index}.weight"] = torch.from_numpy(require_array(arrays, f"{name}_weight", shape, np.float32).copy())
-            state[f"{2 * index}.bias"] = torch.from_numpy(require_array(arrays, f"{name}_bias", shape[:1], np.float32).copy())
+        for index, name in enumerate(names):
+            state[f"{2 * index}.weight"] = torch.from_numpy(arrays[f"{name}_weight"].copy())
+            state[f"{2 * index}.bias"] = torch.from_numpy(arrays[f"{name}_bias"].copy())
         network.load_state_dict(state)
         network.eval()
-        model.network_ = network
-        return model
+        self.x_mean_ = require_array(arrays, "x_mean", (_INPUT_FEATURES,), np.float64)
+        self.x_scale_, self.y_scale_ = x_scale, y_scale
+        self.y_mean_ = require_array(arrays, "y_mean", (_OUTPUTS,), np.float64)
+        self.network_ = network

@@ -15,8 +15,12 @@ from scipy.spatial.transform import Rotation
 from dvrk_gym.sim.robot.kinematics import PAPER_YAWS_RAD
 
 __all__ = [
+    "EULER_FEATURES",
     "INPUT_COLUMNS",
+    "OUTPUT_COLUMNS",
     "PAPER_YAWS_RAD",
+    "QUATERNION_FEATURES",
+    "calibrator_layout",
     "check_inputs",
     "check_targets",
     "encode_euler",
@@ -25,9 +29,22 @@ __all__ = [
 ]
 
 INPUT_COLUMNS = ("cx_m", "cy_m", "cz_m", "yaw_rad", "pitch_rad", "roll_rad")
+"""A calibration input row: camera-frame position (m) and yaw, pitch, roll (rad)."""
+OUTPUT_COLUMNS = ("bx_m", "by_m", "bz_m")
+"""A calibration target row: base-frame position (m)."""
+EULER_FEATURES = ("cx_m", "cy_m", "cz_m", "sin_yaw", "sin_pitch", "sin_roll", "cos_yaw", "cos_pitch", "cos_roll")
+"""The columns of :func:`encode_euler`."""
+QUATERNION_FEATURES = ("cx_m", "cy_m", "cz_m", "qx", "qy", "qz", "qw")
+"""The columns of :func:`encode_quaternion`."""
 # The quaternion sign is chosen on the side of this orientation (yaw 0, pitch 0, roll pi:
 # the paper's tool points down), so the encoding is continuous over the whole workspace.
 _QUATERNION_REFERENCE_XYZW = np.array([1.0, 0.0, 0.0, 0.0])
+
+
+def calibrator_layout(features: tuple[str, ...] | None = None) -> dict[str, list[str]]:
+    """A calibrator's layout for its model file: inputs, the features it computes from them (if any), outputs."""
+    layout = {"inputs": list(INPUT_COLUMNS), "outputs": list(OUTPUT_COLUMNS)}
+    return layout if features is None else {**layout, "features": list(features)}
 
 
 def check_inputs(X: object, name: str = "X", columns: int = 6) -> np.ndarray:

@@ -8,15 +8,23 @@ from typing import Any
 import numpy as np
 from sklearn.linear_model import LinearRegression
 
-from dvrk_gym.calibration.models.features import check_inputs, check_targets, encode_euler, encode_quaternion
-from dvrk_gym.calibration.models.serialization import SavableModel, require_array, require_names
+from dvrk_gym.calibration.models.features import (
+    EULER_FEATURES,
+    QUATERNION_FEATURES,
+    calibrator_layout,
+    check_inputs,
+    check_targets,
+    encode_euler,
+    encode_quaternion,
+)
+from dvrk_gym.calibration.models.serialization import ModelParts, SavableModel, require_array, require_names
 from dvrk_gym.utils.checks import check_choice
 
 __all__ = ["LinearCalibrator"]
 
-_ENCODINGS: dict[str, tuple[Callable[[np.ndarray], np.ndarray], int]] = {
-    "euler": (encode_euler, 9),
-    "quaternion": (encode_quaternion, 7),
+_ENCODINGS: dict[str, tuple[Callable[[np.ndarray], np.ndarray], tuple[str, ...]]] = {
+    "euler": (encode_euler, EULER_FEATURES),
+    "quaternion": (encode_quaternion, QUATERNION_FEATURES),
 }
 
 
@@ -54,16 +62,21 @@ class LinearCalibrator(SavableModel):
             raise ValueError("LinearCalibrator.predict called before fit")
         return self._encode(check_inputs(X)) @ self.coef_.T + self.intercept_
 
-    def _export(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+    def layout(self) -> dict[str, Any]:
+        """Inputs (m, rad), the encoded features, outputs (m)."""
+        return calibrator_layout(_ENCODINGS[self.angles][1])
+
+    def _export(self) -> ModelParts:
         if self.coef_ is None or self.intercept_ is None:
             raise ValueError("LinearCalibrator.save called before fit")
-        return {"angles": self.angles}, {"coef": self.coef_, "intercept": self.intercept_}
+        return ModelParts({"angles": self.angles}, {"coef": self.coef_, "intercept": self.intercept_})
 
     @classmethod
-    def _restore(cls, params: Mapping[str, Any], arrays: Mapping[str, np.ndarray]) -> LinearCalibrator:
-        model = cls(angles=params["angles"])
-        require_names(arrays, {"coef", "intercept"})
-        features = _ENCODINGS[model.angles][1]
-        model.coef_ = require_array(arrays, "coef", (3, features), np.float64)
-        model.intercept_ = require_array(arrays, "intercept", (3,), np.float64)
-        return model
+    def _from_params(cls, params: Mapping[str, Any]) -> LinearCalibrator:
+        return cls(angles=params["angles"])
+
+    def _load_parts(self, parts: ModelParts) -> None:
+        require_names(parts.estimators, set(), "estimators")
+        require_names(parts.arrays, {"coef", "intercept"})
+        self.coef_ = require_array(parts.arrays, "coef", (3, len(_ENCODINGS[self.angles][1])), np.float64)
+        self.intercept_ = require_array(parts.arrays, "intercept", (3,), np.float64)

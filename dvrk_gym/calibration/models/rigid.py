@@ -15,8 +15,8 @@ from typing import Any
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from dvrk_gym.calibration.models.features import PAPER_YAWS_RAD, check_inputs, check_targets, nearest_yaw_index
-from dvrk_gym.calibration.models.serialization import SavableModel, require_array, require_names
+from dvrk_gym.calibration.models.features import PAPER_YAWS_RAD, calibrator_layout, check_inputs, check_targets, nearest_yaw_index
+from dvrk_gym.calibration.models.serialization import ModelParts, SavableModel, require_array, require_names
 
 __all__ = ["RigidBodyCalibrator", "fit_rigid_transform"]
 
@@ -90,21 +90,29 @@ class RigidBodyCalibrator(SavableModel):
         rotated = np.einsum("nij,nj->ni", self.rotations_[groups], X[:, :3])
         return rotated + self.translations_[groups]
 
-    def _export(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+    def layout(self) -> dict[str, Any]:
+        """Inputs (m, rad; only the position and the yaw are used), outputs (m)."""
+        return calibrator_layout()
+
+    def _export(self) -> ModelParts:
         if self.rotations_ is None or self.translations_ is None or self.group_rows_ is None:
             raise ValueError("RigidBodyCalibrator.save called before fit")
-        return {}, {"rotations": self.rotations_, "translations": self.translations_, "group_rows": self.group_rows_}
+        return ModelParts({}, {"rotations": self.rotations_, "translations": self.translations_, "group_rows": self.group_rows_})
 
     @classmethod
-    def _restore(cls, params: Mapping[str, Any], arrays: Mapping[str, np.ndarray]) -> RigidBodyCalibrator:
+    def _from_params(cls, params: Mapping[str, Any]) -> RigidBodyCalibrator:
+        if params:
+            raise ValueError(f"unexpected parameters {sorted(params)}; a rigid-body calibrator has none")
+        return cls()
+
+    def _load_parts(self, parts: ModelParts) -> None:
         groups = len(PAPER_YAWS_RAD)
-        require_names(arrays, {"rotations", "translations", "group_rows"})
-        rotations = require_array(arrays, "rotations", (groups, 3, 3), np.float64)
+        require_names(parts.estimators, set(), "estimators")
+        require_names(parts.arrays, {"rotations", "translations", "group_rows"})
+        rotations = require_array(parts.arrays, "rotations", (groups, 3, 3), np.float64)
         orthogonality = np.abs(rotations @ rotations.transpose(0, 2, 1) - np.eye(3)).max()
         if orthogonality > _ROTATION_TOL or np.any(np.linalg.det(rotations) < 0.0):
             raise ValueError("rotations are not proper rotation matrices")
-        model = cls()
-        model.rotations_ = rotations
-        model.translations_ = require_array(arrays, "translations", (groups, 3), np.float64)
-        model.group_rows_ = require_array(arrays, "group_rows", (groups,), np.int64)
-        return model
+        self.rotations_ = rotations
+        self.translations_ = require_array(parts.arrays, "translations", (groups, 3), np.float64)
+        self.group_rows_ = require_array(parts.arrays, "group_rows", (groups,), np.int64)

@@ -19,14 +19,14 @@ from typing import Any, Protocol
 import numpy as np
 
 from dvrk_gym.calibration.models.dnn import DNNCalibrator
-from dvrk_gym.calibration.models.features import check_inputs, check_targets
-from dvrk_gym.calibration.models.forests import ResidualForests
-from dvrk_gym.calibration.models.serialization import SavableModel
+from dvrk_gym.calibration.models.features import calibrator_layout, check_inputs, check_targets
+from dvrk_gym.calibration.models.forests import FOREST_TYPES, ResidualForests
+from dvrk_gym.calibration.models.serialization import ModelParts, SavableModel
 
 __all__ = ["TwoPhaseCalibrator"]
 
-_DNN_PREFIX = "dnn_"
-_FORESTS_PREFIX = "rf_"
+_DNN_PREFIX = "dnn."
+_FORESTS_PREFIX = "rf."
 
 
 class Regressor(Protocol):
@@ -65,6 +65,7 @@ class TwoPhaseCalibrator(SavableModel):
     """
 
     KIND = "two_phase_calibrator"
+    TRUSTED_TYPES = FOREST_TYPES
 
     def __init__(self, dnn: Regressor | None = None, forests: ResidualForests | None = None, seed: int = 0) -> None:
         self.dnn: Regressor = dnn if dnn is not None else DNNCalibrator(seed=seed)
@@ -122,34 +123,43 @@ class TwoPhaseCalibrator(SavableModel):
         predicted = np.asarray(self.dnn.predict(X), dtype=float)
         return check_targets(predicted, X.shape[0], name=f"{type(self.dnn).__name__}.predict(X)")
 
-    def _export(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+    def layout(self) -> dict[str, Any]:
+        """Inputs (m, rad), outputs (m), and the layouts of the network and of the residual forests."""
+        return {**calibrator_layout(), "phase1": DNNCalibrator().layout(), "phase2": self.forests.layout()}
+
+    def _export(self) -> ModelParts:
         if not isinstance(self.dnn, DNNCalibrator):
             raise TypeError(
                 f"a model file holds the paper's DNN as Phase I, not a {type(self.dnn).__name__}: save the "
                 "forests alone (model.forests.save(path)) and your Phase I model with its own library"
             )
-        dnn_params, dnn_arrays = self.dnn._export()
-        params: dict[str, Any] = {"dnn": dnn_params, "forests": None}
-        arrays = {_DNN_PREFIX + name: value for name, value in dnn_arrays.items()}
-        if self.phase2_fitted_:
-            params["forests"], forest_arrays = self.forests._export()
-            arrays.update({_FORESTS_PREFIX + name: value for name, value in forest_arrays.items()})
-        return params, arrays
+        dnn = self.dnn._export().prefixed(_DNN_PREFIX)
+        params: dict[str, Any] = {"dnn": dnn.params, "forests": None}
+        if not self.phase2_fitted_:
+            return ModelParts(params, dnn.arrays, dnn.estimators)
+        forests = self.forests._export().prefixed(_FORESTS_PREFIX)
+        params["forests"] = forests.params
+        return ModelParts(params, {**dnn.arrays, **forests.arrays}, {**dnn.estimators, **forests.estimators})
 
     @classmethod
-    def _restore(cls, params: Mapping[str, Any], arrays: Mapping[str, np.ndarray]) -> TwoPhaseCalibrator:
-        unknown = sorted(name for name in arrays if not name.startswith((_DNN_PREFIX, _FORESTS_PREFIX)))
-        if unknown:
-            raise ValueError(f"unexpected arrays {unknown}")
-
-        def part(prefix: str) -> dict[str, np.ndarray]:
-            return {name[len(prefix) :]: value for name, value in arrays.items() if name.startswith(prefix)}
-
-        dnn = DNNCalibrator._restore(params["dnn"], part(_DNN_PREFIX))
+    def _from_params(cls, params: Mapping[str, Any]) -> TwoPhaseCalibrator:
+        dnn = DNNCalibrator._from_params(params["dnn"])
         if params["forests"] is None:
-            if part(_FORESTS_PREFIX):
-                raise ValueError("forest arrays present but params say Phase II is not fitted")
             return cls(dnn=dnn)
-        model = cls(dnn=dnn, forests=ResidualForests._restore(params["forests"], part(_FORESTS_PREFIX)))
-        model.phase2_fitted_ = True
-        return model
+        return cls(dnn=dnn, forests=ResidualForests._from_params(params["forests"]))
+
+    def _load_parts(self, parts: ModelParts) -> None:
+        unknown = sorted(name for name in [*parts.arrays, *parts.estimators] if not name.startswith((_DNN_PREFIX, _FORESTS_PREFIX)))
+        if unknown:
+            raise ValueError(f"unexpected arrays or estimators {unknown}")
+        if not isinstance(self.dnn, DNNCalibrator):
+            raise TypeError(f"a two-phase model file holds the paper's DNN; this calibrator's Phase I is a {type(self.dnn).__name__}")
+        self.dnn._load_parts(parts.part(_DNN_PREFIX, parts.params["dnn"]))
+        self.phase1_fitted_ = True
+        forests = parts.part(_FORESTS_PREFIX, parts.params["forests"] or {})
+        if parts.params["forests"] is None:
+            if forests.arrays or forests.estimators:
+                raise ValueError("forests present but the parameters say Phase II is not fitted")
+            return
+        self.forests._load_parts(forests)
+        self.phase2_fitted_ = True
