@@ -35,6 +35,8 @@ __all__ = [
     "finite_vector",
     "dh_transform",
     "link_frames",
+    "last_frame",
+    "dh_transforms",
     "forward_kinematics",
     "rotation_x",
     "joint_limit_violations",
@@ -121,7 +123,7 @@ def finite_vector(values: object, size: int, name: str) -> np.ndarray:
     array = np.asarray(values, dtype=float)
     if array.shape != (size,):
         raise ValueError(f"{name} must have shape ({size},), got {array.shape}")
-    if not np.all(np.isfinite(array)):
+    if not np.isfinite(array).all():
         raise ValueError(f"{name} must be finite, got {array}")
     return array
 
@@ -150,6 +152,73 @@ def dh_transform(row: DHRow, q: float) -> np.ndarray:
     )
 
 
+class _TableArrays:
+    """A DH table's columns as arrays, for building all its link transforms at once."""
+
+    def __init__(self, dh: tuple[DHRow, ...]) -> None:
+        self.dh = dh  # kept, so that the id this is cached under stays this table's
+        self.theta_offset = np.array([row.theta_offset_rad for row in dh])
+        self.d_offset = np.array([row.d_offset_m for row in dh])
+        self.prismatic = np.array([row.prismatic for row in dh])
+        alpha = np.array([row.alpha_rad for row in dh])
+        self.ca, self.sa = np.cos(alpha), np.sin(alpha)
+        self.template = np.zeros((len(dh), 4, 4))
+        self.template[:, 0, 3] = [row.a_m for row in dh]
+        self.template[:, 1, 2] = -self.sa
+        self.template[:, 2, 2] = self.ca
+        self.template[:, 3, 3] = 1.0
+
+
+_TABLE_ARRAYS: dict[int, _TableArrays] = {}
+_MAX_CACHED_TABLES = 256
+
+
+def _table_arrays(dh: tuple[DHRow, ...]) -> _TableArrays:
+    arrays = _TABLE_ARRAYS.get(id(dh))
+    if arrays is None or arrays.dh is not dh:
+        if len(_TABLE_ARRAYS) >= _MAX_CACHED_TABLES:
+            _TABLE_ARRAYS.clear()
+        arrays = _TABLE_ARRAYS[id(dh)] = _TableArrays(dh)
+    return arrays
+
+
+def dh_transforms(q: np.ndarray, dh: tuple[DHRow, ...] = PSM_DH) -> np.ndarray:
+    """The transforms of all links at once, (n, 4, 4): entry i is :func:`dh_transform`
+    ``(dh[i], q[i])``, element for element the same numbers.
+
+    Args:
+        q: (n,) joint values, rad / m, one per row of ``dh`` (not checked).
+        dh: DH table.
+    """
+    t = _table_arrays(dh)
+    theta = t.theta_offset + np.where(t.prismatic, 0.0, q)
+    d = t.d_offset + np.where(t.prismatic, q, 0.0)
+    ct, st = np.cos(theta), np.sin(theta)
+    transforms = t.template.copy()
+    transforms[:, 0, 0] = ct
+    transforms[:, 0, 1] = -st
+    transforms[:, 1, 0] = st * t.ca
+    transforms[:, 1, 1] = ct * t.ca
+    transforms[:, 1, 3] = -t.sa * d
+    transforms[:, 2, 0] = st * t.sa
+    transforms[:, 2, 1] = ct * t.sa
+    transforms[:, 2, 3] = t.ca * d
+    return transforms
+
+
+_EYE4 = _frozen(np.eye(4))
+
+
+def _chain(q: np.ndarray, dh: tuple[DHRow, ...], frames: np.ndarray | None = None) -> np.ndarray:
+    """The last frame of the chain (4, 4), filling ``frames`` (n, 4, 4) with every frame if given."""
+    current = _EYE4
+    for i, transform in enumerate(dh_transforms(q, dh)):
+        current = current @ transform
+        if frames is not None:
+            frames[i] = current
+    return current
+
+
 def link_frames(q: np.ndarray, dh: tuple[DHRow, ...] = PSM_DH) -> np.ndarray:
     """Frames 1..n of the chain in the base (RCM) frame.
 
@@ -163,11 +232,13 @@ def link_frames(q: np.ndarray, dh: tuple[DHRow, ...] = PSM_DH) -> np.ndarray:
     """
     q = finite_vector(q, len(dh), "q")
     frames = np.empty((len(dh), 4, 4))
-    current = np.eye(4)
-    for i, (row, qi) in enumerate(zip(dh, q)):
-        current = current @ dh_transform(row, qi)
-        frames[i] = current
+    _chain(q, dh, frames)
     return frames
+
+
+def last_frame(q: np.ndarray, dh: tuple[DHRow, ...] = PSM_DH) -> np.ndarray:
+    """The last frame of the chain, ``link_frames(q, dh)[-1]`` (4, 4), without the others."""
+    return _chain(finite_vector(q, len(dh), "q"), dh)
 
 
 def forward_kinematics(q: np.ndarray, dh: tuple[DHRow, ...] = PSM_DH) -> np.ndarray:
@@ -180,7 +251,7 @@ def forward_kinematics(q: np.ndarray, dh: tuple[DHRow, ...] = PSM_DH) -> np.ndar
     Returns:
         (4, 4) pose in the base frame, translation in metres.
     """
-    pose = link_frames(q, dh)[-1]
+    pose = last_frame(q, dh)
     pose[:3, :3] = pose[:3, :3] @ TOOL_TIP_ROTATION
     return pose
 
@@ -198,6 +269,8 @@ def joint_limit_violations(q: np.ndarray, tolerance: float) -> list[str]:
         q: (6,) joint values, rad / m.
         tolerance: How far past a limit (rad or m) still counts as within it.
     """
+    if ((JOINT_LOWER - tolerance <= q) & (q <= JOINT_UPPER + tolerance)).all():
+        return []
     messages = []
     for i, name in enumerate(JOINT_NAMES):
         if JOINT_LOWER[i] - tolerance <= q[i] <= JOINT_UPPER[i] + tolerance:
@@ -246,7 +319,7 @@ def jaw_tip_positions(q: np.ndarray, jaw_angle_rad: float, dh: tuple[DHRow, ...]
             f"jaw angle {np.rad2deg(jaw_angle_rad):.2f} deg is outside "
             f"[{np.rad2deg(JAW_LOWER_RAD):.0f}, {np.rad2deg(JAW_UPPER_RAD):.0f}] deg"
         )
-    frame6 = link_frames(q, dh)[-1]
+    frame6 = last_frame(q, dh)
     half = np.array([0.5, -0.5]) * jaw_angle_rad
     # A closed jaw points along y6 (the tool z axis); rotating y6 by +-half about z6.
     local_dirs = np.stack([-np.sin(half), np.cos(half), np.zeros(2)], axis=1)
@@ -259,7 +332,7 @@ def touch_point(q: np.ndarray, dh: tuple[DHRow, ...] = PSM_DH) -> np.ndarray:
     The closed jaws are the segment from the wrist-yaw pivot to the closed tip, so
     the lowest point is one of its two ends.
     """
-    frame6 = link_frames(q, dh)[-1]
+    frame6 = last_frame(q, dh)
     pivot = frame6[:3, 3]
     tip = pivot + JAW_LENGTH_M * frame6[:3, 1]
     return tip if tip[2] <= pivot[2] else pivot.copy()
