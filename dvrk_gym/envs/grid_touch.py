@@ -89,6 +89,7 @@ def _clip_camera(position: np.ndarray) -> np.ndarray:
     return np.clip(position, CAMERA_BOX_LOW_M, CAMERA_BOX_HIGH_M).astype(np.float32)
 
 
+_EYE4 = np.eye(4)
 _TOOL_ROTATIONS: dict[str, np.ndarray] = {}
 _MAX_CACHED_ROTATIONS = 256
 
@@ -111,7 +112,7 @@ def _tool_rotation(yaw_rad: float) -> np.ndarray:
 
 def tool_pose(position: np.ndarray, yaw_rad: float) -> np.ndarray:
     """The tool pose at ``position`` (reported frame, m) with ``yaw`` and the paper's pitch and roll."""
-    pose = np.eye(4)
+    pose = _EYE4.copy()
     pose[:3, :3] = _tool_rotation(yaw_rad)
     pose[:3, 3] = kin.finite_vector(position, 3, "position")
     return pose

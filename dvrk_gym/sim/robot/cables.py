@@ -28,6 +28,8 @@ the per-move ones are the functions below. Joint vectors follow
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from dvrk_gym.sim.robot import kinematics as kin
@@ -136,7 +138,23 @@ def gravity_sag(q: np.ndarray, config: BiasConfig) -> np.ndarray:
     full_insertion_angle_rad = config.sag_m / INSERTION_MAX_M
     rotation = full_insertion_angle_rad * (insertion / INSERTION_MAX_M) ** 2 * toward_down
     jacobian = np.array([[cy * cp, 0.0, sy * cp], [-sy * sp, -cp, cy * sp]]).T
-    return np.linalg.lstsq(jacobian, rotation, rcond=None)[0]
+    return _least_squares(jacobian, rotation)
+
+
+try:  # numpy >= 2: lstsq's own LAPACK routine, without the wrapper's checks and error state
+    from numpy.linalg._umath_linalg import lstsq as _lstsq_gufunc
+except ImportError:  # pragma: no cover - older numpy names it differently
+    _lstsq_gufunc = None
+
+
+def _least_squares(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``np.linalg.lstsq(a, b, rcond=None)[0]`` for a (m, n) float matrix and a (m,) vector, the
+    same numbers (the same LAPACK call, gelsd, with the same cut-off) at a fraction of the
+    wrapper's cost; tests/test_step_speed.py checks that they agree."""
+    if _lstsq_gufunc is None:
+        return np.linalg.lstsq(a, b, rcond=None)[0]
+    rcond = np.finfo(np.float64).eps * max(a.shape)
+    return _lstsq_gufunc(a, b[:, np.newaxis], rcond, signature="ddd->ddid")[0][:, 0]
 
 
 def play_update(plays: np.ndarray, q_cmd: np.ndarray, radii: np.ndarray) -> np.ndarray:
@@ -186,7 +204,7 @@ def _checked_joints(values: np.ndarray, name: str) -> np.ndarray:
     array = np.asarray(values, dtype=float)
     if array.shape != (_N_JOINTS,):
         raise ValueError(f"{name} must have shape ({_N_JOINTS},), got {array.shape}")
-    if np.isfinite(array).all():
+    if all(map(math.isfinite, array.tolist())):
         return array
     for i, value in enumerate(array):
         if not np.isfinite(value):

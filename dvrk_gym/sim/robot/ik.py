@@ -8,6 +8,8 @@ the base (RCM) frame, metres; joint vectors follow
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from dvrk_gym.sim.robot.kinematics import (
@@ -33,7 +35,8 @@ _SINGULAR_TOL_M = 1e-6
 _OUTER_DH = PSM_DH[:3]  # yaw, pitch, insertion: the rows that place the wrist
 _ALPHA5_SIGN = float(np.sign(np.sin(PSM_DH[4].alpha_rad)))
 _ROTATION_X6 = rotation_x(PSM_DH[5].alpha_rad)
-_ROLL_BRANCHES_RAD = 2 * np.pi * np.arange(-2, 3)
+_ROLL_BRANCHES_RAD = (2 * np.pi * np.arange(-2, 3)).tolist()
+_ROLL_LOWER_RAD, _ROLL_UPPER_RAD = float(JOINT_LOWER[3]), float(JOINT_UPPER[3])
 _EYE3 = np.eye(3)
 _BOTTOM_ROW = np.array([0.0, 0.0, 0.0, 1.0])
 
@@ -44,7 +47,8 @@ class UnreachablePoseError(ValueError):
 
 def _wrap(angle_rad: float) -> float:
     """Angle wrapped to (-pi, pi]."""
-    return float(-np.remainder(-angle_rad + np.pi, 2 * np.pi) + np.pi)
+    # Python's float % is np.remainder's arithmetic (fmod, then the divisor's sign).
+    return -((-float(angle_rad) + math.pi) % (2 * math.pi)) + math.pi
 
 
 def _zxz_outer_angles(m: np.ndarray, s: float) -> tuple[float, float]:
@@ -99,11 +103,13 @@ def _choose_roll(q: np.ndarray, q_ref: np.ndarray | None) -> np.ndarray:
     """Pick the 2*pi branch of roll: within limits and closest to q_ref[3] if given."""
     if q_ref is None:
         return q
-    branches = q[3] + _ROLL_BRANCHES_RAD
-    in_limits = (branches >= JOINT_LOWER[3]) & (branches <= JOINT_UPPER[3])
-    candidates = branches[in_limits] if in_limits.any() else branches
+    # In Python floats (the same sums and comparisons as on arrays, without their overhead);
+    # min() takes the first of equal distances, as np.argmin does.
+    roll, reference = float(q[3]), float(q_ref[3])
+    branches = [roll + offset for offset in _ROLL_BRANCHES_RAD]
+    candidates = [b for b in branches if _ROLL_LOWER_RAD <= b <= _ROLL_UPPER_RAD] or branches
     q = q.copy()
-    q[3] = candidates[np.argmin(np.abs(candidates - q_ref[3]))]
+    q[3] = min(candidates, key=lambda b: abs(b - reference))
     return q
 
 
@@ -111,7 +117,7 @@ def _validate_pose(pose: np.ndarray) -> np.ndarray:
     pose = np.asarray(pose, dtype=float)
     if pose.shape != (4, 4):
         raise ValueError(f"pose must have shape (4, 4), got {pose.shape}")
-    if not np.isfinite(pose).all():
+    if not all(map(math.isfinite, pose.ravel().tolist())):
         raise ValueError("pose must be finite")
     rotation = pose[:3, :3]
     orthonormality_error = np.abs(rotation.T @ rotation - _EYE3).max()

@@ -13,6 +13,7 @@ inverse is in :mod:`dvrk_gym.sim.robot.ik`.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -123,7 +124,7 @@ def finite_vector(values: object, size: int, name: str) -> np.ndarray:
     array = np.asarray(values, dtype=float)
     if array.shape != (size,):
         raise ValueError(f"{name} must have shape ({size},), got {array.shape}")
-    if not np.isfinite(array).all():
+    if not all(map(math.isfinite, array.tolist())):
         raise ValueError(f"{name} must be finite, got {array}")
     return array
 
@@ -160,6 +161,10 @@ class _TableArrays:
         self.theta_offset = np.array([row.theta_offset_rad for row in dh])
         self.d_offset = np.array([row.d_offset_m for row in dh])
         self.prismatic = np.array([row.prismatic for row in dh])
+        self.revolute = ~self.prismatic
+        # What a joint leaves where it does not act: offset + 0.0, as dh_transform adds it.
+        self.theta_fixed = self.theta_offset + 0.0
+        self.d_fixed = self.d_offset + 0.0
         alpha = np.array([row.alpha_rad for row in dh])
         self.ca, self.sa = np.cos(alpha), np.sin(alpha)
         self.template = np.zeros((len(dh), 4, 4))
@@ -191,8 +196,8 @@ def dh_transforms(q: np.ndarray, dh: tuple[DHRow, ...] = PSM_DH) -> np.ndarray:
         dh: DH table.
     """
     t = _table_arrays(dh)
-    theta = t.theta_offset + np.where(t.prismatic, 0.0, q)
-    d = t.d_offset + np.where(t.prismatic, q, 0.0)
+    theta = np.add(t.theta_offset, q, out=t.theta_fixed.copy(), where=t.revolute)
+    d = np.add(t.d_offset, q, out=t.d_fixed.copy(), where=t.prismatic)
     ct, st = np.cos(theta), np.sin(theta)
     transforms = t.template.copy()
     transforms[:, 0, 0] = ct
