@@ -83,7 +83,6 @@ def rotation_angle_bound(rotation: np.ndarray) -> float:
     return math.pi * chord / (2.0 * math.sqrt(2.0)) + _ANGLE_BOUND_MARGIN_RAD
 
 
-
 def trapezoid_progress(t: float, duration: float, ramp: float) -> float:
     """Fraction in [0, 1] of the path covered ``t`` seconds into a trapezoidal profile.
 
