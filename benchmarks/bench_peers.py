@@ -31,8 +31,7 @@ Profiles (cProfile and timers, on the 2-core machine shared with other jobs; iss
   After: the transforms of a chain built at once from arrays made once per DH table, the
   checks vectorised, the cable model peeked without copying its state, one rotation per
   yaw, the reported pose remembered per joint vector, the contact search's first point
-  measured once, one ``resetJointStatesMultiDof`` per placement and each pybullet function
-  bound once. Every number is the same bit for bit (the same numpy operations on the same
+  measured once, and each pybullet function bound once. Every number is the same bit for bit (the same numpy operations on the same
   values; tests/test_step_speed.py pins trajectories). Left: the IK's own arithmetic, the
   matrix products, ``lstsq`` and scipy's ``Rotation.from_matrix`` in move planning.
 * Debridement-v0, one pick (about 600 physics steps of 1/240 s: lower, grip, raise and the

@@ -283,7 +283,8 @@ class PSMBody:
         half_open = max(self.jaw_angle, 0.0) / 2
         targets = list(q) + [q[5] + half_open, q[5] - half_open]
         c = self.physics.client
-        c.resetJointStatesMultiDof(self.body_id, list(range(len(targets))), [[float(v)] for v in targets], [[0.0]] * len(targets))
+        for j, value in enumerate(targets):
+            c.resetJointState(self.body_id, j, float(value))
         self._drive_motors(c.POSITION_CONTROL, len(targets), targetPositions=[float(v) for v in targets])
         self.joints = q.copy()
 
@@ -313,8 +314,8 @@ class PSMBody:
         positions = list(q) + [q[5] + jaw_half_angles[0], q[5] - jaw_half_angles[1]]
         velocities = list(arm_velocity) + [arm_velocity[5] + jaw_rates[0], arm_velocity[5] - jaw_rates[1]]
         c = self.physics.client
-        joints = list(range(len(positions)))
-        c.resetJointStatesMultiDof(self.body_id, joints, [[float(p)] for p in positions], [[float(v)] for v in velocities])
+        for j, (p, v) in enumerate(zip(positions, velocities)):
+            c.resetJointState(self.body_id, j, float(p), float(v))
         self._drive_motors(c.VELOCITY_CONTROL, len(positions), targetVelocities=[float(v) for v in velocities])
         self.joints = q.copy()
         self.jaw_angle = float(jaw_half_angles[0] + jaw_half_angles[1])
