@@ -158,19 +158,14 @@ class _TableArrays:
 
     def __init__(self, dh: tuple[DHRow, ...]) -> None:
         self.dh = dh  # kept, so that the id this is cached under stays this table's
-        self.theta_offset = np.array([row.theta_offset_rad for row in dh])
-        self.d_offset = np.array([row.d_offset_m for row in dh])
+        self.theta_offset, self.d_offset = np.array([[row.theta_offset_rad, row.d_offset_m] for row in dh]).T
         self.prismatic = np.array([row.prismatic for row in dh])
         self.revolute = ~self.prismatic
         # What a joint leaves where it does not act: offset + 0.0, as dh_transform adds it.
-        self.theta_fixed = self.theta_offset + 0.0
-        self.d_fixed = self.d_offset + 0.0
-        alpha = np.array([row.alpha_rad for row in dh])
-        self.ca, self.sa = np.cos(alpha), np.sin(alpha)
+        self.theta_fixed, self.d_fixed = self.theta_offset + 0.0, self.d_offset + 0.0
+        self.ca, self.sa = np.cos([row.alpha_rad for row in dh]), np.sin([row.alpha_rad for row in dh])
         self.template = np.zeros((len(dh), 4, 4))
-        self.template[:, 0, 3] = [row.a_m for row in dh]
-        self.template[:, 1, 2] = -self.sa
-        self.template[:, 2, 2] = self.ca
+        self.template[:, 0, 3], self.template[:, 1, 2], self.template[:, 2, 2] = [row.a_m for row in dh], -self.sa, self.ca
         self.template[:, 3, 3] = 1.0
 
 
@@ -200,14 +195,9 @@ def dh_transforms(q: np.ndarray, dh: tuple[DHRow, ...] = PSM_DH) -> np.ndarray:
     d = np.add(t.d_offset, q, out=t.d_fixed.copy(), where=t.prismatic)
     ct, st = np.cos(theta), np.sin(theta)
     transforms = t.template.copy()
-    transforms[:, 0, 0] = ct
-    transforms[:, 0, 1] = -st
-    transforms[:, 1, 0] = st * t.ca
-    transforms[:, 1, 1] = ct * t.ca
-    transforms[:, 1, 3] = -t.sa * d
-    transforms[:, 2, 0] = st * t.sa
-    transforms[:, 2, 1] = ct * t.sa
-    transforms[:, 2, 3] = t.ca * d
+    transforms[:, 0, 0], transforms[:, 0, 1] = ct, -st
+    transforms[:, 1, 0], transforms[:, 1, 1], transforms[:, 1, 3] = st * t.ca, ct * t.ca, -t.sa * d
+    transforms[:, 2, 0], transforms[:, 2, 1], transforms[:, 2, 3] = st * t.sa, ct * t.sa, t.ca * d
     return transforms
 
 
