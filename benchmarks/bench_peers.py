@@ -2,7 +2,7 @@
 
 Run: python benchmarks/bench_peers.py  [--steps 1000] [--picks 16] [--rounds 3] [--resolution 1920 1080]
 Needs panda-gym (the ``bench`` extra): pip install -e ".[bench]", or pip install panda-gym==3.0.7.
-Takes about a minute and a half on 2 cores.
+With --steps 500 --picks 8 it took 4 minutes on the shared 2-core machine (load average 13-18).
 
 Prints, for GridTouch-v0, CalibrationExploration-v0, Debridement-v0 (one step is one pick),
 PandaReach-v3 and PandaPickAndPlace-v3: steps per wall second, the ratio to PandaReach-v3's,
@@ -15,35 +15,45 @@ median over the rounds, so a change in the machine's load hits all of them alike
 Targets (issue 18): GridTouch-v0 at least 2x PandaReach-v3's steps/s; Debridement-v0 toward
 10 picks/s.
 
-Profiles (cProfile and timers, on the 2-core machine shared with other jobs; issue 18):
+Profiles (cProfile and timers, on the 2-core machine shared with other jobs, load average
+8-19; issue 18):
 
 * GridTouch-v0, a step and its reset, before: about 14 inverse kinematics, 13 cable model
   and 13 forward kinematics evaluations (the contact search and the simulated person's
-  correction each iterate on IK -> cables -> touch point). Per evaluation the costs were
-  numpy's overhead on 3- to 6-element arrays, not arithmetic: each link transform built
-  from nested lists with its own cos/sin of constant twists (``dh_transform``: 17% of the
-  time), the pose checks (``_validate_pose``: ``np.linalg.det``, ``np.eye``), the joint
-  checks looping over elements, the cable state copied out and back per evaluation,
-  ``np.linalg.lstsq`` of the gravity sag (7%), a fresh tool rotation (cos/sin of yaw, pitch
-  and roll) for every evaluation of the same yaw, the reported pose's FK recomputed five
-  times a step, and eight ``resetJointState`` calls per arm placement through
-  ``BulletClient.__getattr__`` (a new ``functools.partial`` per call).
-  After: the transforms of a chain built at once from arrays made once per DH table, the
-  checks vectorised, the cable model peeked without copying its state, one rotation per
-  yaw, the reported pose remembered per joint vector, the contact search's first point
-  measured once, and each pybullet function bound once. Every number is the same bit for bit (the same numpy operations on the same
-  values; tests/test_step_speed.py pins trajectories). Left: the IK's own arithmetic, the
-  matrix products, ``lstsq`` and scipy's ``Rotation.from_matrix`` in move planning.
-* Debridement-v0, one pick (about 600 physics steps of 1/240 s: lower, grip, raise and the
-  drop step physics, the moves to the fragment and the receptacle are free-space
-  teleports), before: rendering for the fragment observation 25-30% (two coarse
-  renders and two windows per fragment seen; left to the rendering work of issue 18),
-  ``stepSimulation`` 11-14%, the gripper's Python per physics step (driving the joints,
-  contact sensing, speed limits, grasp tests) about 30%, IK and cables of the stepped
-  moves' waypoints about 25%. After: the same physics, with the per-step and per-waypoint
-  overheads cut as for GridTouch. Fewer or longer physics steps during the descent were
-  not taken: every stepped phase has the jaws near, on or holding a fragment, and the
-  fragments lying on the paper are stepped all along, so any change moves the outcomes.
+  correction each iterate on IK -> cables -> touch point; 80% of the time). Per evaluation
+  the cost was numpy's overhead on 3- to 6-element arrays, not arithmetic: each link
+  transform built from nested lists with its own cos/sin of constant twists
+  (``dh_transform``, the top line of the profile), the pose checks (``np.linalg.det``,
+  ``np.eye``), joint checks looping over elements, the cable state copied out and back per
+  evaluation, ``np.linalg.lstsq``'s wrapper in the gravity sag (7%), a tool rotation
+  (cos/sin of yaw, pitch, roll) rebuilt for every evaluation of one yaw, the reported pose's
+  FK recomputed five times a step, scipy's ``Rotation.from_matrix`` in every move's plan,
+  and ``BulletClient.__getattr__`` making a ``functools.partial`` per pybullet call.
+  After: a chain's transforms built at once from arrays made once per DH table, checks
+  vectorised or in Python floats, the cable model peeked without copying its state, one
+  rotation per yaw, the reported pose remembered per joint vector, the contact search's
+  first point measured once, lstsq's LAPACK call without its wrapper, scipy's angle only
+  when a bound on it could set a move's duration, each pybullet function bound once. Whole
+  process CPU for 1,500 steps and resets, old and new code in turn: 8.06 s -> 5.17 s
+  (0.69 s of it start-up). Every number is the same bit for bit: the same numpy
+  operations on the same values (tests/test_fast_paths.py compares each fast path with the
+  code it replaced); ``dvrk-gym reproduce --quick`` gives the same results.json. Left, in
+  order: ``_solve_branch``'s own arithmetic, ``dh_transforms``, the 4x4 products of the
+  chains, ``_least_squares``, ``set_joints`` (eight ``resetJointState`` calls: one
+  ``resetJointStatesMultiDof`` call was faster but moved a fragment in a debridement trial,
+  so it was not kept). Getting to 2x PandaReach-v3 would take fewer numpy calls per
+  evaluation than the same operations allow, that is, other roundings (and other numbers).
+* Debridement-v0, one pick (about 600 physics steps of 1/240 s: lowering, gripping,
+  raising and the drop step physics; the moves to the fragment and to the receptacle are
+  free-space teleports), before: rendering for the fragment observation 25-30% (two
+  coarse renders and two windows per fragment seen; left to the rendering work of issue
+  18), ``stepSimulation`` 11-14%, the gripper's Python per physics step (driving the
+  joints, contact sensing, speed limits, grasp tests) about 30%, IK and cables of the
+  stepped moves' waypoints about 25%. After: the same physics with the per-step and
+  per-waypoint overheads cut as for GridTouch: 8 picks at 1920 x 1080, whole process CPU
+  3.21 s -> 2.88 s (about 1 s of it start-up and the reset). Fewer or longer physics steps
+  were not taken: every stepped phase has the jaws near, on or holding a fragment, and the
+  fragments on the paper are stepped all along, so any change moves the outcomes.
 """
 
 from __future__ import annotations
