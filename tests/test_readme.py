@@ -13,6 +13,7 @@ from dvrk_gym.cli.main import build_parser
 
 ROOT = Path(__file__).resolve().parents[1]
 README = (ROOT / "README.md").read_text()
+CONTRIBUTING = (ROOT / "CONTRIBUTING.md").read_text()
 COMMANDS = {"--version", "reproduce", "demo", "collect", "calibrate", "evaluate", "search", "debride", "baseline", "fidelity", "sweep"}
 
 
@@ -65,6 +66,15 @@ def test_every_benchmark_the_readme_names_exists_and_takes_its_arguments(command
     # --help last: argparse checks the options before it, then prints the help and exits 0.
     result = subprocess.run([sys.executable, script, *arguments, "--help"], cwd=ROOT, capture_output=True, text=True, timeout=120)
     assert result.returncode == 0, result.stderr[-1500:]
+
+
+def test_every_benchmark_script_is_listed_and_every_listed_one_exists():
+    scripts = sorted(path.name for path in (ROOT / "benchmarks").glob("*.py"))
+    unlisted = [name for name in scripts if f"`{name}`" not in CONTRIBUTING and f"benchmarks/{name}" not in README]
+    assert not unlisted, f"benchmarks not in CONTRIBUTING's table of benchmarks nor in the README: {unlisted}"
+    listed = re.findall(r"^\| `(\w+\.py)` \|", CONTRIBUTING, flags=re.M)
+    assert listed, "CONTRIBUTING.md has no table of benchmarks"
+    assert not [name for name in listed if name not in scripts], f"CONTRIBUTING lists benchmarks that do not exist: {listed}"
 
 
 @pytest.mark.parametrize("name", sorted(set(re.findall(r"`(dvrk_gym(?:\.\w+)+)", README))))

@@ -89,10 +89,38 @@ def _clip_camera(position: np.ndarray) -> np.ndarray:
     return np.clip(position, CAMERA_BOX_LOW_M, CAMERA_BOX_HIGH_M).astype(np.float32)
 
 
+_EYE4 = np.eye(4)
+_TOOL_ROTATIONS: dict[str, np.ndarray] = {}
+_MAX_CACHED_ROTATIONS = 256
+
+
+def _tool_rotation(yaw_rad: float) -> np.ndarray:
+    """The tool's rotation (3, 3) at ``yaw_rad`` with the paper's pitch and roll, made once per
+    yaw (a touch or a pick asks for the same yaw a dozen times). Keyed by the float's exact
+    value, so -0.0 and 0.0 keep their own (sines of opposite sign)."""
+    key = float(yaw_rad).hex()
+    rotation = _TOOL_ROTATIONS.get(key)
+    if rotation is None:
+        if len(_TOOL_ROTATIONS) >= _MAX_CACHED_ROTATIONS:
+            _TOOL_ROTATIONS.clear()
+        pitch, roll = kin.paper_pitch_roll(yaw_rad)
+        rotation = kin.pose_from_euler(np.zeros(3), yaw_rad, float(pitch), float(roll))[:3, :3].copy()
+        rotation.flags.writeable = False
+        _TOOL_ROTATIONS[key] = rotation
+    return rotation
+
+
 def tool_pose(position: np.ndarray, yaw_rad: float) -> np.ndarray:
     """The tool pose at ``position`` (reported frame, m) with ``yaw`` and the paper's pitch and roll."""
-    pitch, roll = kin.paper_pitch_roll(yaw_rad)
-    return kin.pose_from_euler(position, yaw_rad, float(pitch), float(roll))
+    pose = _EYE4.copy()
+    pose[:3, :3] = _tool_rotation(yaw_rad)
+    pose[:3, 3] = kin.finite_vector(position, 3, "position")
+    return pose
+
+
+_HOME_COMMAND = ik.inverse_kinematics(tool_pose(HOME_POSITION_M, 0.0))
+_HOME_COMMAND.flags.writeable = False
+"""The joint command of ``HOME_POSITION_M`` at yaw 0, rad / m."""
 
 
 class GridTouchEnv(DvrkEnv[GridTouchConfig]):
@@ -188,7 +216,7 @@ class GridTouchEnv(DvrkEnv[GridTouchConfig]):
         where the arm is when it has not touched since the last reset."""
         world = self.world
         if relax or not np.isfinite(world.cable.get_state()).all():
-            return ik.inverse_kinematics(tool_pose(HOME_POSITION_M, 0.0))
+            return _HOME_COMMAND
         if not self._touched:
             return world.q_cmd.copy()
         lifted = world.reported_pose()
@@ -227,11 +255,8 @@ class GridTouchEnv(DvrkEnv[GridTouchConfig]):
     def _true_tip_for(self, position: np.ndarray, yaw: float) -> np.ndarray:
         """Where the jaws would truly be if commanded to ``position`` now (state untouched)."""
         cable = self.world.cable
-        state = cable.get_state()
         q_cmd, _ = ik.inverse_kinematics_clamped(tool_pose(position, yaw), q_ref=self.world.q_cmd)
-        tip = kin.touch_point(cable.true_joints(q_cmd), cable.true_dh)
-        cable.set_state(state)
-        return tip
+        return kin.touch_point(cable.peek_true_joints(q_cmd), cable.true_dh)
 
     def _contact_height(self, target: np.ndarray, yaw: float) -> float:
         """The commanded height at which the descent stops: the command, or first contact.
@@ -240,10 +265,13 @@ class GridTouchEnv(DvrkEnv[GridTouchConfig]):
         iteration finds where the jaws meet the paper in a few steps.
         """
         z = float(target[2])
-        if self._true_tip_for(target, yaw)[2] >= SURFACE_Z_M:
+        tip_z = self._true_tip_for(target, yaw)[2]
+        if tip_z >= SURFACE_Z_M:
             return z
-        for _ in range(8):
-            gap = self._true_tip_for(np.array([target[0], target[1], z]), yaw)[2] - SURFACE_Z_M
+        for i in range(8):
+            if i > 0:  # the first iteration's point is the target, just measured
+                tip_z = self._true_tip_for(np.array([target[0], target[1], z]), yaw)[2]
+            gap = tip_z - SURFACE_Z_M
             if abs(gap) < CONTACT_TOLERANCE_M:
                 break
             z -= gap

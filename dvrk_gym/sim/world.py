@@ -174,6 +174,7 @@ class DvrkWorld:
         self.jaw_angle = 0.0
         self.jaw_driver: JawDriver | None = None
         self._grid_cache: tuple[StereoDetection, ...] | None = None
+        self._nominal_poses: dict[bytes, np.ndarray] = {}
         self.reset_robot(HOME_JOINTS)
 
     # ----------------------------------------------------------------- robot state
@@ -201,7 +202,20 @@ class DvrkWorld:
 
     def reported_pose(self) -> np.ndarray:
         """The pose the robot reports: nominal FK of its encoders (4x4, base frame, m)."""
-        return kin.forward_kinematics(self.q_cmd)
+        return self._nominal_pose(self.q_cmd).copy()
+
+    def _nominal_pose(self, q: np.ndarray) -> np.ndarray:
+        """Nominal FK of joints ``q`` (4x4, m), remembered for the last few joint vectors:
+        a move plans from the reported pose and to its end, which becomes the next
+        reported pose, and observations read it again. Do not modify the result."""
+        q = np.asarray(q, dtype=float)
+        key = q.tobytes()
+        pose = self._nominal_poses.get(key)
+        if pose is None:
+            if len(self._nominal_poses) >= 4:
+                self._nominal_poses.clear()
+            pose = self._nominal_poses[key] = kin.forward_kinematics(q)
+        return pose
 
     def true_pose(self) -> np.ndarray:
         """Where the tool frame really is (4x4, base frame, m). For evaluation only."""
@@ -244,7 +258,7 @@ class DvrkWorld:
             q_target, clamped = ik.inverse_kinematics_clamped(pose, q_ref=self.q_cmd)
         else:
             q_target, clamped = ik.inverse_kinematics(pose, q_ref=self.q_cmd), np.zeros(6, dtype=bool)
-        move = CartesianMove.plan(self.reported_pose(), kin.forward_kinematics(q_target), limits or self.config.motion)
+        move = CartesianMove.plan(self._nominal_pose(self.q_cmd), self._nominal_pose(q_target), limits or self.config.motion)
         return self._finish_move(q_target, move.duration_s, jaw_angle_rad, noise_rng, clamped)
 
     def move_joints(self, q: np.ndarray, jaw_angle_rad: float | None = None, noise_rng: np.random.Generator | None = None) -> MoveResult:
@@ -252,7 +266,7 @@ class DvrkWorld:
         q = np.asarray(q, dtype=float)
         if not kin.within_joint_limits(q):
             raise ik.UnreachablePoseError(f"joints {np.round(q, 4).tolist()} are outside the joint limits")
-        move = CartesianMove.plan(self.reported_pose(), kin.forward_kinematics(q), self.config.motion)
+        move = CartesianMove.plan(self._nominal_pose(self.q_cmd), self._nominal_pose(q), self.config.motion)
         return self._finish_move(q, move.duration_s, jaw_angle_rad, noise_rng, np.zeros(6, dtype=bool))
 
     def _finish_move(

@@ -7,11 +7,13 @@ worlds live in one process without seeing each other, and ``close()`` frees the 
 from __future__ import annotations
 
 import contextlib
+import functools
 import logging
 import os
 import sys
 import warnings
 from collections.abc import Iterator
+from typing import Any
 
 import pybullet
 from pybullet_utils import bullet_client
@@ -20,6 +22,27 @@ logger = logging.getLogger(__name__)
 
 GRAVITY_M_S2 = 9.81
 DEFAULT_TIME_STEP_S = 1.0 / 240.0
+
+
+class _BoundClient(bullet_client.BulletClient):
+    """A ``BulletClient`` that binds each pybullet function to its server once.
+
+    ``BulletClient`` makes a new ``functools.partial`` at every attribute access (a
+    physics step of the debridement table makes about twenty); here the first one is
+    kept on the instance, where later look-ups find it without ``__getattr__``. The calls
+    are the same. Disconnecting forgets them, so none outlives its server (whose id
+    PyBullet may give to the next one).
+    """
+
+    def __getattr__(self, name: str) -> Any:
+        if name == "disconnect":
+            for bound in [key for key, value in vars(self).items() if isinstance(value, functools.partial)]:
+                del self.__dict__[bound]
+            return super().__getattr__(name)
+        attribute = super().__getattr__(name)
+        if isinstance(attribute, functools.partial):
+            self.__dict__[name] = attribute
+        return attribute
 
 
 class PhysicsError(RuntimeError):
@@ -65,7 +88,7 @@ class Physics:
             gui = False
         mode = pybullet.GUI if gui else pybullet.DIRECT
         with _quiet_stdout():  # the server prints "argv[0]=" on every connection
-            self._client: bullet_client.BulletClient | None = bullet_client.BulletClient(connection_mode=mode)
+            self._client: bullet_client.BulletClient | None = _BoundClient(connection_mode=mode)
         self.time_step_s = float(time_step_s)
         self._bodies: dict[str, int] = {}
         self._configure()

@@ -28,6 +28,8 @@ the per-move ones are the functions below. Joint vectors follow
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from dvrk_gym.sim.robot import kinematics as kin
@@ -138,7 +140,23 @@ def gravity_sag(q: np.ndarray, config: BiasConfig) -> np.ndarray:
     full_insertion_angle_rad = config.sag_m / INSERTION_MAX_M
     rotation = full_insertion_angle_rad * (insertion / INSERTION_MAX_M) ** 2 * toward_down
     jacobian = np.array([[cy * cp, 0.0, sy * cp], [-sy * sp, -cp, cy * sp]]).T
-    return np.linalg.lstsq(jacobian, rotation, rcond=None)[0]
+    return _least_squares(jacobian, rotation)
+
+
+try:  # numpy >= 2: lstsq's own LAPACK routine, without the wrapper's checks and error state
+    from numpy.linalg._umath_linalg import lstsq as _lstsq_gufunc
+except ImportError:  # pragma: no cover - older numpy names it differently
+    _lstsq_gufunc = None
+
+
+def _least_squares(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``np.linalg.lstsq(a, b, rcond=None)[0]`` for a (m, n) float matrix and a (m,) vector, the
+    same numbers (the same LAPACK call, gelsd, with the same cut-off) at a fraction of the
+    wrapper's cost; tests/test_step_speed.py checks that they agree."""
+    if _lstsq_gufunc is None:
+        return np.linalg.lstsq(a, b, rcond=None)[0]
+    rcond = np.finfo(np.float64).eps * max(a.shape)
+    return _lstsq_gufunc(a, b[:, np.newaxis], rcond, signature="ddd->ddid")[0][:, 0]
 
 
 def play_update(plays: np.ndarray, q_cmd: np.ndarray, radii: np.ndarray) -> np.ndarray:
@@ -164,7 +182,8 @@ def hysteresis_output(plays: np.ndarray, q_cmd: np.ndarray) -> np.ndarray:
 
     Written as q_cmd minus the mean lag so that zero-width plays give q_cmd bit for bit.
     """
-    return q_cmd - np.mean(q_cmd - plays, axis=0)
+    # np.mean's arithmetic (a sum, then a division by the count), without its wrapper's overhead.
+    return q_cmd - np.add.reduce(q_cmd - plays, axis=0) / len(plays)
 
 
 def repeatability_std(config: BiasConfig) -> np.ndarray:
@@ -195,6 +214,8 @@ def _checked_joints(values: np.ndarray, name: str) -> np.ndarray:
     array = np.asarray(values, dtype=float)
     if array.shape != (_N_JOINTS,):
         raise ValueError(f"{name} must have shape ({_N_JOINTS},), got {array.shape}")
+    if all(map(math.isfinite, array.tolist())):
+        return array
     for i, value in enumerate(array):
         if not np.isfinite(value):
             raise ValueError(f"{name}[{i}] ({kin.JOINT_NAMES[i]}) is {value}; expected a finite value")
@@ -245,17 +266,28 @@ class CableModel:
             (6,) true joint values, rad / m.
         """
         q_cmd = _checked_joints(q_cmd, "q_cmd")
-        if np.isnan(self._plays).any():
-            self.reset(q_cmd)
-        self._plays = play_update(self._plays, q_cmd, self._radii)
-        q = hysteresis_output(self._plays, q_cmd)
-        error = np.zeros(_N_JOINTS)
-        error[_OUTER] = outer_stretch(q, self.config, self.instrument.outer_gains) + gravity_sag(q, self.config)
-        error[_WRIST] = wrist_stretch(q, self.config, self.instrument.wrist_coupling)
-        q_true = q + self.instrument.homing_offsets + error
+        self._plays, q_true = self._advance(q_cmd)
         if noise_rng is not None:
             q_true = q_true + noise_rng.normal(0.0, 1.0, _N_JOINTS) * self._noise_std
         return q_true
+
+    def peek_true_joints(self, q_cmd: np.ndarray) -> np.ndarray:
+        """The joints (6,) rad / m that a noiseless move to ``q_cmd`` (6,) would give, without
+        moving: the hysteresis state stays as it is. The same numbers as ``true_joints(q_cmd)``
+        between ``get_state()`` and ``set_state()``, without copying the state."""
+        return self._advance(_checked_joints(q_cmd, "q_cmd"))[1]
+
+    def _advance(self, q_cmd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(the play outputs after a move to ``q_cmd``, the noiseless true joints there)."""
+        plays = self._plays
+        if np.isnan(plays).any():  # no history: the cables are at rest at the first command
+            plays = np.tile(q_cmd, (len(PLAY_FRACTIONS), 1))
+        plays = play_update(plays, q_cmd, self._radii)
+        q = hysteresis_output(plays, q_cmd)
+        error = np.zeros(_N_JOINTS)
+        error[_OUTER] = outer_stretch(q, self.config, self.instrument.outer_gains) + gravity_sag(q, self.config)
+        error[_WRIST] = wrist_stretch(q, self.config, self.instrument.wrist_coupling)
+        return plays, q + self.instrument.homing_offsets + error
 
     def get_state(self) -> np.ndarray:
         """A copy of the hysteresis state, (n_plays, 6); NaN before the first move."""

@@ -8,6 +8,8 @@ the base (RCM) frame, metres; joint vectors follow
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from dvrk_gym.sim.robot.kinematics import (
@@ -17,7 +19,7 @@ from dvrk_gym.sim.robot.kinematics import (
     PSM_DH,
     TOOL_TIP_ROTATION,
     clamp_to_joint_limits,
-    dh_transform,
+    dh_transforms,
     finite_vector,
     joint_limit_violations,
     rotation_x,
@@ -30,6 +32,13 @@ __all__ = ["UnreachablePoseError", "inverse_kinematics", "inverse_kinematics_cla
 _INSERTION_TO_WRIST_M = -(PSM_DH[2].d_offset_m + PSM_DH[3].d_offset_m)
 _WRIST_OFFSET_M = PSM_DH[5].a_m
 _SINGULAR_TOL_M = 1e-6
+_OUTER_DH = PSM_DH[:3]  # yaw, pitch, insertion: the rows that place the wrist
+_ALPHA5_SIGN = float(np.sign(np.sin(PSM_DH[4].alpha_rad)))
+_ROTATION_X6 = rotation_x(PSM_DH[5].alpha_rad)
+_ROLL_BRANCHES_RAD = (2 * np.pi * np.arange(-2, 3)).tolist()
+_ROLL_LOWER_RAD, _ROLL_UPPER_RAD = float(JOINT_LOWER[3]), float(JOINT_UPPER[3])
+_EYE3 = np.eye(3)
+_BOTTOM_ROW = np.array([0.0, 0.0, 0.0, 1.0])
 
 
 class UnreachablePoseError(ValueError):
@@ -38,12 +47,12 @@ class UnreachablePoseError(ValueError):
 
 def _wrap(angle_rad: float) -> float:
     """Angle wrapped to (-pi, pi]."""
-    return float(-np.remainder(-angle_rad + np.pi, 2 * np.pi) + np.pi)
+    # Python's float % is np.remainder's arithmetic (fmod, then the divisor's sign).
+    return -((-float(angle_rad) + math.pi) % (2 * math.pi)) + math.pi
 
 
-def _zxz_outer_angles(m: np.ndarray, b: float) -> tuple[float, float]:
-    """Angles (a, c) of m = Rz(a) @ Rx(b) @ Rz(c) for a known b with sin(b) != 0."""
-    s = np.sign(np.sin(b))
+def _zxz_outer_angles(m: np.ndarray, s: float) -> tuple[float, float]:
+    """Angles (a, c) of m = Rz(a) @ Rx(b) @ Rz(c) for a known b, given s = sign(sin(b)) != 0."""
     return float(np.arctan2(s * m[0, 2], -s * m[1, 2])), float(np.arctan2(s * m[2, 0], s * m[2, 1]))
 
 
@@ -54,7 +63,7 @@ def _nonsingular_norm(vector: np.ndarray, why_singular: str) -> np.floating:
         vector: (3,) metres.
         why_singular: What a short vector means, with ``{mm:.4f}`` where its length (mm) goes.
     """
-    norm = np.linalg.norm(vector)
+    norm = np.sqrt(vector.dot(vector))  # np.linalg.norm's own formula for a vector, without its checks
     if norm < _SINGULAR_TOL_M:
         raise UnreachablePoseError("pose is geometrically unreachable: " + why_singular.format(mm=norm * 1e3))
     return norm
@@ -76,13 +85,15 @@ def _solve_branch(p6: np.ndarray, r6: np.ndarray, x5_sign: float, shaft_sign: fl
     pitch = -np.arctan2(shaft[1], np.hypot(shaft[0], shaft[2]))
     insertion = _INSERTION_TO_WRIST_M + shaft_sign * shaft_length
     # Right-handed frame 5: z5 = x5 x y5 (spelled out because np.cross is slow for 3-vectors).
-    z5 = np.array([x5[1] * n[2] - x5[2] * n[1], x5[2] * n[0] - x5[0] * n[2], x5[0] * n[1] - x5[1] * n[0]])
-    r5 = np.column_stack([x5, n, z5])
-    r3 = (dh_transform(PSM_DH[0], yaw) @ dh_transform(PSM_DH[1], pitch) @ dh_transform(PSM_DH[2], insertion))[:3, :3]
+    r5 = np.empty((3, 3))
+    r5[:, 0], r5[:, 1] = x5, n
+    r5[:, 2] = [x5[1] * n[2] - x5[2] * n[1], x5[2] * n[0] - x5[0] * n[2], x5[0] * n[1] - x5[1] * n[0]]
+    t0, t1, t2 = dh_transforms(np.array([yaw, pitch, insertion]), _OUTER_DH)
+    r3 = (t0 @ t1 @ t2)[:3, :3]
     # R35 = Rz(q4) Rx(alpha5) Rz(q5 + offset5) because alpha4 = 0 and a4 = a5 = 0.
-    roll, wrist_pitch = _zxz_outer_angles(r3.T @ r5, PSM_DH[4].alpha_rad)
+    roll, wrist_pitch = _zxz_outer_angles(r3.T @ r5, _ALPHA5_SIGN)
     # R56 = Rx(alpha6) Rz(q6 + offset6).
-    r56 = rotation_x(PSM_DH[5].alpha_rad).T @ (r5.T @ r6)
+    r56 = _ROTATION_X6.T @ (r5.T @ r6)
     wrist_yaw = np.arctan2(r56[1, 0], r56[0, 0]) - PSM_DH[5].theta_offset_rad
     wrist_pitch -= PSM_DH[4].theta_offset_rad
     return np.array([yaw, pitch, insertion, _wrap(roll), _wrap(wrist_pitch), _wrap(wrist_yaw)])
@@ -92,11 +103,13 @@ def _choose_roll(q: np.ndarray, q_ref: np.ndarray | None) -> np.ndarray:
     """Pick the 2*pi branch of roll: within limits and closest to q_ref[3] if given."""
     if q_ref is None:
         return q
-    branches = q[3] + 2 * np.pi * np.arange(-2, 3)
-    in_limits = (branches >= JOINT_LOWER[3]) & (branches <= JOINT_UPPER[3])
-    candidates = branches[in_limits] if in_limits.any() else branches
+    # In Python floats (the same sums and comparisons as on arrays, without their overhead);
+    # min() takes the first of equal distances, as np.argmin does.
+    roll, reference = float(q[3]), float(q_ref[3])
+    branches = [roll + offset for offset in _ROLL_BRANCHES_RAD]
+    candidates = [b for b in branches if _ROLL_LOWER_RAD <= b <= _ROLL_UPPER_RAD] or branches
     q = q.copy()
-    q[3] = candidates[np.argmin(np.abs(candidates - q_ref[3]))]
+    q[3] = min(candidates, key=lambda b: abs(b - reference))
     return q
 
 
@@ -104,12 +117,14 @@ def _validate_pose(pose: np.ndarray) -> np.ndarray:
     pose = np.asarray(pose, dtype=float)
     if pose.shape != (4, 4):
         raise ValueError(f"pose must have shape (4, 4), got {pose.shape}")
-    if not np.all(np.isfinite(pose)):
+    if not all(map(math.isfinite, pose.ravel().tolist())):
         raise ValueError("pose must be finite")
     rotation = pose[:3, :3]
-    orthonormality_error = np.abs(rotation.T @ rotation - np.eye(3)).max()
-    bottom_row_error = np.abs(pose[3] - (0.0, 0.0, 0.0, 1.0)).max()
-    if orthonormality_error > 1e-6 or bottom_row_error > 1e-9 or np.linalg.det(rotation) < 0:
+    orthonormality_error = np.abs(rotation.T @ rotation - _EYE3).max()
+    bottom_row_error = np.abs(pose[3] - _BOTTOM_ROW).max()
+    (a, b, c), (d, e, f), (g, h, i) = rotation.tolist()
+    determinant = a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g)
+    if orthonormality_error > 1e-6 or bottom_row_error > 1e-9 or determinant < 0:
         raise ValueError("pose must be a rigid transform (orthonormal, det +1, last row 0 0 0 1)")
     return pose
 

@@ -13,6 +13,7 @@ inverse is in :mod:`dvrk_gym.sim.robot.ik`.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -35,6 +36,8 @@ __all__ = [
     "finite_vector",
     "dh_transform",
     "link_frames",
+    "last_frame",
+    "dh_transforms",
     "forward_kinematics",
     "rotation_x",
     "joint_limit_violations",
@@ -121,7 +124,7 @@ def finite_vector(values: object, size: int, name: str) -> np.ndarray:
     array = np.asarray(values, dtype=float)
     if array.shape != (size,):
         raise ValueError(f"{name} must have shape ({size},), got {array.shape}")
-    if not np.all(np.isfinite(array)):
+    if not all(map(math.isfinite, array.tolist())):
         raise ValueError(f"{name} must be finite, got {array}")
     return array
 
@@ -150,6 +153,67 @@ def dh_transform(row: DHRow, q: float) -> np.ndarray:
     )
 
 
+class _TableArrays:
+    """A DH table's columns as arrays, for building all its link transforms at once."""
+
+    def __init__(self, dh: tuple[DHRow, ...]) -> None:
+        self.dh = dh  # kept, so that the id this is cached under stays this table's
+        self.theta_offset, self.d_offset = np.array([[row.theta_offset_rad, row.d_offset_m] for row in dh]).T
+        self.prismatic = np.array([row.prismatic for row in dh])
+        self.revolute = ~self.prismatic
+        # What a joint leaves where it does not act: offset + 0.0, as dh_transform adds it.
+        self.theta_fixed, self.d_fixed = self.theta_offset + 0.0, self.d_offset + 0.0
+        self.ca, self.sa = np.cos([row.alpha_rad for row in dh]), np.sin([row.alpha_rad for row in dh])
+        self.template = np.zeros((len(dh), 4, 4))
+        self.template[:, 0, 3], self.template[:, 1, 2], self.template[:, 2, 2] = [row.a_m for row in dh], -self.sa, self.ca
+        self.template[:, 3, 3] = 1.0
+
+
+_TABLE_ARRAYS: dict[int, _TableArrays] = {}
+_MAX_CACHED_TABLES = 256
+
+
+def _table_arrays(dh: tuple[DHRow, ...]) -> _TableArrays:
+    arrays = _TABLE_ARRAYS.get(id(dh))
+    if arrays is None or arrays.dh is not dh:
+        if len(_TABLE_ARRAYS) >= _MAX_CACHED_TABLES:
+            _TABLE_ARRAYS.clear()
+        arrays = _TABLE_ARRAYS[id(dh)] = _TableArrays(dh)
+    return arrays
+
+
+def dh_transforms(q: np.ndarray, dh: tuple[DHRow, ...] = PSM_DH) -> np.ndarray:
+    """The transforms of all links at once, (n, 4, 4): entry i is :func:`dh_transform`
+    ``(dh[i], q[i])``, element for element the same numbers.
+
+    Args:
+        q: (n,) joint values, rad / m, one per row of ``dh`` (not checked).
+        dh: DH table.
+    """
+    t = _table_arrays(dh)
+    theta = np.add(t.theta_offset, q, out=t.theta_fixed.copy(), where=t.revolute)
+    d = np.add(t.d_offset, q, out=t.d_fixed.copy(), where=t.prismatic)
+    ct, st = np.cos(theta), np.sin(theta)
+    transforms = t.template.copy()
+    transforms[:, 0, 0], transforms[:, 0, 1] = ct, -st
+    transforms[:, 1, 0], transforms[:, 1, 1], transforms[:, 1, 3] = st * t.ca, ct * t.ca, -t.sa * d
+    transforms[:, 2, 0], transforms[:, 2, 1], transforms[:, 2, 3] = st * t.sa, ct * t.sa, t.ca * d
+    return transforms
+
+
+_EYE4 = _frozen(np.eye(4))
+
+
+def _chain(q: np.ndarray, dh: tuple[DHRow, ...], frames: np.ndarray | None = None) -> np.ndarray:
+    """The last frame of the chain (4, 4), filling ``frames`` (n, 4, 4) with every frame if given."""
+    current = _EYE4
+    for i, transform in enumerate(dh_transforms(q, dh)):
+        current = current @ transform
+        if frames is not None:
+            frames[i] = current
+    return current
+
+
 def link_frames(q: np.ndarray, dh: tuple[DHRow, ...] = PSM_DH) -> np.ndarray:
     """Frames 1..n of the chain in the base (RCM) frame.
 
@@ -163,11 +227,13 @@ def link_frames(q: np.ndarray, dh: tuple[DHRow, ...] = PSM_DH) -> np.ndarray:
     """
     q = finite_vector(q, len(dh), "q")
     frames = np.empty((len(dh), 4, 4))
-    current = np.eye(4)
-    for i, (row, qi) in enumerate(zip(dh, q)):
-        current = current @ dh_transform(row, qi)
-        frames[i] = current
+    _chain(q, dh, frames)
     return frames
+
+
+def last_frame(q: np.ndarray, dh: tuple[DHRow, ...] = PSM_DH) -> np.ndarray:
+    """The last frame of the chain, ``link_frames(q, dh)[-1]`` (4, 4), without the others."""
+    return _chain(finite_vector(q, len(dh), "q"), dh)
 
 
 def forward_kinematics(q: np.ndarray, dh: tuple[DHRow, ...] = PSM_DH) -> np.ndarray:
@@ -180,7 +246,7 @@ def forward_kinematics(q: np.ndarray, dh: tuple[DHRow, ...] = PSM_DH) -> np.ndar
     Returns:
         (4, 4) pose in the base frame, translation in metres.
     """
-    pose = link_frames(q, dh)[-1]
+    pose = last_frame(q, dh)
     pose[:3, :3] = pose[:3, :3] @ TOOL_TIP_ROTATION
     return pose
 
@@ -198,6 +264,8 @@ def joint_limit_violations(q: np.ndarray, tolerance: float) -> list[str]:
         q: (6,) joint values, rad / m.
         tolerance: How far past a limit (rad or m) still counts as within it.
     """
+    if ((JOINT_LOWER - tolerance <= q) & (q <= JOINT_UPPER + tolerance)).all():
+        return []
     messages = []
     for i, name in enumerate(JOINT_NAMES):
         if JOINT_LOWER[i] - tolerance <= q[i] <= JOINT_UPPER[i] + tolerance:
@@ -246,7 +314,7 @@ def jaw_tip_positions(q: np.ndarray, jaw_angle_rad: float, dh: tuple[DHRow, ...]
             f"jaw angle {np.rad2deg(jaw_angle_rad):.2f} deg is outside "
             f"[{np.rad2deg(JAW_LOWER_RAD):.0f}, {np.rad2deg(JAW_UPPER_RAD):.0f}] deg"
         )
-    frame6 = link_frames(q, dh)[-1]
+    frame6 = last_frame(q, dh)
     half = np.array([0.5, -0.5]) * jaw_angle_rad
     # A closed jaw points along y6 (the tool z axis); rotating y6 by +-half about z6.
     local_dirs = np.stack([-np.sin(half), np.cos(half), np.zeros(2)], axis=1)
@@ -259,7 +327,7 @@ def touch_point(q: np.ndarray, dh: tuple[DHRow, ...] = PSM_DH) -> np.ndarray:
     The closed jaws are the segment from the wrist-yaw pivot to the closed tip, so
     the lowest point is one of its two ends.
     """
-    frame6 = link_frames(q, dh)[-1]
+    frame6 = last_frame(q, dh)
     pivot = frame6[:3, 3]
     tip = pivot + JAW_LENGTH_M * frame6[:3, 1]
     return tip if tip[2] <= pivot[2] else pivot.copy()

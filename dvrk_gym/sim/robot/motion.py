@@ -67,6 +67,22 @@ def trapezoid_timing(distance: float, max_speed: float, max_accel: float) -> tup
     return distance / max_speed + max_speed / max_accel, max_speed / max_accel
 
 
+_EYE3 = np.eye(3)
+_ANGLE_BOUND_MARGIN_RAD = 1e-9
+"""Added to :func:`rotation_angle_bound`: more than the round-off of the bound and of scipy's angle."""
+
+
+def rotation_angle_bound(rotation: np.ndarray) -> float:
+    """An upper bound, rad, on the angle of a rotation matrix (3, 3), without finding the angle.
+
+    ``|R - I|_F = 2 sqrt(2) sin(angle / 2)``, and ``sin(x / 2) >= x / pi`` on [0, pi], so the
+    angle is at most ``pi |R - I|_F / (2 sqrt(2))`` (exact at pi, about 1.57 times the
+    angle when it is small), plus a margin for round-off.
+    """
+    chord = math.sqrt(float(np.square(rotation - _EYE3).sum()))
+    return math.pi * chord / (2.0 * math.sqrt(2.0)) + _ANGLE_BOUND_MARGIN_RAD
+
+
 def trapezoid_progress(t: float, duration: float, ramp: float) -> float:
     """Fraction in [0, 1] of the path covered ``t`` seconds into a trapezoidal profile.
 
@@ -108,12 +124,18 @@ class CartesianMove:
     def plan(cls, start: np.ndarray, end: np.ndarray, limits: MotionLimits) -> CartesianMove:
         """Plan a move whose duration respects both the linear and the angular limits."""
         distance = float(np.linalg.norm(end[:3, 3] - start[:3, 3]))
-        angle = float(Rotation.from_matrix(start[:3, :3].T @ end[:3, :3]).magnitude())
         linear = trapezoid_timing(distance, limits.max_speed_m_s, limits.max_accel_m_s2)
-        angular = trapezoid_timing(angle, limits.max_angular_speed_rad_s, limits.max_angular_accel_rad_s2)
+        relative = start[:3, :3].T @ end[:3, :3]
         # The slower of the two sets the profile; the other follows the same fraction, so
-        # position and orientation arrive together and neither exceeds its limits.
-        duration, ramp = max(linear, angular)
+        # position and orientation arrive together and neither exceeds its limits. The
+        # rotation's angle (scipy, slow) is needed only when a bound on it could be slower.
+        bound = trapezoid_timing(rotation_angle_bound(relative), limits.max_angular_speed_rad_s, limits.max_angular_accel_rad_s2)
+        if bound[0] < linear[0]:
+            duration, ramp = linear
+        else:
+            angle = float(Rotation.from_matrix(relative).magnitude())
+            angular = trapezoid_timing(angle, limits.max_angular_speed_rad_s, limits.max_angular_accel_rad_s2)
+            duration, ramp = max(linear, angular)
         return cls(np.array(start, dtype=float), np.array(end, dtype=float), duration, ramp)
 
     def pose_at(self, t: float) -> np.ndarray:

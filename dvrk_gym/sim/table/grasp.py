@@ -313,7 +313,8 @@ class Gripper:
             if fragment.name in self.holds:
                 continue
             linear, angular = c.getBaseVelocity(body)
-            speed = math.sqrt(sum(v * v for v in linear))
+            vx, vy, vz = linear
+            speed = math.sqrt(vx * vx + vy * vy + vz * vz)  # the order sum() adds them in
             if speed > limit:
                 scale = limit / speed
                 c.resetBaseVelocity(body, [v * scale for v in linear], [w * scale for w in angular])
@@ -332,6 +333,9 @@ class Gripper:
     def _try_grasp(self, fragment: Fragment) -> None:
         """Hold ``fragment`` once both jaws have squeezed it antipodally for ``grasp_steps`` steps in a row."""
         name, body = fragment.name, fragment.body_id
+        if body not in self._touches[0] or body not in self._touches[1]:  # the common case: not squeezed
+            self._streak[name] = 0
+            return
         touching = all(body in self._touches[i] and self._touches[i][body].depth_m >= 0.0 for i in range(2))
         ok = touching and self.jaw_target < self.jaw_angle and self._antipodal(fragment)
         self._streak[name] = self._streak.get(name, 0) + 1 if ok else 0

@@ -1,0 +1,150 @@
+"""Our three envs beside panda-gym's, stepped in one process with seeded random actions.
+
+Run: python benchmarks/bench_peers.py  [--steps 1000] [--picks 16] [--rounds 3] [--resolution 1920 1080]
+Needs panda-gym (the ``bench`` extra): pip install -e ".[bench]", or pip install panda-gym==3.0.7.
+With --steps 500 --picks 8 it took 4 minutes on the shared 2-core machine (load average 13-18).
+
+Prints, for GridTouch-v0, CalibrationExploration-v0, Debridement-v0 (one step is one pick),
+PandaReach-v3 and PandaPickAndPlace-v3: steps per wall second, the ratio to PandaReach-v3's,
+and the real-time factor (simulated seconds per wall second). Each env is made with
+``gym.make`` (so with Gymnasium's wrappers, as a user has it), reset with the seed, and
+stepped with random actions from its seeded action space; an episode that ends is reset, and
+the reset counts in the time. The envs take turns, ``--rounds`` times, and each figure is the
+median over the rounds, so a change in the machine's load hits all of them alike.
+
+Targets (issue 18): GridTouch-v0 at least 2x PandaReach-v3's steps/s; Debridement-v0 toward
+10 picks/s.
+
+Profiles (cProfile and timers, on the 2-core machine shared with other jobs, load average
+8-19; issue 18):
+
+* GridTouch-v0, a step and its reset, before: about 14 inverse kinematics, 13 cable model
+  and 13 forward kinematics evaluations (the contact search and the simulated person's
+  correction each iterate on IK -> cables -> touch point; 80% of the time). Per evaluation
+  the cost was numpy's overhead on 3- to 6-element arrays, not arithmetic: each link
+  transform built from nested lists with its own cos/sin of constant twists
+  (``dh_transform``, the top line of the profile), the pose checks (``np.linalg.det``,
+  ``np.eye``), joint checks looping over elements, the cable state copied out and back per
+  evaluation, ``np.linalg.lstsq``'s wrapper in the gravity sag (7%), a tool rotation
+  (cos/sin of yaw, pitch, roll) rebuilt for every evaluation of one yaw, the reported pose's
+  FK recomputed five times a step, scipy's ``Rotation.from_matrix`` in every move's plan,
+  and ``BulletClient.__getattr__`` making a ``functools.partial`` per pybullet call.
+  After: a chain's transforms built at once from arrays made once per DH table, checks
+  vectorised or in Python floats, the cable model peeked without copying its state, one
+  rotation per yaw, the reported pose remembered per joint vector, the contact search's
+  first point measured once, lstsq's LAPACK call without its wrapper, scipy's angle only
+  when a bound on it could set a move's duration, each pybullet function bound once. Whole
+  process CPU for 1,500 steps and resets, old and new code in turn: 8.06 s -> 5.17 s
+  (0.69 s of it start-up). Every number is the same bit for bit: the same numpy
+  operations on the same values (tests/test_fast_paths.py compares each fast path with the
+  code it replaced); ``dvrk-gym reproduce --quick`` gives the same results.json. Left, in
+  order: ``_solve_branch``'s own arithmetic, ``dh_transforms``, the 4x4 products of the
+  chains, ``_least_squares``, ``set_joints`` (eight ``resetJointState`` calls: one
+  ``resetJointStatesMultiDof`` call was faster but moved a fragment in a debridement trial,
+  so it was not kept). Getting to 2x PandaReach-v3 would take fewer numpy calls per
+  evaluation than the same operations allow, that is, other roundings (and other numbers).
+* Debridement-v0, one pick (about 600 physics steps of 1/240 s: lowering, gripping,
+  raising and the drop step physics; the moves to the fragment and to the receptacle are
+  free-space teleports), before: rendering for the fragment observation 25-30% (two
+  coarse renders and two windows per fragment seen; left to the rendering work of issue
+  18), ``stepSimulation`` 11-14%, the gripper's Python per physics step (driving the
+  joints, contact sensing, speed limits, grasp tests) about 30%, IK and cables of the
+  stepped moves' waypoints about 25%. After: the same physics with the per-step and
+  per-waypoint overheads cut as for GridTouch: 8 picks at 1920 x 1080, whole process CPU
+  3.21 s -> 2.88 s (about 1 s of it start-up and the reset). Fewer or longer physics steps
+  were not taken: every stepped phase has the jaws near, on or holding a fragment, and the
+  fragments on the paper are stepped all along, so any change moves the outcomes.
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import gymnasium as gym
+
+INSTALL = 'pip install -e ".[bench]"  (or: pip install panda-gym==3.0.7)'
+REFERENCE = "PandaReach-v3"
+
+
+@dataclass
+class Subject:
+    """One env to time: its id, keyword arguments, steps per round, and how to read its simulated time."""
+
+    env_id: str
+    kwargs: dict = field(default_factory=dict)
+    steps: int = 1000
+    sim_seconds: Callable[[gym.Env, dict], float] | None = None
+    rates: list[float] = field(default_factory=list)
+    real_time_factors: list[float] = field(default_factory=list)
+
+
+def clock_seconds(env: gym.Env) -> float:
+    """Seconds on a dvrk_gym env's simulated clock (reset with each episode)."""
+    return env.unwrapped.world.clock.time_s
+
+
+def time_subject(subject: Subject, seed: int) -> None:
+    """Make, reset and step ``subject.env_id`` ``subject.steps`` times; append its steps/s and real-time factor."""
+    env = gym.make(subject.env_id, **subject.kwargs)
+    env.reset(seed=seed)
+    env.action_space.seed(seed)
+    env.step(env.action_space.sample())  # one-off work (the printed grid's detection) is not a step
+    env.reset(seed=seed)
+    ours = subject.env_id.startswith("dvrk_gym/")
+    simulated = 0.0
+    start = time.perf_counter()
+    for _ in range(subject.steps):
+        before = clock_seconds(env) if ours else 0.0
+        _, _, terminated, truncated, _ = env.step(env.action_space.sample())
+        simulated += clock_seconds(env) - before if ours else env.unwrapped.sim.dt
+        if terminated or truncated:
+            env.reset()
+    elapsed = time.perf_counter() - start
+    env.close()
+    subject.rates.append(subject.steps / elapsed)
+    subject.real_time_factors.append(simulated / elapsed)
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--steps", type=int, default=1000, help="steps per round of each env but Debridement (default: %(default)s)")
+    parser.add_argument("--picks", type=int, default=16, help="Debridement-v0 picks per round (default: %(default)s)")
+    parser.add_argument("--rounds", type=int, default=3, help="turns of every env; figures are medians (default: %(default)s)")
+    parser.add_argument("--seed", type=int, default=0, help="seeds every env and its actions (default: %(default)s)")
+    parser.add_argument("--resolution", type=int, nargs=2, default=(1920, 1080), metavar=("W", "H"), help="our endoscope images")
+    args = parser.parse_args()
+    try:
+        import panda_gym  # noqa: F401  (registers the Panda envs)
+    except ImportError:
+        print(f"bench_peers needs panda-gym, which is not installed: {INSTALL}", file=sys.stderr)
+        return 1
+    import dvrk_gym  # noqa: F401  (registers ours)
+
+    resolution = {"camera_resolution": tuple(args.resolution)}
+    subjects = [
+        Subject("dvrk_gym/GridTouch-v0", resolution, args.steps),
+        Subject("dvrk_gym/CalibrationExploration-v0", resolution, args.steps),
+        Subject("dvrk_gym/Debridement-v0", resolution, args.picks),
+        Subject(REFERENCE, steps=args.steps),
+        Subject("PandaPickAndPlace-v3", steps=args.steps),
+    ]
+    for _ in range(args.rounds):
+        for subject in subjects:
+            time_subject(subject, args.seed)
+    reference = statistics.median(next(s for s in subjects if s.env_id == REFERENCE).rates)
+    print(f"{'env (random actions, resets counted)':<36} {'steps/s':>9} {'x ' + REFERENCE:>17} {'sim s / wall s':>15}")
+    for subject in subjects:
+        rate = statistics.median(subject.rates)
+        factor = statistics.median(subject.real_time_factors)
+        print(f"{subject.env_id.removeprefix('dvrk_gym/'):<36} {rate:>9.1f} {rate / reference:>17.2f} {factor:>15.2f}")
+    print(f"medians of {args.rounds} rounds; Debridement-v0: one step is one pick ({args.picks} a round); resolution {resolution}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

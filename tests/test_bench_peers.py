@@ -1,0 +1,44 @@
+"""benchmarks/bench_peers.py: it runs beside panda-gym, and says how to install it when it is missing."""
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+SCRIPT = ROOT / "benchmarks" / "bench_peers.py"
+
+# Runs the script with panda_gym made unimportable, as in an environment without the extra.
+WITHOUT_PANDA_GYM = f"""
+import runpy, sys
+class Missing:
+    def find_spec(self, name, path=None, target=None):
+        if name.split(".")[0] == "panda_gym":
+            raise ModuleNotFoundError(f"No module named {{name!r}}")
+sys.meta_path.insert(0, Missing())
+sys.argv = [{str(SCRIPT)!r}, "--rounds", "1"]
+runpy.run_path({str(SCRIPT)!r}, run_name="__main__")
+"""
+
+
+def test_without_panda_gym_it_exits_non_zero_and_names_the_install_command():
+    result = subprocess.run([sys.executable, "-c", WITHOUT_PANDA_GYM], cwd=ROOT, capture_output=True, text=True, timeout=120)
+    assert result.returncode != 0
+    assert 'pip install -e ".[bench]"' in result.stderr and "pip install panda-gym==3.0.7" in result.stderr
+    assert result.stdout == ""  # nothing timed
+
+
+@pytest.mark.slow
+def test_it_times_all_five_envs_and_prints_their_ratio_to_panda_reach():
+    pytest.importorskip("panda_gym")
+    arguments = ["--steps", "20", "--picks", "1", "--rounds", "1", "--resolution", "320", "180"]
+    result = subprocess.run([sys.executable, str(SCRIPT), *arguments], cwd=ROOT, capture_output=True, text=True, timeout=600)
+    assert result.returncode == 0, result.stderr[-2000:]
+    lines = result.stdout.splitlines()  # panda-gym's PyBullet prints its argv lines first
+    header = next(i for i, line in enumerate(lines) if line.startswith("env (random actions"))
+    rows = {line.split()[0]: line.split()[1:] for line in lines[header + 1 : header + 6]}
+    assert list(rows) == ["GridTouch-v0", "CalibrationExploration-v0", "Debridement-v0", "PandaReach-v3", "PandaPickAndPlace-v3"]
+    assert rows["PandaReach-v3"][1] == "1.00"
+    for name, (rate, ratio, real_time_factor) in rows.items():
+        assert float(rate) > 0.0 and float(ratio) > 0.0 and float(real_time_factor) > 0.0, name
