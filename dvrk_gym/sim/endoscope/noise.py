@@ -1,7 +1,7 @@
 """Pixel noise of the endoscope's detections: one Gaussian model for every detector.
 
 A detection's noise is given as a standard deviation in pixels of the paper's 1920 x 1080
-images (:data:`~dvrk_gym.sim.endoscope.camera.PAPER_INTRINSICS`), so one setting means the
+images (:data:`~dvrk_gym.paper.ENDOSCOPE_RESOLUTION_PX`), so one setting means the
 same angular error at any rendering resolution: at width w it is that sd times
 w / 1920 pixels. Each noisy (u, v) takes one draw of two independent normals,
 ``rng.normal(0.0, sigma_px, size=2)``; with zero noise or no generator nothing is drawn,
@@ -15,12 +15,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from dvrk_gym.sim.endoscope.camera import PAPER_INTRINSICS
+from dvrk_gym import paper
 
-__all__ = ["PAPER_WIDTH_PX", "PixelNoise"]
+__all__ = ["MAX_PIXEL_NOISE_PX", "PAPER_WIDTH_PX", "PixelNoise"]
 
-PAPER_WIDTH_PX: int = PAPER_INTRINSICS.width
+PAPER_WIDTH_PX: int = paper.ENDOSCOPE_RESOLUTION_PX[0]
 """Width of the paper's images (1920 px), at which a pixel-noise setting is given."""
+MAX_PIXEL_NOISE_PX = 50.0
+"""The largest detection noise a world or an env accepts (standard deviation at 1920 x 1080), pixels."""
 
 
 @dataclass(frozen=True)
