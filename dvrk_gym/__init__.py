@@ -65,7 +65,7 @@ _EXPORTS = {
     "run_reproduce": "reproduce.run",
     # sweeps over instruments, calibrators and seeds (locally or on Dask)
     "SweepSettings": "sweep.grid",
-    "LocalExecutor": "sweep.executors",
+    "LocalExecutor": "parallel.executors",
     "run_sweep": "sweep.run",
 }
 _LAZY = LazyExports(__name__, _EXPORTS)
@@ -98,11 +98,11 @@ if TYPE_CHECKING:  # what type checkers and editors see; at run time the names l
     from dvrk_gym.evaluation.trials import run_trials
     from dvrk_gym.fidelity.comparison import run_fidelity
     from dvrk_gym.fidelity.statistics import FidelityStatistics, fidelity_statistics
+    from dvrk_gym.parallel.executors import LocalExecutor
     from dvrk_gym.reproduce.run import ReproduceConfig, run_reproduce
     from dvrk_gym.sim.robot.bias import BiasConfig
     from dvrk_gym.sim.table.table import DebridementTable
     from dvrk_gym.sim.world import DvrkWorld, WorldConfig
-    from dvrk_gym.sweep.executors import LocalExecutor
     from dvrk_gym.sweep.grid import SweepSettings
     from dvrk_gym.sweep.run import run_sweep
 
