@@ -56,7 +56,8 @@ def add_executor_options(parser: argparse.ArgumentParser, what: str) -> None:
         "--workers",
         type=int,
         default=min(2, os.cpu_count() or 1),
-        help=f"local processes running {what} side by side, without --scheduler; results do not depend on it (default: %(default)s)",
+        help=f"local processes running {what} side by side, without --scheduler (1: in this process); "
+        "results do not depend on it (default: %(default)s)",
     )
     parser.add_argument(
         "--scheduler",
