@@ -23,8 +23,8 @@ from distributed import LocalCluster
 
 from dvrk_gym import paper
 from dvrk_gym.calibration.pipeline import PipelineConfig
+from dvrk_gym.parallel.dask_executor import DaskExecutor
 from dvrk_gym.sweep import LocalExecutor, SweepResult, SweepSettings, format_rows, parse_calibrators, parse_int_list, run_sweep
-from dvrk_gym.sweep.dask_executor import DaskExecutor
 from dvrk_gym.sweep.table import TIME_COLUMNS
 
 

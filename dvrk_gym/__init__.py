@@ -25,12 +25,12 @@ __version__ = "0.1.0"
 _EXPORTS = {
     # the environments and their settings
     "CalibrationExplorationEnv": "envs.exploration",
-    "ExplorationConfig": "envs.exploration",
+    "ExplorationConfig": "envs.configs",
     "GridTouchEnv": "envs.grid_touch",
-    "GridTouchConfig": "envs.grid_touch",
+    "GridTouchConfig": "envs.configs",
     "DebridementEnv": "envs.debridement",
     "DebridementConfig": "envs.debridement_config",
-    "PickTiming": "envs.picks",
+    "PickTiming": "envs.debridement_config",
     "fragment_target": "envs.debridement",
     "BiasConfig": "sim.robot.bias",
     "DvrkWorld": "sim.world",
@@ -65,7 +65,7 @@ _EXPORTS = {
     "run_reproduce": "reproduce.run",
     # sweeps over instruments, calibrators and seeds (locally or on Dask)
     "SweepSettings": "sweep.grid",
-    "LocalExecutor": "sweep.executors",
+    "LocalExecutor": "parallel.executors",
     "run_sweep": "sweep.run",
 }
 _LAZY = LazyExports(__name__, _EXPORTS)
@@ -89,20 +89,20 @@ if TYPE_CHECKING:  # what type checkers and editors see; at run time the names l
     from dvrk_gym.calibration.models.two_phase import TwoPhaseCalibrator
     from dvrk_gym.calibration.pipeline import PipelineConfig, run_calibration
     from dvrk_gym.calibration.policy import CalibratedPolicy, Calibrator
+    from dvrk_gym.envs.configs import ExplorationConfig, GridTouchConfig
     from dvrk_gym.envs.debridement import DebridementEnv, fragment_target
-    from dvrk_gym.envs.debridement_config import DebridementConfig
-    from dvrk_gym.envs.exploration import CalibrationExplorationEnv, ExplorationConfig
-    from dvrk_gym.envs.grid_touch import GridTouchConfig, GridTouchEnv
-    from dvrk_gym.envs.picks import PickTiming
+    from dvrk_gym.envs.debridement_config import DebridementConfig, PickTiming
+    from dvrk_gym.envs.exploration import CalibrationExplorationEnv
+    from dvrk_gym.envs.grid_touch import GridTouchEnv
     from dvrk_gym.evaluation.episodes import run_episodes, summarize
     from dvrk_gym.evaluation.trials import run_trials
     from dvrk_gym.fidelity.comparison import run_fidelity
     from dvrk_gym.fidelity.statistics import FidelityStatistics, fidelity_statistics
+    from dvrk_gym.parallel.executors import LocalExecutor
     from dvrk_gym.reproduce.run import ReproduceConfig, run_reproduce
     from dvrk_gym.sim.robot.bias import BiasConfig
     from dvrk_gym.sim.table.table import DebridementTable
     from dvrk_gym.sim.world import DvrkWorld, WorldConfig
-    from dvrk_gym.sweep.executors import LocalExecutor
     from dvrk_gym.sweep.grid import SweepSettings
     from dvrk_gym.sweep.run import run_sweep
 

@@ -28,6 +28,7 @@ MAX_FOLDER_MODULES = 10
 LAYER_RANKS = {
     "dvrk_gym.paper": 0,
     "dvrk_gym.utils": 0,
+    "dvrk_gym.parallel": 0,
     "dvrk_gym.sim.physics": 1,
     "dvrk_gym.sim.identified": 1,
     "dvrk_gym.sim.robot": 2,

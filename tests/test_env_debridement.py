@@ -19,7 +19,8 @@ from dvrk_gym.sim.physics.scene import WORKSPACE_CENTER_M
 from dvrk_gym.sim.robot import ik
 from dvrk_gym.sim.robot import kinematics as kin
 from dvrk_gym.sim.table import judge
-from dvrk_gym.sim.table.fragments import FRAGMENT_TYPES, TRUNCATE_SD
+from dvrk_gym.sim.table.fragment_types import FRAGMENT_TYPES
+from dvrk_gym.sim.table.fragments import TRUNCATE_SD
 from dvrk_gym.sim.table.grasp import GRASP_TIP_CLEARANCE_M
 from dvrk_gym.sim.table.layout import MIN_GAP_M, outline_gap
 

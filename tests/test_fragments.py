@@ -13,7 +13,8 @@ from dvrk_gym.sim.physics.scene import WORKSPACE_CENTER_M, build_scene
 from dvrk_gym.sim.robot import ik
 from dvrk_gym.sim.robot import kinematics as kin
 from dvrk_gym.sim.robot.body import PSMBody
-from dvrk_gym.sim.table.fragments import FRAGMENT_TYPES, sample_fragment_sizes, spawn_fragments
+from dvrk_gym.sim.table.fragment_types import FRAGMENT_TYPES
+from dvrk_gym.sim.table.fragments import sample_fragment_sizes, spawn_fragments
 from dvrk_gym.sim.table.grasp import GRASP_TIP_CLEARANCE_M, JAW_LINKS, Gripper
 from dvrk_gym.sim.table.layout import MIN_GAP_M, ellipse_outline, phantom_region, sample_layout
 from dvrk_gym.sim.table.table import DebridementTable

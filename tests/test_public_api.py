@@ -19,11 +19,11 @@ def test_an_unknown_name_is_an_attribute_error():
         dvrk_gym.NoSuchThing  # noqa: B018
 
 
-def test_importing_the_package_registers_the_envs_without_loading_torch_or_pybullet():
+def test_importing_the_package_registers_the_envs_without_loading_torch_pybullet_or_scipy():
     code = (
         "import sys, gymnasium as gym, dvrk_gym\n"
         "assert set(dvrk_gym.ENV_IDS) <= set(gym.registry), 'envs not registered'\n"
-        "heavy = sorted(m for m in ('torch', 'pybullet', 'sklearn', 'stable_baselines3') if m in sys.modules)\n"
+        "heavy = sorted(m for m in ('torch', 'pybullet', 'scipy', 'sklearn', 'stable_baselines3') if m in sys.modules)\n"
         "print(','.join(heavy))\n"
     )
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)

@@ -8,8 +8,8 @@ import pytest
 
 from dvrk_gym import paper
 from dvrk_gym.cli.main import main
+from dvrk_gym.parallel.task_graph import Task, TaskError, run_tasks
 from dvrk_gym.reproduce import TINY, Profile, ReproduceConfig, build_tasks, run_reproduce
-from dvrk_gym.reproduce.scheduler import Task, TaskError, run_tasks
 from dvrk_gym.utils.run_folder import RunFolder, read_settings
 
 

@@ -212,7 +212,7 @@ def numbers(rows):
 @pytest.mark.slow
 def test_local_processes_and_a_dask_cluster_give_identical_numbers_and_a_resumed_sweep_runs_nothing(tmp_path):
     distributed = pytest.importorskip("distributed")
-    from dvrk_gym.sweep.dask_executor import DaskExecutor
+    from dvrk_gym.parallel.dask_executor import DaskExecutor
 
     settings = SweepSettings(bias_seeds=(0, 1), calibrators=("rbt", "dnn", "dnn+rf"), seeds=(0,), pipeline=TINY)
     with LocalExecutor(workers=2) as pool:

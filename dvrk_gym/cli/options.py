@@ -1,10 +1,16 @@
-"""Command-line options several ``dvrk-gym`` commands share: which instrument, what camera, progress."""
+"""Command-line options several ``dvrk-gym`` commands share: which instrument, what camera,
+progress, and where the work runs (local processes or a Dask cluster)."""
 
 from __future__ import annotations
 
 import argparse
+import os
 import tempfile
 from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from dvrk_gym.parallel.executors import Executor
 
 
 def add_instrument_options(parser: argparse.ArgumentParser, resolution: bool = True, note: str = "") -> None:
@@ -36,6 +42,49 @@ def add_resolution_option(parser: argparse.ArgumentParser) -> None:
 def add_progress_option(parser: argparse.ArgumentParser) -> None:
     """``--no-progress``: no progress bars."""
     parser.add_argument("--no-progress", action="store_true", help="no progress bars")
+
+
+def add_executor_options(parser: argparse.ArgumentParser, what: str) -> None:
+    """``--workers N`` (local processes), ``--scheduler ADDRESS`` (a Dask cluster instead) and
+    ``--connect-timeout S``; :func:`make_executor` reads them.
+
+    Args:
+        parser: the command's parser.
+        what: what runs side by side, for the help texts ("units", "stages").
+    """
+    parser.add_argument(
+        "--workers",
+        type=int,
+        default=min(2, os.cpu_count() or 1),
+        help=f"local processes running {what} side by side, without --scheduler (1: in this process); "
+        "results do not depend on it (default: %(default)s)",
+    )
+    parser.add_argument(
+        "--scheduler",
+        metavar="ADDRESS",
+        help=f"run the {what} on a Dask cluster instead, e.g. tcp://host:8786 (pip install 'dvrk-gym[dask]')",
+    )
+    parser.add_argument(
+        "--connect-timeout", type=float, default=10.0, metavar="S", help="seconds to try to reach --scheduler (default: %(default)s)"
+    )
+
+
+def make_executor(args: argparse.Namespace) -> Executor:
+    """The executor the options of :func:`add_executor_options` ask for (not yet started).
+
+    Raises:
+        ValueError: ``--scheduler`` without dask.distributed installed, a malformed or
+            unreachable address, or ``--workers`` below 1.
+    """
+    if args.scheduler:
+        try:
+            from dvrk_gym.parallel.dask_executor import DaskExecutor
+        except ImportError as error:
+            raise ValueError(f"--scheduler needs dask.distributed ({error}); install it with: pip install 'dvrk-gym[dask]'") from None
+        return DaskExecutor(args.scheduler, connect_timeout_s=args.connect_timeout)
+    from dvrk_gym.parallel.executors import local_executor
+
+    return local_executor(args.workers)
 
 
 def writable_folder(path: Path, what: str = "--out") -> Path:

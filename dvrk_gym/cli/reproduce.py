@@ -3,19 +3,18 @@
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 from pathlib import Path
 
-from dvrk_gym.cli.options import add_instrument_options, add_progress_option, writable_folder
+from dvrk_gym.cli.options import add_executor_options, add_instrument_options, add_progress_option, make_executor, writable_folder
 
 DEFAULT_OUT = {"quick": Path("dvrk_gym_out/reproduce-quick"), "full": Path("dvrk_gym_out/reproduce")}
 """The default run folder by profile name (another profile's: dvrk_gym_out/reproduce-<name>)."""
 
 
 def _run_reproduce(args: argparse.Namespace) -> int:
+    from dvrk_gym.parallel.task_graph import TaskError
     from dvrk_gym.reproduce import PROFILES, Profile, ReproduceConfig, run_reproduce
-    from dvrk_gym.reproduce.scheduler import TaskError
 
     if args.profile is not None:
         if args.quick:
@@ -33,8 +32,11 @@ def _run_reproduce(args: argparse.Namespace) -> int:
         bias_seed=args.bias_seed,
         progress=not args.no_progress,
     )
+    executor = make_executor(args)
+    print(f"reproduce: profile {profile.name}, tasks on {executor.description}, run folder {out}")
     try:
-        run = run_reproduce(config)
+        with executor:
+            run = run_reproduce(config, executor)
     except TaskError as error:
         print(f"dvrk-gym reproduce: {error}\n(the stages that finished are cached in {out}: the same command resumes)", file=sys.stderr)
         return 1
@@ -65,7 +67,8 @@ def add_commands(subparsers: argparse._SubParsersAction) -> None:
         "(each table beside the paper's numbers, with the difference), results.json and PNG figures. Stages are "
         "cached in the output folder: a re-run resumes. --quick: a five-model search, 3 trials per debridement "
         "cell and a short RL run (a few minutes on 2 cores); the full run took 16.3 min with 2 workers on a quiet "
-        "2-core machine (README, Measured performance).",
+        "2-core machine (README, Measured performance). --scheduler runs the stages on a Dask cluster, with the same "
+        "results; its workers must see --out at the same path (a shared disk).",
     )
     parser.add_argument("--quick", action="store_true", help="the quick profile (a few minutes) instead of the full run")
     parser.add_argument(
@@ -78,12 +81,7 @@ def add_commands(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "--out", type=Path, help="run folder (default: dvrk_gym_out/reproduce-quick, dvrk_gym_out/reproduce, or reproduce-<profile name>)"
     )
-    parser.add_argument(
-        "--workers",
-        type=int,
-        default=min(2, os.cpu_count() or 1),
-        help="processes running stages side by side; results do not depend on it (default: %(default)s)",
-    )
+    add_executor_options(parser, "stages")
     parser.add_argument("--seed", type=int, default=0, help="seeds every stage (default: %(default)s)")
     add_instrument_options(parser, resolution=False)
     add_progress_option(parser)

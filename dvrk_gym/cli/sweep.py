@@ -3,17 +3,16 @@
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 from pathlib import Path
 
 from dvrk_gym import paper
-from dvrk_gym.cli.options import add_progress_option, add_resolution_option
+from dvrk_gym.cli.options import add_executor_options, add_progress_option, add_resolution_option, make_executor
 
 
 def _run_sweep(args: argparse.Namespace) -> int:
     from dvrk_gym.calibration.pipeline import PipelineConfig
-    from dvrk_gym.sweep import LocalExecutor, SweepError, SweepSettings, format_rows, parse_calibrators, parse_int_list, run_sweep
+    from dvrk_gym.sweep import SweepError, SweepSettings, format_rows, parse_calibrators, parse_int_list, run_sweep
 
     settings = SweepSettings(
         bias_seeds=parse_int_list(args.bias_seeds, "--bias-seeds"),
@@ -23,14 +22,7 @@ def _run_sweep(args: argparse.Namespace) -> int:
             n_trajectories=args.trajectories, dnn_epochs=args.epochs, bias=args.bias, camera_resolution=tuple(args.resolution)
         ),
     )
-    if args.scheduler:
-        try:
-            from dvrk_gym.sweep.dask_executor import DaskExecutor
-        except ImportError as error:
-            raise ValueError(f"--scheduler needs dask.distributed ({error}); install it with: pip install 'dvrk-gym[dask]'") from None
-        executor = DaskExecutor(args.scheduler, connect_timeout_s=args.connect_timeout)
-    else:
-        executor = LocalExecutor(workers=args.workers)
+    executor = make_executor(args)
     units = len(settings.units())
     print(f"sweep: {len(settings.bias_seeds)} instruments x {len(settings.seeds)} seeds = {units} units on {executor.description}")
     try:
@@ -60,16 +52,7 @@ def add_commands(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--bias-seeds", default="0-4", help="instruments: numbers and ranges, e.g. 0-4 or 0,3,7-9 (default: %(default)s)")
     parser.add_argument("--calibrators", default="rbt,dnn,dnn+rf", help="calibrators in the table (default: %(default)s)")
     parser.add_argument("--seeds", default="0", help="run seeds: numbers and ranges (default: %(default)s)")
-    parser.add_argument(
-        "--workers",
-        type=int,
-        default=min(2, os.cpu_count() or 1),
-        help="local processes running units side by side, without --scheduler (default: %(default)s)",
-    )
-    parser.add_argument("--scheduler", metavar="ADDRESS", help="run the units on a Dask cluster instead, e.g. tcp://host:8786")
-    parser.add_argument(
-        "--connect-timeout", type=float, default=10.0, metavar="S", help="seconds to try to reach --scheduler (default: %(default)s)"
-    )
+    add_executor_options(parser, "units")
     parser.add_argument("--out", type=Path, default=Path("dvrk_gym_out/sweep"), help="output folder (default: %(default)s)")
     parser.add_argument("--trajectories", type=int, default=paper.PHASE1_TRAJECTORIES, help="Phase I trajectories (the paper: %(default)s)")
     parser.add_argument("--epochs", type=int, default=paper.DNN_EPOCHS, help="DNN training epochs (the paper: %(default)s)")

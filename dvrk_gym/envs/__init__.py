@@ -1,19 +1,35 @@
 """Gymnasium environments of the dVRK experiment, registered as ``dvrk_gym/<Name>-v0``.
 
-Each id is registered with the episode length its defaults give as ``max_episode_steps``:
-CalibrationExploration-v0 93 poses (one of the paper's Phase I trajectories), Debridement-v0
-eight picks (one trial). GridTouch-v0 has none: every episode is one touch, which ends it
-(``terminated``); a time limit of one step would also mark that touch ``truncated``, which
-it is not. An env also ends its episodes itself
+Each id is registered with its config's defaults as ``kwargs`` (``gym.spec(id).kwargs``:
+every setting, as plain JSON values, nested settings as dicts and pairs as lists), so
+``gym.make(id)`` and ``gym.make(id, **gym.spec(id).kwargs)`` make the same env, and a
+keyword given to ``gym.make`` replaces its default. A keyword the env does not take raises
+``TypeError`` naming the ones it takes; a bad value raises ``ValueError`` saying what is
+allowed.
+
+Each id is also registered with the episode length its defaults give as
+``max_episode_steps``: CalibrationExploration-v0 93 poses (one of the paper's Phase I
+trajectories), Debridement-v0 eight picks (one trial). GridTouch-v0 has none: every
+episode is one touch, which ends it (``terminated``); a time limit of one step would also
+mark that touch ``truncated``, which it is not. An env also ends its episodes itself
 (``max_steps``, ``max_picks``); if you raise those, raise ``max_episode_steps`` with them,
 e.g. ``gym.make("dvrk_gym/Debridement-v0", action_mode="delta", max_episode_steps=600)``.
+
+The configs are read from modules that load neither PyBullet nor SciPy
+(:mod:`~dvrk_gym.envs.configs`, :mod:`~dvrk_gym.envs.debridement_config`), so that
+``import dvrk_gym`` stays light; the env classes load when an env is made.
 """
 
 from __future__ import annotations
 
+import dataclasses
+import json
+from typing import Any
+
 import gymnasium as gym
 
-from dvrk_gym import paper
+from dvrk_gym.envs.configs import EnvConfig, ExplorationConfig, GridTouchConfig
+from dvrk_gym.envs.debridement_config import DebridementConfig
 
 ENV_ENTRY_POINTS = {
     "dvrk_gym/CalibrationExploration-v0": "dvrk_gym.envs.exploration:CalibrationExplorationEnv",
@@ -21,17 +37,38 @@ ENV_ENTRY_POINTS = {
     "dvrk_gym/Debridement-v0": "dvrk_gym.envs.debridement:DebridementEnv",
 }
 """Each env id and the class that implements it."""
+ENV_CONFIGS: dict[str, type[EnvConfig]] = {
+    "dvrk_gym/CalibrationExploration-v0": ExplorationConfig,
+    "dvrk_gym/GridTouch-v0": GridTouchConfig,
+    "dvrk_gym/Debridement-v0": DebridementConfig,
+}
+"""Each env id and its config class (the class's ``config_class``; a test checks they agree)."""
 EPISODE_STEPS = {
-    "dvrk_gym/CalibrationExploration-v0": paper.PHASE1_POSES_PER_TRAJECTORY,
+    "dvrk_gym/CalibrationExploration-v0": ExplorationConfig().max_steps,
     "dvrk_gym/GridTouch-v0": None,
-    "dvrk_gym/Debridement-v0": paper.FRAGMENTS_PER_TRIAL,
+    "dvrk_gym/Debridement-v0": DebridementConfig().max_picks,
 }
 """Steps of one episode with each env's defaults, for Gymnasium's TimeLimit (None: the env always
-terminates its episodes itself); a test checks them against the configs."""
+terminates its episodes itself)."""
+
+
+def default_kwargs(config_class: type[EnvConfig]) -> dict[str, Any]:
+    """The defaults of ``config_class`` as plain JSON values: what ``gym.spec(id).kwargs`` holds.
+
+    Nested configs (Debridement-v0's ``timing`` and ``gripper``) become dicts of their fields
+    and tuples become lists, as a JSON round trip gives them back; the config reads both
+    forms, so these keywords build a config equal to ``config_class()``.
+    """
+    return json.loads(json.dumps(dataclasses.asdict(config_class())))
 
 
 def register_envs() -> None:
     """Register every environment with Gymnasium (idempotent)."""
     for env_id, entry_point in ENV_ENTRY_POINTS.items():
         if env_id not in gym.registry:
-            gym.register(id=env_id, entry_point=entry_point, max_episode_steps=EPISODE_STEPS[env_id])
+            gym.register(
+                id=env_id,
+                entry_point=entry_point,
+                max_episode_steps=EPISODE_STEPS[env_id],
+                kwargs=default_kwargs(ENV_CONFIGS[env_id]),
+            )

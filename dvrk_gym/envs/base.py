@@ -10,48 +10,19 @@ action checks, seeding, state restoration and rendering, so no environment repea
 
 from __future__ import annotations
 
+import difflib
+import functools
 import inspect
-from dataclasses import dataclass
+from collections.abc import Callable
 from typing import Any, ClassVar, Generic, TypeVar
 
 import gymnasium as gym
 import numpy as np
 from gymnasium.error import ResetNeeded
 
-from dvrk_gym.sim.robot.bias import BIAS_PRESETS, BiasConfig
+from dvrk_gym.envs.configs import EnvConfig
 from dvrk_gym.sim.robot.kinematics import JOINT_NAMES
-from dvrk_gym.sim.world import MAX_PIXEL_NOISE_PX, DvrkWorld, WorldConfig
-from dvrk_gym.utils.checks import check_choice, check_float_fields, check_int_fields, check_resolution
-
-
-@dataclass(frozen=True)
-class EnvConfig:
-    """Settings every environment shares.
-
-    Attributes:
-        bias: cable bias, a preset name ("none", "paper", "severe") or a BiasConfig.
-        bias_seed: which instrument to draw from the bias distribution (fixed for the
-            life of the env; episodes are seeded separately through ``reset(seed=...)``).
-        camera_resolution: (width, height) of each endoscope image, pixels.
-        pixel_noise_px: standard deviation of the detection noise added to every pixel
-            coordinate the cameras report, at 1920 x 1080 (scaled with the resolution).
-    """
-
-    bias: str | BiasConfig = "paper"
-    bias_seed: int = 0
-    camera_resolution: tuple[int, int] = (1920, 1080)
-    pixel_noise_px: float = 0.0
-
-    def __post_init__(self) -> None:
-        # gym.make passes lists from JSON-like specs; the world wants a tuple.
-        object.__setattr__(self, "camera_resolution", check_resolution("camera_resolution", self.camera_resolution))
-        if isinstance(self.bias, str):
-            check_choice("bias", self.bias, sorted(BIAS_PRESETS))
-        elif not isinstance(self.bias, BiasConfig):
-            raise ValueError(f"bias must be one of {sorted(BIAS_PRESETS)} or a BiasConfig, got {self.bias!r}")
-        check_int_fields(type(self).__name__, self, {"bias_seed": (0, 2**31 - 1)})
-        check_float_fields(type(self).__name__, self, {"pixel_noise_px": (0.0, MAX_PIXEL_NOISE_PX, False)})
-
+from dvrk_gym.sim.world import DvrkWorld, WorldConfig
 
 ConfigT = TypeVar("ConfigT", bound=EnvConfig)
 
@@ -69,6 +40,32 @@ def config_docs(config_class: type) -> str:
         if "Attributes:" in doc and klass is not object:
             blocks.append(doc.split("Attributes:", 1)[1].strip("\n"))
     return "\n".join(blocks)
+
+
+def checking_keywords(init: Callable[..., None], class_name: str) -> Callable[..., None]:
+    """``init`` (an env's ``__init__``) that first refuses a keyword it does not take.
+
+    The ``TypeError`` names the keyword, the nearest one it takes and all the ones it takes
+    (Python's own names only the bad keyword), before any world is built; ``gym.make``
+    passes it on. ``inspect.signature`` and ``help()`` still show ``init``'s own signature.
+    A constructor with ``**kwargs`` is returned as it is.
+    """
+    parameters = inspect.signature(init).parameters
+    if any(p.kind is inspect.Parameter.VAR_KEYWORD for p in parameters.values()):
+        return init
+    allowed = sorted(name for name, p in parameters.items() if name != "self" and p.kind is not inspect.Parameter.VAR_POSITIONAL)
+
+    @functools.wraps(init)
+    def checked(self: Any, *args: Any, **kwargs: Any) -> None:
+        for name in kwargs:
+            if name not in allowed:
+                close = difflib.get_close_matches(name, allowed, n=1)
+                hint = f" (did you mean {close[0]!r}?)" if close else ""
+                listed = ", ".join(allowed)
+                raise TypeError(f"{class_name} got an unexpected keyword argument {name!r}{hint}; its keywords are: {listed}")
+        init(self, *args, **kwargs)
+
+    return checked
 
 
 def check_action(action: Any, space: gym.spaces.Box, names: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray]:
@@ -126,9 +123,11 @@ class DvrkEnv(gym.Env, Generic[ConfigT]):
     option_names: ClassVar[tuple[str, ...]] = ()
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
-        """Append the config's field docs to the subclass's ``__init__`` docstring, for ``help()``."""
+        """Make the subclass's ``__init__`` refuse unknown keywords clearly (:func:`checking_keywords`)
+        and append the config's field docs to its docstring, for ``help()``."""
         super().__init_subclass__(**kwargs)
         if "__init__" in cls.__dict__:
+            cls.__init__ = checking_keywords(cls.__dict__["__init__"], cls.__name__)  # type: ignore[method-assign]
             fields = "\n".join("    " + line if line else line for line in config_docs(cls.config_class).splitlines())
             cls.__init__.__doc__ = (
                 f"{inspect.cleandoc(cls.__init__.__doc__ or '')}\n\nKeyword arguments ({cls.config_class.__name__}'s fields):\n{fields}\n"

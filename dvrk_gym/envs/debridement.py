@@ -46,18 +46,20 @@ from dvrk_gym.envs.debridement_config import (
     PICK_ACTION_NAMES,
     SERRATED_GRIPPER,
     DebridementConfig,
+    PickTiming,
 )
 from dvrk_gym.envs.exploration import CAMERA_BOX_HIGH_M, CAMERA_BOX_LOW_M, encode_reported, reported_observation_space
 from dvrk_gym.envs.grid_touch import ACTION_HIGH as PICK_HIGH
 from dvrk_gym.envs.grid_touch import ACTION_LOW as PICK_LOW
 from dvrk_gym.envs.grid_touch import tool_pose
-from dvrk_gym.envs.picks import CLOSED_JAW_RAD, PHASES, PickPrimitive, PickRun, PickTiming
+from dvrk_gym.envs.picks import CLOSED_JAW_RAD, PHASES, PickPrimitive, PickRun
 from dvrk_gym.sim.endoscope.fragment_detection import MAX_FRAGMENTS, FragmentDetection, FragmentObserver
 from dvrk_gym.sim.robot import ik
 from dvrk_gym.sim.robot import kinematics as kin
 from dvrk_gym.sim.robot.bias import BiasConfig
 from dvrk_gym.sim.table import judge
-from dvrk_gym.sim.table.grasp import GRASP_TIP_CLEARANCE_M, GripperConfig
+from dvrk_gym.sim.table.grasp import GRASP_TIP_CLEARANCE_M
+from dvrk_gym.sim.table.gripper_config import GripperConfig
 from dvrk_gym.sim.table.table import DebridementTable
 
 logger = logging.getLogger(__name__)

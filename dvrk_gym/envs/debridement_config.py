@@ -1,18 +1,22 @@
-"""Settings of Debridement-v0: the config dataclass, its action modes and the serrated jaws' default gripper."""
+"""Settings of Debridement-v0: the config dataclass, the timing of a pick, its action modes and
+the serrated jaws' default gripper.
+
+Like :mod:`dvrk_gym.envs.configs`, this module loads neither PyBullet nor SciPy, so that
+registering the env can read its defaults (:mod:`dvrk_gym.envs`).
+"""
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from dvrk_gym import paper
-from dvrk_gym.envs.base import EnvConfig
-from dvrk_gym.envs.picks import PickTiming
-from dvrk_gym.sim.robot.motion import MotionLimits
-from dvrk_gym.sim.table.fragments import FRAGMENT_TYPES
-from dvrk_gym.sim.table.grasp import GripperConfig
+from dvrk_gym.envs.configs import EnvConfig
+from dvrk_gym.sim.robot.motion_limits import MotionLimits
+from dvrk_gym.sim.table.fragment_types import FRAGMENT_TYPES
+from dvrk_gym.sim.table.gripper_config import GripperConfig
 from dvrk_gym.utils.checks import check_bool, check_choice, check_float_fields, check_int_fields
 
 ACTION_MODES = ("primitive", "delta")
@@ -30,6 +34,54 @@ at the up to 22.5 degrees the yaw rounding leaves turn out of the jaws too often
 83 % with B 17 %; the paper: 92 %, B 7.5 %); with 1.5, 94 % and B 6 %."""
 MAX_PICKS = 64
 """The most picks an episode may have (the paper: 8)."""
+
+
+@dataclass(frozen=True)
+class PickTiming:
+    """How a pick moves: heights (m), speed limits and dwell times (s).
+
+    Tuned so that over a trial the phases last as the paper's (mean frames at 25 fps: to
+    seed 26.0, lower 16.1, grip 37.5, raise 24.0, to receptacle 42.1, drop and rotate
+    38.5; 7.37 s a fragment) under the paper's bias. Free moves go at 6.5 cm/s (10 cm in
+    1.64 s; the authors' "fast" setting took 1.49 s); the robot carries a fragment at
+    3.8 cm/s, and lowers and lifts it at 3 cm/s.
+
+    Attributes:
+        approach_height_m: the free move ends this far above the target, m.
+        grip_depth_m: the jaws are lowered to this far below the target (the floor,
+            GRASP_TIP_CLEARANCE_M above the paper, stops them first), m.
+        raise_height_m: how far the jaws lift the fragment, m.
+        drop_height_m: the closed jaw tip's height above the receptacle's floor when the
+            jaws open (its walls are 14 mm high), m.
+        travel: limits of the free move to the fragment (and the rotation after a drop).
+        descend: limits of lowering and raising.
+        carry: limits of the move to the receptacle with a fragment.
+        grip_dwell_s: the grip phase lasts at least this long (the jaws close and the
+            grasp settles), s.
+        drop_fall_s: physics time the fragment gets to fall once the jaws open, s.
+        drop_dwell_s: the drop-and-rotate phase lasts at least this long, s.
+    """
+
+    approach_height_m: float = 0.012
+    grip_depth_m: float = 0.002
+    raise_height_m: float = 0.025
+    drop_height_m: float = 0.012
+    travel: MotionLimits = field(default_factory=lambda: MotionLimits(max_speed_m_s=0.065, max_accel_m_s2=0.65))
+    descend: MotionLimits = field(default_factory=lambda: MotionLimits(max_speed_m_s=0.03, max_accel_m_s2=0.3))
+    carry: MotionLimits = field(default_factory=lambda: MotionLimits(max_speed_m_s=0.038, max_accel_m_s2=0.3))
+    grip_dwell_s: float = 1.5
+    drop_fall_s: float = 0.35
+    drop_dwell_s: float = 1.54
+
+    def __post_init__(self) -> None:
+        heights = dict.fromkeys(("approach_height_m", "grip_depth_m", "raise_height_m", "drop_height_m"), (0.0, 0.1, False))
+        dwells = dict.fromkeys(("grip_dwell_s", "drop_fall_s", "drop_dwell_s"), (0.0, 60.0, False))
+        check_float_fields("PickTiming", self, {**heights, **dwells})
+        for name in ("travel", "descend", "carry"):
+            if not isinstance(getattr(self, name), MotionLimits):
+                raise ValueError(f"PickTiming.{name} must be a MotionLimits (or its fields as a dict), got {getattr(self, name)!r}")
+
+
 DEFAULT_PICK_TIMING = PickTiming()
 """The default pick timing of Debridement-v0 (tuned to the paper's phase durations)."""
 SERRATED_GRIPPER = GripperConfig(jaw_friction=SERRATED_JAW_FRICTION)

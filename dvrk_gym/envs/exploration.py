@@ -8,19 +8,18 @@ endoscope sees of the red marker on the wrist.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 from gymnasium import spaces
 
 from dvrk_gym import paper
-from dvrk_gym.envs.base import DvrkEnv, EnvConfig, config_arguments
+from dvrk_gym.envs.base import DvrkEnv, config_arguments
+from dvrk_gym.envs.configs import ExplorationConfig
 from dvrk_gym.sim.endoscope.stereo import StereoDetection
 from dvrk_gym.sim.robot import ik
 from dvrk_gym.sim.robot import kinematics as kin
 from dvrk_gym.sim.robot.bias import BiasConfig
-from dvrk_gym.utils.checks import check_int_fields
 
 SAFE_X_M = paper.REAL_PHASE1_X_RANGE_M
 SAFE_Y_M = paper.REAL_PHASE1_Y_RANGE_M
@@ -69,22 +68,6 @@ def home_orientation() -> tuple[float, float, float]:
     """(yaw, pitch, roll) in radians of the paper's rest orientation: yaw 0, the paper's rule."""
     pitch, roll = kin.paper_pitch_roll(0.0)
     return 0.0, float(pitch), float(roll)
-
-
-@dataclass(frozen=True)
-class ExplorationConfig(EnvConfig):
-    """Settings of CalibrationExploration-v0.
-
-    Attributes:
-        max_steps: commanded poses per trajectory (the paper: 5,256 samples over 57
-            trajectories, about 92 each: 31 pauses x 3 rotations).
-    """
-
-    max_steps: int = paper.PHASE1_POSES_PER_TRAJECTORY
-
-    def __post_init__(self) -> None:
-        super().__post_init__()
-        check_int_fields("ExplorationConfig", self, {"max_steps": (1, 100_000)})
 
 
 def marker_observation_space(width: int, height: int) -> dict[str, spaces.Space]:

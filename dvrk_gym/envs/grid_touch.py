@@ -16,19 +16,18 @@ episode, as HER's relabelling and stable-baselines3's GoalEnv check require. The
 from __future__ import annotations
 
 import numbers
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 from gymnasium import spaces
 
-from dvrk_gym.envs.base import DvrkEnv, EnvConfig, config_arguments, relax_option
+from dvrk_gym.envs.base import DvrkEnv, config_arguments, relax_option
+from dvrk_gym.envs.configs import GridTouchConfig
 from dvrk_gym.envs.exploration import CAMERA_BOX_HIGH_M, CAMERA_BOX_LOW_M, encode_reported
 from dvrk_gym.sim.physics.scene import GRID_COLUMNS, GRID_ROWS, WORKSPACE_CENTER_M, grid_circle_centers
 from dvrk_gym.sim.robot import ik
 from dvrk_gym.sim.robot import kinematics as kin
 from dvrk_gym.sim.robot.bias import BiasConfig
-from dvrk_gym.utils.checks import check_choice, check_float_fields
 
 N_CIRCLES = GRID_ROWS * GRID_COLUMNS
 ACTION_NAMES = ("bx", "by", "bz", "yaw")
@@ -37,38 +36,8 @@ ACTION_HIGH = np.array([0.080, 0.085, -0.130, np.pi / 2])
 SURFACE_Z_M = float(WORKSPACE_CENTER_M[2])
 CONTACT_TOLERANCE_M = 1e-7
 """How exactly the descent finds the height where the jaws meet the paper, metres."""
-REWARD_TYPES = ("dense", "sparse")
 HOME_POSITION_M = np.array([0.040, 0.042, -0.130])
 """Where a fresh or relaxed episode starts: the reported point 34 mm above the middle of the grid, metres."""
-
-
-@dataclass(frozen=True)
-class GridTouchConfig(EnvConfig):
-    """Settings of GridTouch-v0.
-
-    Attributes:
-        reward_type: "dense" (minus the goal distance in millimetres) or "sparse" (0 when
-            within ``distance_threshold_m``, else -1).
-        distance_threshold_m: success radius around the circle centre, metres.
-        approach_height_m: how far above the target the tool goes before descending, m.
-        correction_noise_m: standard deviation of a person's correction, per axis, metres
-            (the paper's Phase II corrections were made by hand).
-    """
-
-    reward_type: str = "dense"
-    distance_threshold_m: float = 0.001
-    approach_height_m: float = 0.008
-    correction_noise_m: float = 0.0002
-
-    def __post_init__(self) -> None:
-        super().__post_init__()
-        check_choice("reward_type", self.reward_type, REWARD_TYPES)
-        bounds = {
-            "distance_threshold_m": (0.0, 0.05, False),
-            "approach_height_m": (0.0, 0.05, False),
-            "correction_noise_m": (0.0, 0.01, False),
-        }
-        check_float_fields("GridTouchConfig", self, bounds, units=dict.fromkeys(bounds, "m"))
 
 
 def _check_yaw_option(yaw: Any) -> float | str:

@@ -13,21 +13,20 @@ judge (:mod:`dvrk_gym.sim.table.judge`) needs.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
 from dvrk_gym import paper
+from dvrk_gym.envs.debridement_config import PickTiming
 from dvrk_gym.envs.grid_touch import tool_pose
 from dvrk_gym.sim.physics.scene import RECEPTACLE_CENTER_M
 from dvrk_gym.sim.robot import ik
 from dvrk_gym.sim.robot import kinematics as kin
-from dvrk_gym.sim.robot.motion import MotionLimits
 from dvrk_gym.sim.table import judge
 from dvrk_gym.sim.table.grasp import GRASP_TIP_CLEARANCE_M
 from dvrk_gym.sim.table.table import DebridementTable
 from dvrk_gym.sim.world import DvrkWorld
-from dvrk_gym.utils.checks import check_float_fields
 
 PHASES: tuple[str, ...] = tuple(paper.DEBRIDEMENT_PHASE_FRAMES)
 """The paper's six phases of a pick, in order."""
@@ -38,52 +37,6 @@ DROP_OFFSETS_M = np.array([[x, y] for y in (-0.007, 0.0, 0.007) for x in (-0.006
 eight raisins dropped at one point pile over the rim."""
 TEACH_ITERATIONS = 4
 """Fixed-point iterations that find the command putting the true jaw tip on a drop point."""
-
-
-@dataclass(frozen=True)
-class PickTiming:
-    """How a pick moves: heights (m), speed limits and dwell times (s).
-
-    Tuned so that over a trial the phases last as the paper's (mean frames at 25 fps: to
-    seed 26.0, lower 16.1, grip 37.5, raise 24.0, to receptacle 42.1, drop and rotate
-    38.5; 7.37 s a fragment) under the paper's bias. Free moves go at 6.5 cm/s (10 cm in
-    1.64 s; the authors' "fast" setting took 1.49 s); the robot carries a fragment at
-    3.8 cm/s, and lowers and lifts it at 3 cm/s.
-
-    Attributes:
-        approach_height_m: the free move ends this far above the target, m.
-        grip_depth_m: the jaws are lowered to this far below the target (the floor,
-            GRASP_TIP_CLEARANCE_M above the paper, stops them first), m.
-        raise_height_m: how far the jaws lift the fragment, m.
-        drop_height_m: the closed jaw tip's height above the receptacle's floor when the
-            jaws open (its walls are 14 mm high), m.
-        travel: limits of the free move to the fragment (and the rotation after a drop).
-        descend: limits of lowering and raising.
-        carry: limits of the move to the receptacle with a fragment.
-        grip_dwell_s: the grip phase lasts at least this long (the jaws close and the
-            grasp settles), s.
-        drop_fall_s: physics time the fragment gets to fall once the jaws open, s.
-        drop_dwell_s: the drop-and-rotate phase lasts at least this long, s.
-    """
-
-    approach_height_m: float = 0.012
-    grip_depth_m: float = 0.002
-    raise_height_m: float = 0.025
-    drop_height_m: float = 0.012
-    travel: MotionLimits = field(default_factory=lambda: MotionLimits(max_speed_m_s=0.065, max_accel_m_s2=0.65))
-    descend: MotionLimits = field(default_factory=lambda: MotionLimits(max_speed_m_s=0.03, max_accel_m_s2=0.3))
-    carry: MotionLimits = field(default_factory=lambda: MotionLimits(max_speed_m_s=0.038, max_accel_m_s2=0.3))
-    grip_dwell_s: float = 1.5
-    drop_fall_s: float = 0.35
-    drop_dwell_s: float = 1.54
-
-    def __post_init__(self) -> None:
-        heights = dict.fromkeys(("approach_height_m", "grip_depth_m", "raise_height_m", "drop_height_m"), (0.0, 0.1, False))
-        dwells = dict.fromkeys(("grip_dwell_s", "drop_fall_s", "drop_dwell_s"), (0.0, 60.0, False))
-        check_float_fields("PickTiming", self, {**heights, **dwells})
-        for name in ("travel", "descend", "carry"):
-            if not isinstance(getattr(self, name), MotionLimits):
-                raise ValueError(f"PickTiming.{name} must be a MotionLimits (or its fields as a dict), got {getattr(self, name)!r}")
 
 
 @dataclass(frozen=True)

@@ -44,8 +44,9 @@ def _relative(path: str, run_folder: Path) -> str:
     return os.path.relpath(os.path.abspath(path), os.path.abspath(run_folder))
 
 
-def collect_results(config: Any, task_results: dict[str, dict[str, Any]]) -> dict[str, Any]:
-    """Everything the report shows, as plain numbers, from the tasks' summaries."""
+def collect_results(config: Any, task_results: dict[str, dict[str, Any]], executor: str) -> dict[str, Any]:
+    """Everything the report shows, as plain numbers, from the tasks' summaries (``executor``:
+    where the tasks ran, for people)."""
     calibration = task_results["calibration"]
     phase1 = calibration["phase1"]
     profile = config.profile
@@ -80,7 +81,7 @@ def collect_results(config: Any, task_results: dict[str, dict[str, Any]]) -> dic
         if name.startswith("rl_")
     ]
     return {
-        "settings": {**config.settings(), "workers": config.workers, "versions": _versions()},
+        "settings": {**config.settings(), "workers": config.workers, "executor": executor, "versions": _versions()},
         "bias": {k: v for k, v in task_results["bias_field"].items() if k != "cached"}
         | {"figure": _relative(task_results["bias_field"]["figure"], config.out)},
         "phase1": {**phase1, "kept_fraction": phase1["kept"] / max(phase1["raw"], 1), "paper": PAPER_PHASE1},
@@ -139,7 +140,7 @@ def write_report(path: Path, data: dict[str, Any]) -> Path:
         "",
         f"Profile **{profile['name']}**, seed {settings['seed']}, cable bias `{settings['bias']}` "
         f"(instrument {settings['bias_seed']}), endoscope {profile['camera_resolution'][0]} x {profile['camera_resolution'][1]}, "
-        f"{settings['workers']} worker(s). " + _timing_sentence(data),
+        f"run on {settings['executor']}. " + _timing_sentence(data),
         "",
         "Every figure from the simulation, with the paper's beside it and the difference. "
         "`results.json` holds the same numbers and more (per-setting statistics, learning curves, trial rows).",
@@ -158,8 +159,13 @@ def write_report(path: Path, data: dict[str, Any]) -> Path:
 
 def _timing_sentence(data: dict[str, Any]) -> str:
     calls = [call for call in data["calls"] if call["tasks_run"]]
-    runs = "; ".join(f"{call['wall_s'] / 60:.1f} min for {call['tasks_run']} tasks on {call['workers']} worker(s)" for call in calls)
+    runs = "; ".join(f"{call['wall_s'] / 60:.1f} min for {call['tasks_run']} tasks on {_where(call)}" for call in calls)
     return f"Wall time: {runs or 'every task was cached'} (the tasks' own times add up to {data['wall_s']['tasks_total'] / 60:.1f} min)."
+
+
+def _where(call: dict[str, Any]) -> str:
+    """Where a call's tasks ran (calls logged before executors were recorded name their workers)."""
+    return call.get("executor") or f"{call['workers']} worker(s)"
 
 
 def _bias_section(data: dict[str, Any]) -> list[str]:

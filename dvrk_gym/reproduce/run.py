@@ -3,11 +3,14 @@
 The run folder holds everything: ``calibration/`` (the two-phase pipeline's cached
 stages), ``tasks/`` (each task's cached summary), ``debridement/``, ``baselines/``,
 ``figures/``, and the two outputs, ``report.md`` and ``results.json``. A re-run with the
-same settings resumes from what is there; other settings are refused.
+same settings resumes from what is there; other settings are refused. The tasks run on an
+executor (:mod:`dvrk_gym.parallel`): this process, local processes, or a Dask cluster,
+with the same results.
 """
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import json
 import time
@@ -21,10 +24,11 @@ from dvrk_gym.baselines.budgets import resolve_budget
 from dvrk_gym.calibration.pipeline import BENCHMARK_SEED_OFFSET
 from dvrk_gym.calibration.search import CHOSEN_NET, SWEEP_FOLDS
 from dvrk_gym.evaluation.trials import cell_name
+from dvrk_gym.parallel.executors import Executor, InlineExecutor, local_executor
+from dvrk_gym.parallel.task_graph import Task, run_tasks
 from dvrk_gym.reproduce import tasks
 from dvrk_gym.reproduce.profiles import QUICK, Profile
 from dvrk_gym.reproduce.report import collect_results, write_figures, write_report
-from dvrk_gym.reproduce.scheduler import Task, run_tasks
 from dvrk_gym.sim.robot.bias import resolve_bias
 from dvrk_gym.utils.atomic import atomic_write_bytes, atomic_write_json
 from dvrk_gym.utils.checks import check_bool, check_int
@@ -46,7 +50,8 @@ class ReproduceConfig:
         out: the run folder.
         profile: the budgets (:data:`~dvrk_gym.reproduce.profiles.QUICK` or ``FULL``).
         seed: seeds every stage.
-        workers: processes running tasks side by side (results do not depend on it).
+        workers: processes running tasks side by side when no executor is given to
+            :func:`run_reproduce` (1: in this process; results do not depend on it).
         bias: the cable bias preset.
         bias_seed: which instrument.
         progress: show progress bars.
@@ -103,8 +108,9 @@ def _debridement_task(
     return Task(name, function, {**kwargs, **cell}, needs=(need,), cost_s=0.6 * profile.debridement_picks * profile.debridement_trials)
 
 
-def _calibration_tasks(config: ReproduceConfig) -> list[Task]:
-    """The cable model's statistics, the two-phase calibration, the model search and the calibrators' debridement cells."""
+def _calibration_tasks(config: ReproduceConfig, nested_progress: bool) -> list[Task]:
+    """The cable model's statistics, the two-phase calibration (with its own progress bars if
+    ``nested_progress``), the model search and the calibrators' debridement cells."""
     profile, calibration_folder = config.profile, str(config.out / "calibration")
     pipeline = {
         "n_trajectories": profile.n_trajectories,
@@ -122,7 +128,7 @@ def _calibration_tasks(config: ReproduceConfig) -> list[Task]:
         Task(
             "calibration",
             tasks.calibration,
-            {"folder": calibration_folder, "pipeline": pipeline, "progress": config.progress and config.workers == 1},
+            {"folder": calibration_folder, "pipeline": pipeline, "progress": config.progress and nested_progress},
             cost_s=phase1_s + 0.03 * profile.dnn_epochs + 15,
         ),
     ]
@@ -154,9 +160,10 @@ def _rl_tasks(config: ReproduceConfig) -> list[Task]:
     return graph
 
 
-def build_tasks(config: ReproduceConfig) -> list[Task]:
-    """The task graph of a reproduction."""
-    return _calibration_tasks(config) + _rl_tasks(config)
+def build_tasks(config: ReproduceConfig, nested_progress: bool = False) -> list[Task]:
+    """The task graph of a reproduction (``nested_progress``: the tasks run in this process,
+    where their own progress bars can show)."""
+    return _calibration_tasks(config, nested_progress) + _rl_tasks(config)
 
 
 @dataclass
@@ -176,28 +183,39 @@ class Reproduction:
     wall_s: float = 0.0
 
 
-def run_reproduce(config: ReproduceConfig) -> Reproduction:
+def run_reproduce(config: ReproduceConfig, executor: Executor | None = None) -> Reproduction:
     """Run (or resume) a reproduction and write its report, results and figures.
+
+    Args:
+        config: the settings.
+        executor: where the tasks run (not closed here), e.g. a
+            :class:`~dvrk_gym.parallel.dask_executor.DaskExecutor` for a cluster, whose workers
+            must see ``config.out`` at the same path; None: ``config.workers`` local ones.
 
     Raises:
         ValueError: ``config.out`` holds a run made with other settings.
         RunFolderBusy: another process is running in ``config.out``.
+        TaskError: a task failed (the others are cached: the same call resumes).
     """
-    with RunFolder(config.out, config.settings(), stamp=SETTINGS_STAMP) as folder:
-        return _reproduce(config, folder)
+    with RunFolder(config.out, config.settings(), stamp=SETTINGS_STAMP) as folder, contextlib.ExitStack() as stack:
+        runner = executor if executor is not None else stack.enter_context(local_executor(config.workers))
+        return _reproduce(config, folder, runner)
 
 
-def _reproduce(config: ReproduceConfig, folder: RunFolder) -> Reproduction:
+def _reproduce(config: ReproduceConfig, folder: RunFolder, executor: Executor) -> Reproduction:
     start = time.perf_counter()
     (config.out / "figures").mkdir(parents=True, exist_ok=True)
-    task_results = run_tasks(build_tasks(config), config.out / "tasks", workers=config.workers, progress=config.progress)
+    graph = build_tasks(config, nested_progress=isinstance(executor, InlineExecutor))
+    task_results = run_tasks(
+        graph, config.out / "tasks", progress=config.progress, executor=executor, shared_folder=config.out, label="reproduce"
+    )
     error_maps = Path(task_results["calibration"]["figure"])
     if error_maps.exists():
         atomic_write_bytes(config.out / "figures" / "calibration_error_maps.png", error_maps.read_bytes())
-    data = collect_results(config, task_results)
+    data = collect_results(config, task_results, executor.description)
     data["figures"] = write_figures(config.out / "figures", data)
     wall = time.perf_counter() - start
-    calls = _log_call(folder, config, wall, tasks_run=sum(not result["cached"] for result in task_results.values()))
+    calls = _log_call(folder, config, executor, wall, tasks_run=sum(not result["cached"] for result in task_results.values()))
     data["calls"] = calls
     data["wall_s"] = {
         "this_call": wall,
@@ -216,10 +234,18 @@ def _read_calls(path: Path) -> list[dict[str, Any]]:
     return calls
 
 
-def _log_call(folder: RunFolder, config: ReproduceConfig, wall_s: float, tasks_run: int) -> list[dict[str, Any]]:
+def _log_call(folder: RunFolder, config: ReproduceConfig, executor: Executor, wall_s: float, tasks_run: int) -> list[dict[str, Any]]:
     """Append this call to ``calls.json`` in the run folder (a resumed run has several)."""
     calls = folder.load("calls.json", _read_calls) or []
-    calls.append({"wall_s": wall_s, "tasks_run": tasks_run, "workers": config.workers, "finished": time.strftime("%Y-%m-%d %H:%M:%S")})
+    calls.append(
+        {
+            "wall_s": wall_s,
+            "tasks_run": tasks_run,
+            "workers": config.workers,
+            "executor": executor.description,
+            "finished": time.strftime("%Y-%m-%d %H:%M:%S"),
+        }
+    )
     folder.write_json("calls.json", calls)
     return calls
 
@@ -228,15 +254,16 @@ CLOCK_KEYS = frozenset(
     {"wall_s", "wall_s_per_trial", "seconds", "steps_per_second", "train_s", "eval_seconds", "task_wall_s", "stage_s", "calls"}
 )
 """Keys of ``results.json`` whose values are wall-clock times, or the record of the calls that made them."""
-RUN_KEYS = frozenset({"task_cached", "workers"})
-"""Keys of ``results.json`` that say how a run went (tasks loaded from the cache, workers), not what it found."""
+RUN_KEYS = frozenset({"task_cached", "workers", "executor"})
+"""Keys of ``results.json`` that say how a run went (tasks loaded from the cache, workers, where the
+tasks ran), not what it found."""
 
 
 def seeded_results(value: Any) -> Any:
     """A ``results.json`` tree without its wall-clock times and run records: what the seed decides.
 
     Two runs with the same settings give equal trees, whether interrupted and resumed or
-    run with any number of workers.
+    run with any number of workers or on any executor.
     """
     if isinstance(value, dict):
         return {key: seeded_results(item) for key, item in value.items() if key not in CLOCK_KEYS | RUN_KEYS}

@@ -32,7 +32,7 @@ from dvrk_gym.sim.endoscope.camera import (
     default_camera_pose,
 )
 from dvrk_gym.sim.endoscope.detection import Blob, detect_circles, detect_marker, match_to_expected, median_kernel_px
-from dvrk_gym.sim.endoscope.noise import IDENTIFIED_MARKER_NOISE, DetectionNoise, PixelNoise, whole_pixels
+from dvrk_gym.sim.endoscope.noise import IDENTIFIED_MARKER_NOISE, MAX_PIXEL_NOISE_PX, DetectionNoise, PixelNoise, whole_pixels
 from dvrk_gym.sim.endoscope.stereo import StereoDetection, stereo_detection
 from dvrk_gym.sim.physics.client import Physics
 from dvrk_gym.sim.physics.scene import CIRCLE_RADIUS_M, SceneBodies, build_scene, grid_circle_centers
@@ -41,7 +41,8 @@ from dvrk_gym.sim.robot import kinematics as kin
 from dvrk_gym.sim.robot.bias import BiasConfig, resolve_bias
 from dvrk_gym.sim.robot.body import PSMBody, marker_corners, marker_face_samples, marker_position
 from dvrk_gym.sim.robot.cables import CableModel
-from dvrk_gym.sim.robot.motion import CartesianMove, MotionLimits, SimClock
+from dvrk_gym.sim.robot.motion import CartesianMove, SimClock
+from dvrk_gym.sim.robot.motion_limits import MotionLimits
 from dvrk_gym.utils.checks import check_bool, check_float_fields, check_int_fields, check_resolution
 
 HOME_JOINTS = np.array([0.0, 0.0, 0.05, 0.0, 0.0, 0.0])
@@ -54,8 +55,6 @@ MARKER_WINDOW_MARGIN_PX = 2
 """Pixels added around the marker's projected bounding box when rendering its window."""
 MARKER_RAY_STANDOFF_M = 0.00005
 """Visibility rays stop this far in front of the marker's face, metres."""
-MAX_PIXEL_NOISE_PX = 50.0
-"""The largest detection noise a world accepts (standard deviation at 1920 x 1080), pixels."""
 
 
 @dataclass(frozen=True)

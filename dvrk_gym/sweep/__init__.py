@@ -7,11 +7,13 @@
 >>> result.csv  # doctest: +SKIP
 PosixPath('dvrk_gym_out/sweep/sweep.csv')
 
-On a Dask cluster, ``DaskExecutor("tcp://host:8786")`` from :mod:`dvrk_gym.sweep.dask_executor`
-(the ``dask`` extra) takes the place of ``LocalExecutor``, with the same numbers.
+On a Dask cluster, ``DaskExecutor("tcp://host:8786")`` from :mod:`dvrk_gym.parallel.dask_executor`
+(the ``dask`` extra) takes the place of ``LocalExecutor``, with the same numbers. The
+executors live in :mod:`dvrk_gym.parallel` (``dvrk-gym reproduce`` runs on them too) and
+are named here as well.
 """
 
-from dvrk_gym.sweep.executors import Executor, LocalExecutor, Outcome
+from dvrk_gym.parallel.executors import Executor, LocalExecutor, Outcome
 from dvrk_gym.sweep.grid import CALIBRATORS, SweepSettings, Unit, parse_calibrators, parse_int_list
 from dvrk_gym.sweep.run import SweepError, SweepResult, run_sweep
 from dvrk_gym.sweep.table import COLUMN_DOCS, COLUMNS, format_rows, plot_errors, sweep_rows, write_csv

@@ -20,7 +20,7 @@ from typing import Any
 from tqdm.auto import tqdm
 
 from dvrk_gym.calibration.pipeline import PipelineConfig
-from dvrk_gym.sweep.executors import Executor
+from dvrk_gym.parallel.executors import Executor
 from dvrk_gym.sweep.grid import CALIBRATORS, SweepSettings, Unit
 from dvrk_gym.sweep.table import plot_errors, sweep_rows, write_csv
 from dvrk_gym.sweep.unit import run_unit
@@ -90,8 +90,8 @@ def run_sweep(settings: SweepSettings, out: str | os.PathLike, executor: Executo
     Args:
         settings: the grid and the budget.
         out: the output folder (created if missing).
-        executor: where units run (:class:`~dvrk_gym.sweep.executors.LocalExecutor`, or
-            :class:`~dvrk_gym.sweep.dask_executor.DaskExecutor` for a cluster); not closed here.
+        executor: where units run (:class:`~dvrk_gym.parallel.executors.LocalExecutor`, or
+            :class:`~dvrk_gym.parallel.dask_executor.DaskExecutor` for a cluster); not closed here.
         progress: show a bar over the units.
 
     Raises:

@@ -15,7 +15,7 @@ from faults import ROOT, environment
 
 from dvrk_gym.calibration.models.dnn import DNNCalibrator
 from dvrk_gym.calibration.phase2 import Phase2Data
-from dvrk_gym.reproduce.scheduler import Task, run_tasks
+from dvrk_gym.parallel.task_graph import Task, run_tasks
 from dvrk_gym.utils.atomic import atomic_open, atomic_path, atomic_savefig, atomic_write_text, partial_path
 from dvrk_gym.utils.run_folder import LOCK_FILE, RunFolder, RunFolderBusy, read_settings
 
@@ -229,7 +229,7 @@ def _die_once(flag: str) -> dict:
 
 
 def test_a_worker_killed_mid_task_fails_the_run_with_its_name_and_the_rerun_completes(tmp_path):
-    from dvrk_gym.reproduce.scheduler import TaskError
+    from dvrk_gym.parallel.task_graph import TaskError
 
     log = str(tmp_path / "log.txt")
     graph = [Task("fine", _record, {"name": "fine", "log": log}), Task("doomed", _die_once, {"flag": str(tmp_path / "flag")}, cost_s=9)]

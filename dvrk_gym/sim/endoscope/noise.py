@@ -2,7 +2,7 @@
 tape detector's own error (:class:`DetectionNoise`) and its whole pixels (:func:`whole_pixels`).
 
 A detection's noise is given as a standard deviation in pixels of the paper's 1920 x 1080
-images (:data:`~dvrk_gym.sim.endoscope.camera.PAPER_INTRINSICS`), so one setting means the
+images (:data:`~dvrk_gym.paper.ENDOSCOPE_RESOLUTION_PX`), so one setting means the
 same angular error at any rendering resolution: at width w it is that sd times
 w / 1920 pixels. Each noisy (u, v) takes one draw of two independent normals,
 ``rng.normal(0.0, sigma_px, size=2)``; with zero noise or no generator nothing is drawn,
@@ -16,13 +16,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from dvrk_gym import paper
 from dvrk_gym.sim import identified
-from dvrk_gym.sim.endoscope.camera import PAPER_INTRINSICS
 
-__all__ = ["PAPER_WIDTH_PX", "PixelNoise", "DetectionNoise", "IDENTIFIED_MARKER_NOISE", "whole_pixels"]
+__all__ = ["MAX_PIXEL_NOISE_PX", "PAPER_WIDTH_PX", "PixelNoise", "DetectionNoise", "IDENTIFIED_MARKER_NOISE", "whole_pixels"]
 
-PAPER_WIDTH_PX: int = PAPER_INTRINSICS.width
+PAPER_WIDTH_PX: int = paper.ENDOSCOPE_RESOLUTION_PX[0]
 """Width of the paper's images (1920 px), at which a pixel-noise setting is given."""
+MAX_PIXEL_NOISE_PX = 50.0
+"""The largest detection noise a world or an env accepts (standard deviation at 1920 x 1080), pixels."""
 
 
 @dataclass(frozen=True)

@@ -21,9 +21,12 @@ from scipy.spatial.transform import Rotation, Slerp
 from dvrk_gym.sim.physics.scene import WORKSPACE_CENTER_M
 from dvrk_gym.sim.robot import ik
 from dvrk_gym.sim.robot import kinematics as kin
-from dvrk_gym.sim.robot.motion import CartesianMove, MotionLimits, trapezoid_progress
-from dvrk_gym.sim.table.fragments import FRAGMENTS_PER_TRIAL, Fragment, FragmentType, sample_fragment_sizes, spawn_fragments
-from dvrk_gym.sim.table.grasp import Gripper, GripperConfig
+from dvrk_gym.sim.robot.motion import CartesianMove, trapezoid_progress
+from dvrk_gym.sim.robot.motion_limits import MotionLimits
+from dvrk_gym.sim.table.fragment_types import FragmentType
+from dvrk_gym.sim.table.fragments import FRAGMENTS_PER_TRIAL, Fragment, sample_fragment_sizes, spawn_fragments
+from dvrk_gym.sim.table.grasp import Gripper
+from dvrk_gym.sim.table.gripper_config import GripperConfig
 from dvrk_gym.sim.table.layout import sample_layout
 from dvrk_gym.sim.world import DvrkWorld, MoveResult
 

@@ -1,0 +1,88 @@
+"""Work on a Dask cluster (``dask.distributed``): the only module that imports dask.
+
+Start a scheduler and workers wherever they may run (``dask scheduler`` on one machine,
+``dask worker tcp://HOST:8786 --nthreads 1`` on each of the others, or a job queue's
+``dask-jobqueue``), with dvrk-gym installed at the same version on every worker; then
+``dvrk-gym sweep --scheduler tcp://HOST:8786`` or ``dvrk-gym reproduce --scheduler ...``.
+A sweep's units need no shared disk (each sends its numbers back and the process that runs
+the sweep writes them); a reproduction's tasks write their models, tables and figures
+into the run folder, so its ``--out`` must be on a disk every worker sees at the same
+path. Give each worker one thread (``--nthreads 1``): a call runs with one torch thread
+and PyBullet's own loop, so more threads per worker only make calls share a core.
+
+Install with ``pip install "dvrk-gym[dask]"``.
+"""
+
+from __future__ import annotations
+
+import concurrent.futures as cf
+import logging
+from collections.abc import Callable
+from typing import Any
+
+from distributed import Client
+from distributed.comm import get_address_host_port, parse_address
+
+from dvrk_gym.parallel.executors import FuturesExecutor
+
+logger = logging.getLogger(__name__)
+
+CONNECT_TIMEOUT_S = 10.0
+"""How long to try to reach a scheduler before giving up, seconds."""
+
+
+class DaskExecutor(FuturesExecutor):
+    """Runs calls on the workers of a running Dask scheduler.
+
+    Futures come from the client's ``concurrent.futures`` view (``Client.get_executor``):
+    cancelling one cancels its task on the cluster. Calls are never merged as the same
+    (``pure=False``).
+
+    Args:
+        address: the scheduler's address, ``tcp://host:port`` (``LocalCluster.scheduler_address``
+            in tests).
+        connect_timeout_s: how long to try to reach it, seconds.
+
+    Raises:
+        ValueError: the address is malformed, or the scheduler could not be reached in time.
+    """
+
+    def __init__(self, address: str, connect_timeout_s: float = CONNECT_TIMEOUT_S) -> None:
+        try:
+            if parse_address(address)[0] != "inproc":  # a malformed address fails here, before a client exists
+                get_address_host_port(address)
+        except ValueError as error:
+            raise ValueError(f"the scheduler address {address!r} is malformed ({error}); expected such as tcp://host:8786") from None
+        try:
+            self.client = Client(address, timeout=connect_timeout_s, set_as_default=False)
+        except (OSError, TimeoutError) as error:
+            raise ValueError(
+                f"cannot reach a Dask scheduler at {address!r} within {connect_timeout_s:g} s ({type(error).__name__}: {error}); "
+                "expected the address of a running scheduler, such as tcp://host:8786"
+            ) from None
+        self._executor = self.client.get_executor(pure=False)
+        threads = self._threads()
+        self.description = f"Dask scheduler {address} ({len(threads)} workers, {sum(threads.values())} threads)"
+        if not threads:
+            logger.warning("the Dask scheduler at %s has no workers yet: work waits until one joins", address)
+
+    def _threads(self) -> dict[str, int]:
+        """Each worker's threads, as the scheduler knows them now."""
+        return {str(worker): int(n) for worker, n in self.client.nthreads().items()}
+
+    def submit(self, function: Callable[..., Any], /, *args: Any, **kwargs: Any) -> cf.Future:
+        return self._executor.submit(function, *args, **kwargs)
+
+    def capacity(self) -> int:
+        """The threads of the workers the scheduler has now (at least 1, so work waits for a worker)."""
+        return max(1, sum(self._threads().values()))
+
+    def stop(self) -> None:
+        """Cancel every task submitted here that has not finished (a task already running
+        finishes on its worker, and its result is dropped)."""
+        self._executor.shutdown(wait=False)
+        self._executor = self.client.get_executor(pure=False)
+
+    def close(self) -> None:
+        self._executor.shutdown(wait=False)
+        self.client.close()

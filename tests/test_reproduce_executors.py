@@ -1,0 +1,93 @@
+"""``reproduce`` on the shared executors (dvrk_gym.parallel): tasks in dependency order on any
+executor, a worker without the run folder refused, ``--scheduler`` checked, and the quick
+profile on a 2-worker Dask LocalCluster giving what local processes give, file for file."""
+
+import json
+import os
+from pathlib import Path
+
+import pytest
+from workers_for_tests import die_once, record
+
+from dvrk_gym.cli.main import main
+from dvrk_gym.parallel.executors import InlineExecutor, LocalExecutor
+from dvrk_gym.parallel.task_graph import Task, TaskError, run_tasks
+from dvrk_gym.reproduce import QUICK, ReproduceConfig, run_reproduce
+from dvrk_gym.reproduce.run import seeded_results
+
+SAME_BYTES = ("calibration/*.npz", "calibration/calibration_table.json", "debridement/*.json")
+"""The files of a run folder that two runs with the same settings write byte for byte: the
+calibrators' models and Phase I/II data, the calibration table and every debridement cell."""
+
+
+def _graph(log: Path) -> list[Task]:
+    def step(name, needs=(), cost=1.0):
+        return Task(name, record, {"name": name, "log": str(log), "needs_seen": needs}, needs=needs, cost_s=cost)
+
+    return [step("root", cost=5), step("a", ("root",)), step("b", ("root",)), step("c", ("a", "b")), step("free", cost=2)]
+
+
+@pytest.mark.parametrize("make_executor", [InlineExecutor, lambda: LocalExecutor(workers=2)], ids=["inline", "local-2"])
+def test_tasks_run_after_what_they_need_on_any_executor(tmp_path, make_executor):
+    with make_executor() as executor:
+        results = run_tasks(_graph(tmp_path / "log.txt"), tmp_path / "cache", progress=False, executor=executor)
+    assert sorted((tmp_path / "log.txt").read_text().split()) == ["a", "b", "c", "free", "root"]  # each once, needs first
+    assert list(results) == ["root", "a", "b", "c", "free"] and not any(r["cached"] for r in results.values())
+    pids = {r["pid"] for r in results.values()}
+    assert (pids == {os.getpid()}) == isinstance(executor, InlineExecutor)  # inline runs here, a pool elsewhere
+
+
+def test_a_task_that_does_not_see_the_shared_folder_fails_saying_so(tmp_path):
+    graph = [Task("a", record, {"name": "a", "log": str(tmp_path / "log.txt")})]
+    with pytest.raises(TaskError, match=r"task 'a' failed: FileNotFoundError: the run folder .*gone is not on this worker's disk"):
+        run_tasks(graph, tmp_path / "cache", progress=False, shared_folder=tmp_path / "gone")
+    assert not (tmp_path / "log.txt").exists()  # refused before it ran
+
+
+def test_a_local_pool_starts_again_after_a_worker_died(tmp_path):
+    flag = tmp_path / "flag"
+    with LocalExecutor(workers=1) as executor:
+        outcomes = list(executor.map_unordered(die_once, [str(flag)]))
+        assert type(outcomes[0].error).__name__ == "BrokenProcessPool"
+        assert [o.result for o in executor.map_unordered(die_once, [str(flag)])] == ["survived"]
+
+
+@pytest.mark.parametrize(
+    ("arguments", "message"),
+    [
+        (["--scheduler", "localhost"], "the scheduler address 'localhost' is malformed (missing port"),
+        (["--scheduler", "tcp://127.0.0.1:9", "--connect-timeout", "0.5"], "cannot reach a Dask scheduler at 'tcp://127.0.0.1:9'"),
+    ],
+)
+def test_reproduce_refuses_a_bad_scheduler_in_one_line(capsys, tmp_path, arguments, message):
+    pytest.importorskip("distributed")
+    assert main(["reproduce", "--quick", "--out", str(tmp_path / "run"), "--no-progress", *arguments]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and message in err, err
+    assert not (tmp_path / "run" / "tasks").exists()  # nothing ran
+
+
+def _same_bytes(first: Path, second: Path) -> list[str]:
+    """The files of SAME_BYTES, relative to the run folders, after checking that both runs wrote the same ones."""
+    names = sorted(str(path.relative_to(first)) for pattern in SAME_BYTES for path in first.glob(pattern))
+    assert names == sorted(str(path.relative_to(second)) for pattern in SAME_BYTES for path in second.glob(pattern))
+    return [name for name in names if (first / name).read_bytes() != (second / name).read_bytes()]
+
+
+@pytest.mark.slow
+def test_quick_reproduce_on_a_dask_cluster_gives_what_local_processes_give(tmp_path):
+    """The whole quick run twice (about 3 min on 2 quiet cores): 2 local processes, then a
+    LocalCluster of 2 single-thread workers reached at its address as --scheduler would."""
+    distributed = pytest.importorskip("distributed")
+    from dvrk_gym.parallel.dask_executor import DaskExecutor
+
+    local = run_reproduce(ReproduceConfig(out=tmp_path / "local", profile=QUICK, workers=2, progress=False))
+    with (
+        distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster,
+        DaskExecutor(cluster.scheduler_address) as dask,
+    ):
+        on_dask = run_reproduce(ReproduceConfig(out=tmp_path / "dask", profile=QUICK, progress=False), dask)
+    assert on_dask.data["settings"]["executor"].startswith(f"Dask scheduler {cluster.scheduler_address} (2 workers, 2 threads)")
+    assert seeded_results(json.loads(on_dask.results.read_text())) == seeded_results(json.loads(local.results.read_text()))
+    assert _same_bytes(tmp_path / "local", tmp_path / "dask") == []
+    assert len(list((tmp_path / "dask" / "debridement").glob("*.json"))) == 6

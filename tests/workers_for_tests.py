@@ -1,0 +1,24 @@
+"""Task functions for the executor tests: module-level (a worker process imports them by
+name) and light (only the standard library), so a spawned worker starts in a moment."""
+
+import os
+from pathlib import Path
+
+
+def record(name: str, log: str, needs_seen: tuple[str, ...] = ()) -> dict:
+    """Append ``name`` to the log, after checking that every task it needs logged itself first."""
+    seen = Path(log).read_text().split() if Path(log).exists() else []
+    missing = [need for need in needs_seen if need not in seen]
+    if missing:
+        raise AssertionError(f"{name} ran before {missing}")
+    with open(log, "a") as handle:
+        handle.write(name + "\n")
+    return {"name": name, "pid": os.getpid()}
+
+
+def die_once(flag: str) -> str:
+    """Kill this (worker) process with SIGKILL the first time; return normally once ``flag`` exists."""
+    if not Path(flag).exists():
+        Path(flag).write_text("died once")
+        os.kill(os.getpid(), 9)
+    return "survived"
