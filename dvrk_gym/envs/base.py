@@ -18,6 +18,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium.error import ResetNeeded
 
+from dvrk_gym.sim.endoscope.display import DISPLAY_RENDERERS, EndoscopeDisplay
 from dvrk_gym.sim.robot.bias import BIAS_PRESETS, BiasConfig
 from dvrk_gym.sim.robot.kinematics import JOINT_NAMES
 from dvrk_gym.sim.world import MAX_PIXEL_NOISE_PX, DvrkWorld, WorldConfig
@@ -35,12 +36,21 @@ class EnvConfig:
         camera_resolution: (width, height) of each endoscope image, pixels.
         pixel_noise_px: standard deviation of the detection noise added to every pixel
             coordinate the cameras report, at 1920 x 1080 (scaled with the resolution).
+        render_resolution: (width, height) of the images ``render()`` returns, pixels; None:
+            ``camera_resolution``. Only what is shown changes: the detections keep their
+            images at ``camera_resolution``.
+        renderer: what draws ``render()``'s images: "auto" (PyBullet's EGL renderer when it
+            runs here, about 10x faster, else TinyRenderer, with one log line saying why),
+            "egl" (an error if it cannot run) or "tiny" (TinyRenderer: at
+            ``camera_resolution``, the detections' very pixels). Detections always use TinyRenderer.
     """
 
     bias: str | BiasConfig = "paper"
     bias_seed: int = 0
     camera_resolution: tuple[int, int] = (1920, 1080)
     pixel_noise_px: float = 0.0
+    render_resolution: tuple[int, int] | None = None
+    renderer: str = "auto"
 
     def __post_init__(self) -> None:
         # gym.make passes lists from JSON-like specs; the world wants a tuple.
@@ -51,6 +61,9 @@ class EnvConfig:
             raise ValueError(f"bias must be one of {sorted(BIAS_PRESETS)} or a BiasConfig, got {self.bias!r}")
         check_int_fields(type(self).__name__, self, {"bias_seed": (0, 2**31 - 1)})
         check_float_fields(type(self).__name__, self, {"pixel_noise_px": (0.0, MAX_PIXEL_NOISE_PX, False)})
+        if self.render_resolution is not None:
+            object.__setattr__(self, "render_resolution", check_resolution("render_resolution", self.render_resolution))
+        check_choice("renderer", self.renderer, DISPLAY_RENDERERS)
 
 
 ConfigT = TypeVar("ConfigT", bound=EnvConfig)
@@ -158,6 +171,7 @@ class DvrkEnv(gym.Env, Generic[ConfigT]):
         cable.set_state(np.full(cable.get_state().shape, np.nan))
         self._needs_reset = True
         self._seeded_reset = False  # whether the reset under way was given a seed
+        self._display: EndoscopeDisplay | None = None  # made at the first image rendered
 
     # ------------------------------------------------------------------ gym API
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
@@ -183,10 +197,19 @@ class DvrkEnv(gym.Env, Generic[ConfigT]):
 
     def render(self) -> np.ndarray | list[Any] | None:
         if self.render_mode == "rgb_array":
-            return self.world.render("left")
+            return self._render_frame()
         return None  # "human": the PyBullet GUI shows the world live; None: nothing to draw
 
+    def _render_frame(self) -> np.ndarray:
+        """The left endoscope image to show, (h, w, 3) uint8 RGB at ``render_resolution``."""
+        if self._display is None:
+            self._display = EndoscopeDisplay(self.world.camera, self.config.render_resolution, self.config.renderer)
+        return self._display.image(self.world.physics, "left")
+
     def close(self) -> None:
+        display = getattr(self, "_display", None)  # __init__ may have failed before it was set
+        if display is not None:
+            display.close()
         if hasattr(self, "world"):
             self.world.close()
         super().close()

@@ -37,10 +37,13 @@ _PAPER_ROTATION_BASE_CAM = (
     (-0.115, 0.983, -0.144),
     (0.236, -0.114, -0.965),
 )
-# Where TinyRenderer samples pixel (u, v) relative to the OpenCV pixel centre,
-# expressed as offsets added before normalising to NDC (measured, see module doc).
-_TINY_SAMPLE_OFFSET_U_PX = 0.0
-_TINY_SAMPLE_OFFSET_V_PX = 1.0
+# Where each renderer samples pixel (u, v) relative to the OpenCV pixel centre, as offsets
+# (u, v) added before normalising to NDC. TinyRenderer: measured, see the module doc.
+# OpenGL (the EGL renderer) samples pixel centres, at half-integers, and flips the rows
+# when reading them back (measured on rendered spheres: tests/test_display.py).
+_SAMPLE_OFFSETS_PX = {"tiny": (0.0, 1.0), "opengl": (0.5, 0.5)}
+RENDERERS = tuple(_SAMPLE_OFFSETS_PX)
+"""The renderers a projection matrix can be made for: PyBullet's TinyRenderer and OpenGL (EGL)."""
 # OpenCV camera frame -> OpenGL camera frame (y up, looking along -z).
 _CV_TO_GL = np.diag([1.0, -1.0, -1.0, 1.0])
 _SIDES = ("left", "right")
@@ -257,19 +260,24 @@ class StereoCamera:
             cam_from_world[0, 3] -= self.baseline_m
         return (_CV_TO_GL @ cam_from_world).flatten(order="F").tolist()
 
-    def projection_matrix(self, window: PixelWindow | None = None) -> list[float]:
-        """OpenGL projection matrix for TinyRenderer, column-major list of 16 floats.
+    def projection_matrix(self, window: PixelWindow | None = None, renderer: str = "tiny") -> list[float]:
+        """OpenGL projection matrix, column-major list of 16 floats.
 
         With ``window`` the frustum is the off-centre sub-frustum covering exactly
-        that window's pixels (principal point shifted by (u0, v0)).
+        that window's pixels (principal point shifted by (u0, v0)). ``renderer`` ("tiny"
+        for PyBullet's TinyRenderer, "opengl" for its EGL renderer) sets where pixels are
+        sampled, so that either renderer's pixels agree with :meth:`project`.
         """
+        if renderer not in _SAMPLE_OFFSETS_PX:
+            raise ValueError(f"renderer must be one of {RENDERERS}, got {renderer!r}")
         k = self.intrinsics
         if window is None:
             window = PixelWindow(0, 0, k.width, k.height)
         self._check_window(window)
         w, h = window.width, window.height
-        cx = k.cx - window.u0 + _TINY_SAMPLE_OFFSET_U_PX
-        cy = k.cy - window.v0 + _TINY_SAMPLE_OFFSET_V_PX
+        offset_u, offset_v = _SAMPLE_OFFSETS_PX[renderer]
+        cx = k.cx - window.u0 + offset_u
+        cy = k.cy - window.v0 + offset_v
         n, f = self.near_m, self.far_m
         proj = np.zeros((4, 4))
         proj[0, 0] = 2.0 * k.fx / w

@@ -1,0 +1,329 @@
+"""A display copy of a physics world, drawn by PyBullet's EGL renderer (OpenGL without a window).
+
+PyBullet's software renderer (TinyRenderer) takes about a second for a 1920 x 1080 frame
+of the workspace; its EGL plugin (Mesa's llvmpipe on a machine without a GPU) takes a
+tenth of that. The plugin cannot simply be loaded into a world's own client:
+
+* once loaded into a client it draws every ``getCameraImage`` of that client, whatever
+  ``renderer=`` says, so the perception images (TinyRenderer's, which the detections and
+  hence every calibration number rest on) would change;
+* it draws only the bodies created after it was loaded;
+* it does not draw visual shapes built from vertices in code (the printed circles, the
+  fragments, the tool's shaft): it reads meshes from files only.
+
+So :class:`EglMirror` is a second client, with the plugin loaded before any body, holding
+a copy of each body's visual shapes (meshes built in code are written once as OBJ files
+to a temporary folder), moved to the world's poses before each frame. The world's own
+client is never touched, so its images stay bit for bit what they were.
+
+When the plugin cannot be loaded it calls ``exit()`` inside the process (without libEGL,
+for one), so :func:`egl_usable` first tries it in a child process.
+"""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+import importlib.util
+import logging
+import subprocess
+import sys
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pybullet
+from pybullet_utils import bullet_client
+from scipy.spatial.transform import Rotation
+
+from dvrk_gym.sim.physics.client import Physics, quiet_output
+from dvrk_gym.sim.physics.meshes import Mesh, box
+from dvrk_gym.utils.atomic import atomic_write_text
+
+logger = logging.getLogger(__name__)
+
+EGL_PLUGIN_MODULE = "eglRenderer"
+"""The module pybullet's wheel ships its EGL renderer plugin as."""
+EGL_MAX_IMAGE_PX = (1024, 768)
+"""The largest image (width, height) the EGL plugin draws as asked: it draws into a surface of
+this size, and stretches anything larger from it. Draw larger images in tiles."""
+TINY_LIGHT_DIRECTION = (-50.0, 30.0, 100.0)
+"""Where TinyRenderer's light comes from (world frame, z up; PyBullet's default)."""
+EGL_LIGHT_DIRECTION = (-50.0, 30.0, 40.0)
+"""Where the EGL renderer's light comes from, in its own frame: fixed (``getCameraImage``'s
+``lightDirection`` does not reach it). It also draws a shadow map from there, every frame:
+4096 x 4096 texels over +-10 units around the origin, from 1 to 300 units in front of a
+light 71 units out. A scene in metres would shadow itself in 5 mm stripes, so the mirror
+turns the world so that this light falls on it as TinyRenderer's does, scales it by
+:data:`MIRROR_SCALE` and moves it :data:`MIRROR_DISTANCE` units away from the light: all of
+it lies beyond the shadow map's depth range, and so all of it is lit."""
+MIRROR_SCALE = 100.0
+"""Mirror units per metre (GL's float32 then resolves 0.3 micrometres at the mirror's distance)."""
+MIRROR_DISTANCE = 500.0
+"""How far from the origin, away from the light, the focus is put, mirror units: beyond the
+shadow map's 300 units with 0.4 m (40 units) of the world around the focus."""
+PROBE_TIMEOUT_S = 60.0
+"""How long the child process that tries the EGL plugin may take, seconds."""
+_PROBE_SENTINEL = "dvrk_gym-egl-probe-ok"
+# Loads the plugin, draws a red box filling a 32 x 24 frame, and says so if the centre is red.
+_PROBE_CODE = f"""
+import sys, numpy, pybullet
+from pybullet_utils import bullet_client
+c = bullet_client.BulletClient(connection_mode=pybullet.DIRECT)
+if c.loadPlugin(sys.argv[1], "_eglRendererPlugin") < 0:
+    sys.exit(3)
+box = c.createVisualShape(pybullet.GEOM_BOX, halfExtents=[1, 1, 0.1], rgbaColor=[1, 0, 0, 1])
+c.createMultiBody(0, baseVisualShapeIndex=box)
+view = pybullet.computeViewMatrix([0, 0, 2], [0, 0, 0], [0, 1, 0])
+proj = pybullet.computeProjectionMatrixFOV(40, 32 / 24, 0.1, 10)
+rgba = c.getCameraImage(32, 24, view, proj, renderer=pybullet.ER_BULLET_HARDWARE_OPENGL)[2]
+r, g, b = (int(v) for v in numpy.reshape(numpy.asarray(rgba, dtype=numpy.uint8), (24, 32, 4))[12, 16, :3])
+c.disconnect()
+print("{_PROBE_SENTINEL}" if r > 200 and g < 60 and b < 60 else f"centre pixel {{(r, g, b)}}", flush=True)
+"""
+
+
+class RendererUnavailable(RuntimeError):
+    """PyBullet's EGL renderer cannot run here (no plugin, no libEGL, no EGL device)."""
+
+
+def egl_plugin_path() -> str | None:
+    """Where pybullet's EGL renderer plugin is, or None if this pybullet has none."""
+    spec = importlib.util.find_spec(EGL_PLUGIN_MODULE)
+    return None if spec is None else spec.origin
+
+
+@functools.lru_cache(maxsize=8)
+def egl_usable(plugin_path: str) -> str | None:
+    """Try the EGL plugin at ``plugin_path`` in a child process (once per path and process).
+
+    Returns:
+        None if it loaded and drew a frame; otherwise why not, in one line.
+    """
+    try:
+        done = subprocess.run(
+            [sys.executable, "-c", _PROBE_CODE, plugin_path],
+            capture_output=True,
+            text=True,
+            timeout=PROBE_TIMEOUT_S,
+            check=False,
+        )
+    except subprocess.TimeoutExpired:
+        return f"trying it took more than {PROBE_TIMEOUT_S:g} s"
+    if _PROBE_SENTINEL in done.stdout:
+        return None
+    said = [line.strip() for line in (done.stderr + done.stdout).splitlines() if line.strip() and "build time" not in line]
+    return f"trying it exited with status {done.returncode}" + (f" ({said[-1]})" if said else "")
+
+
+@dataclass(frozen=True)
+class _Copy:
+    """One mirrored link: the world's body and link index, and the mirror's body drawing it."""
+
+    body: int
+    link: int
+    mirror_body: int
+
+
+class EglMirror:
+    """A copy of a world's visual shapes in a client of its own, drawn by the EGL renderer.
+
+    The copy lives in a frame of its own (:data:`EGL_LIGHT_DIRECTION`): the world turned,
+    scaled by :data:`MIRROR_SCALE` about ``focus_m`` and moved away from the light.
+    :meth:`image` takes the world's view matrix and draws what a camera there sees.
+
+    Args:
+        focus_m: the world point (x, y, z), metres, at the middle of what will be drawn;
+            what lies within 0.4 m of it is lit evenly.
+        plugin_path: the EGL plugin's file (default: pybullet's own, :func:`egl_plugin_path`).
+
+    Raises:
+        RendererUnavailable: the plugin is missing or fails to start (one line says why).
+    """
+
+    def __init__(self, focus_m: tuple[float, float, float] = (0.0, 0.0, 0.0), plugin_path: str | None = None) -> None:
+        path = egl_plugin_path() if plugin_path is None else plugin_path
+        if path is None:
+            raise RendererUnavailable(f"this pybullet has no EGL renderer plugin (module {EGL_PLUGIN_MODULE!r} not found)")
+        failure = egl_usable(path)
+        if failure is not None:
+            raise RendererUnavailable(f"PyBullet's EGL renderer ({path}) does not run here: {failure}")
+        with quiet_output(stderr=True):  # the server and the plugin print their start-up to the C streams
+            self._client: bullet_client.BulletClient | None = bullet_client.BulletClient(connection_mode=pybullet.DIRECT)
+            self._plugin = self._client.loadPlugin(path, "_eglRendererPlugin")
+        if self._plugin < 0:
+            self._client.disconnect()
+            self._client = None
+            raise RendererUnavailable(f"PyBullet could not load its EGL renderer from {path}")
+        self._folder: tempfile.TemporaryDirectory[str] | None = tempfile.TemporaryDirectory(prefix="dvrk_gym_display_")
+        self._layout: int | None = None  # the layout_version of the Physics copied
+        self._copies: list[_Copy] = []
+        self._rotation = Rotation.align_vectors([EGL_LIGHT_DIRECTION], [TINY_LIGHT_DIRECTION])[0]
+        self._focus = np.asarray(focus_m, dtype=float)
+        behind_light = np.asarray(EGL_LIGHT_DIRECTION) / np.linalg.norm(EGL_LIGHT_DIRECTION)
+        # mirror point = MIRROR_SCALE * R (world point - focus) + offset; and back, for the view matrix
+        self._to_mirror = MIRROR_SCALE * self._rotation.as_matrix()
+        self._offset = MIRROR_DISTANCE * behind_light
+        self._from_mirror = np.eye(4)
+        self._from_mirror[:3, :3] = self._rotation.as_matrix().T / MIRROR_SCALE
+        self._from_mirror[:3, 3] = self._focus - self._from_mirror[:3, :3] @ self._offset
+
+    @property
+    def client(self) -> bullet_client.BulletClient:
+        """The mirror's own client; raises RendererUnavailable once closed."""
+        if self._client is None:
+            raise RendererUnavailable("this EGL mirror has been closed")
+        return self._client
+
+    @property
+    def copies(self) -> tuple[tuple[int, int, int], ...]:
+        """(world body id, link index (-1: base), mirror body id) of every mirrored link."""
+        return tuple((c.body, c.link, c.mirror_body) for c in self._copies)
+
+    def to_world(self, position: np.ndarray, orientation: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """A pose in the mirror's frame (position in mirror units, quaternion (x, y, z, w)) as a
+        world pose (metres, quaternion)."""
+        world_position = self._from_mirror[:3, :3] @ np.asarray(position, dtype=float) + self._from_mirror[:3, 3]
+        return world_position, (self._rotation.inv() * Rotation.from_quat(orientation)).as_quat()
+
+    def sync(self, physics: Physics) -> None:
+        """Make the copy match ``physics``: rebuilt if bodies came or went, every link moved to its pose."""
+        if self._layout != physics.layout_version:
+            self._rebuild(physics)
+        source, mirror = physics.client, self.client
+        for copy in self._copies:
+            position, orientation = link_frame(source, copy.body, copy.link)
+            mirror_position = self._to_mirror @ (np.asarray(position) - self._focus) + self._offset
+            mirror_orientation = (self._rotation * Rotation.from_quat(orientation)).as_quat()
+            mirror.resetBasePositionAndOrientation(copy.mirror_body, mirror_position.tolist(), mirror_orientation.tolist())
+
+    def image(self, width: int, height: int, view_matrix: list[float], projection_matrix: list[float]) -> np.ndarray:
+        """Draw the copy as it was last synced: (height, width, 3) uint8 RGB, row 0 at the top.
+
+        Args:
+            width, height: image size, pixels, at most :data:`EGL_MAX_IMAGE_PX`.
+            view_matrix: the world's OpenGL view matrix (world -> eye, metres), column-major, 16 floats.
+            projection_matrix: OpenGL projection matrix (eye space in metres), column-major, 16 floats.
+        """
+        if not (0 < width <= EGL_MAX_IMAGE_PX[0] and 0 < height <= EGL_MAX_IMAGE_PX[1]):
+            raise ValueError(
+                f"the EGL renderer draws images of 1x1 to {EGL_MAX_IMAGE_PX[0]}x{EGL_MAX_IMAGE_PX[1]} pixels, got {width}x{height}; "
+                "draw a larger one in tiles"
+            )
+        view = np.asarray(view_matrix, dtype=float).reshape(4, 4, order="F") @ self._from_mirror
+        with quiet_output():  # the plugin prints the GL vendor on some frames
+            result = self.client.getCameraImage(
+                width,
+                height,
+                viewMatrix=view.flatten(order="F").tolist(),
+                projectionMatrix=projection_matrix,
+                renderer=pybullet.ER_BULLET_HARDWARE_OPENGL,
+                shadow=0,
+                flags=pybullet.ER_NO_SEGMENTATION_MASK,
+            )
+        rgba = np.asarray(result[2], dtype=np.uint8).reshape(height, width, 4)
+        return np.ascontiguousarray(rgba[:, :, :3])
+
+    def close(self) -> None:
+        """Unload the plugin, disconnect the client and delete the mesh files; safe to call more than once."""
+        if self._client is not None:
+            with quiet_output():
+                try:
+                    self._client.unloadPlugin(self._plugin)
+                    self._client.disconnect()
+                except pybullet.error:
+                    logger.debug("the EGL mirror's server was already disconnected")
+            self._client = None
+            self._copies = []
+        if self._folder is not None:
+            self._folder.cleanup()
+            self._folder = None
+
+    def __del__(self) -> None:
+        if hasattr(self, "_folder"):  # __init__ may have failed before there was anything to free
+            self.close()
+
+    # ------------------------------------------------------------------ building the copy
+    def _rebuild(self, physics: Physics) -> None:
+        mirror = self.client
+        with quiet_output():
+            mirror.resetSimulation()
+        self._copies = []
+        for name in physics.body_names:
+            body = physics.body(name)
+            by_link: dict[int, list[tuple]] = {}
+            for entry in physics.client.getVisualShapeData(body):
+                by_link.setdefault(entry[1], []).append(entry)
+            meshes = list(physics.meshes(name))
+            built_in_code = sum(1 for entries in by_link.values() for e in entries if _from_vertices(e))
+            if built_in_code != len(meshes):
+                raise RendererUnavailable(
+                    f"body {name!r} has {built_in_code} visual meshes built from vertices but {len(meshes)} were made "
+                    "through Physics.mesh_visual; make a body's meshes with it, right before Physics.add"
+                )
+            for link in sorted(by_link):
+                visual = self._visual_array(by_link[link], meshes)
+                self._copies.append(_Copy(body, link, mirror.createMultiBody(0.0, -1, visual)))
+        self._layout = physics.layout_version
+
+    def _visual_array(self, entries: list[tuple], meshes: list[Mesh]) -> int:
+        """One visual shape array in the mirror holding a link's visual shapes, sizes and frames in
+        mirror units (``meshes``: the code-built ones still to place, consumed in order)."""
+        kinds, sizes, radii, lengths, files, scales = [], [], [], [], [], []
+        for entry in entries:
+            kind, dims, file_name = entry[2], [d * MIRROR_SCALE for d in entry[3]], entry[4]
+            if _from_vertices(entry):
+                file_name = self._obj_file(meshes.pop(0)).encode()
+            elif kind == pybullet.GEOM_BOX:
+                # The plugin's own boxes are lit differently on their two triangles per face, and
+                # it draws one mesh file once per shape array, whatever the scales: a file per size.
+                kind, file_name, dims = pybullet.GEOM_MESH, self._obj_file(box(tuple(dims))).encode(), [1.0, 1.0, 1.0]
+            elif kind not in (pybullet.GEOM_BOX, pybullet.GEOM_SPHERE, pybullet.GEOM_CYLINDER, pybullet.GEOM_CAPSULE, pybullet.GEOM_MESH):
+                raise RendererUnavailable(f"the EGL mirror cannot copy visual shapes of PyBullet geometry type {kind}")
+            kinds.append(kind)
+            sizes.append([d / 2 for d in dims] if kind == pybullet.GEOM_BOX else [0.0, 0.0, 0.0])
+            radii.append(dims[1] if kind in (pybullet.GEOM_CYLINDER, pybullet.GEOM_CAPSULE) else dims[0])
+            lengths.append(dims[0] if kind in (pybullet.GEOM_CYLINDER, pybullet.GEOM_CAPSULE) else 0.0)
+            files.append(file_name.decode() if kind == pybullet.GEOM_MESH else "")
+            scales.append(dims if kind == pybullet.GEOM_MESH else [1.0, 1.0, 1.0])
+        with quiet_output():
+            return self.client.createVisualShapeArray(
+                shapeTypes=kinds,
+                halfExtents=sizes,
+                radii=radii,
+                lengths=lengths,
+                fileNames=files,
+                meshScales=scales,
+                rgbaColors=[list(e[7]) for e in entries],
+                visualFramePositions=[[v * MIRROR_SCALE for v in e[5]] for e in entries],
+                visualFrameOrientations=[list(e[6]) for e in entries],
+            )
+
+    def _obj_file(self, mesh: Mesh) -> str:
+        """The path of ``mesh`` written as an OBJ file (once per distinct mesh)."""
+        if self._folder is None:
+            raise RendererUnavailable("this EGL mirror has been closed")
+        text = mesh.obj_text()
+        path = Path(self._folder.name) / f"{hashlib.sha256(text.encode()).hexdigest()[:24]}.obj"
+        if not path.exists():
+            atomic_write_text(path, text)
+        return str(path)
+
+
+def _from_vertices(entry: tuple) -> bool:
+    """Whether a ``getVisualShapeData`` entry is a mesh built from vertices (no file name)."""
+    return entry[2] == pybullet.GEOM_MESH and not entry[4]
+
+
+def link_frame(client: bullet_client.BulletClient, body: int, link: int) -> tuple[tuple[float, ...], tuple[float, ...]]:
+    """The world pose of a link's frame (the frame its visual shapes are placed in): position
+    (m) and quaternion (x, y, z, w). Link -1 is the base, whose frame is its centre of mass
+    less the local inertial offset."""
+    if link >= 0:
+        state = client.getLinkState(body, link, computeForwardKinematics=True)
+        return state[4], state[5]
+    com_position, com_orientation = client.getBasePositionAndOrientation(body)
+    inertial_position, inertial_orientation = client.getDynamicsInfo(body, -1)[3:5]
+    to_frame = client.invertTransform(inertial_position, inertial_orientation)
+    return client.multiplyTransforms(com_position, com_orientation, *to_frame)
