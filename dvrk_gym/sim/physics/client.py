@@ -49,9 +49,12 @@ def _quiet_fd(fd: int) -> Iterator[None]:
         yield
         return
     try:
-        with open(os.devnull, "w") as devnull:
-            os.dup2(devnull.fileno(), fd)
-            yield
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        try:
+            os.dup2(devnull, fd)
+        finally:
+            os.close(devnull)
+        yield
     finally:
         os.dup2(saved, fd)
         os.close(saved)

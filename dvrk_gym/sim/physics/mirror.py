@@ -23,12 +23,12 @@ for one), so :func:`egl_usable` first tries it in a child process.
 from __future__ import annotations
 
 import functools
-import hashlib
 import importlib.util
 import logging
 import subprocess
 import sys
 import tempfile
+import weakref
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -156,9 +156,16 @@ class EglMirror:
             self._client.disconnect()
             self._client = None
             raise RendererUnavailable(f"PyBullet could not load its EGL renderer from {path}")
+        # A loaded OBJ file is cached for the life of the process unless this is off, and
+        # fragments bring new meshes at every reset.
+        self._client.setPhysicsEngineParameter(enableFileCaching=0)
         self._folder: tempfile.TemporaryDirectory[str] | None = tempfile.TemporaryDirectory(prefix="dvrk_gym_display_")
+        # Frees the client and the folder when closed, collected, or at exit (while the streams still work).
+        self._release = weakref.finalize(self, _release, self._client, self._plugin, self._folder)
         self._layout: int | None = None  # the layout_version of the Physics copied
         self._copies: list[_Copy] = []
+        self._written: list[str] = []  # the OBJ files written for the rebuild under way
+        self._names: dict[int, str] = {}  # their names, one string object each
         self._rotation = Rotation.align_vectors([EGL_LIGHT_DIRECTION], [TINY_LIGHT_DIRECTION])[0]
         self._focus = np.asarray(focus_m, dtype=float)
         behind_light = np.asarray(EGL_LIGHT_DIRECTION) / np.linalg.norm(EGL_LIGHT_DIRECTION)
@@ -227,22 +234,10 @@ class EglMirror:
 
     def close(self) -> None:
         """Unload the plugin, disconnect the client and delete the mesh files; safe to call more than once."""
-        if self._client is not None:
-            with quiet_output():
-                try:
-                    self._client.unloadPlugin(self._plugin)
-                    self._client.disconnect()
-                except pybullet.error:
-                    logger.debug("the EGL mirror's server was already disconnected")
-            self._client = None
-            self._copies = []
-        if self._folder is not None:
-            self._folder.cleanup()
-            self._folder = None
-
-    def __del__(self) -> None:
-        if hasattr(self, "_folder"):  # __init__ may have failed before there was anything to free
-            self.close()
+        self._release()
+        self._client = None
+        self._folder = None
+        self._copies = []
 
     # ------------------------------------------------------------------ building the copy
     def _rebuild(self, physics: Physics) -> None:
@@ -263,52 +258,66 @@ class EglMirror:
                     "through Physics.mesh_visual; make a body's meshes with it, right before Physics.add"
                 )
             for link in sorted(by_link):
-                visual = self._visual_array(by_link[link], meshes)
-                self._copies.append(_Copy(body, link, mirror.createMultiBody(0.0, -1, visual)))
+                for entry in by_link[link]:  # one body per shape: shape arrays leak their file names
+                    visual = self._visual_shape(entry, meshes)
+                    self._copies.append(_Copy(body, link, mirror.createMultiBody(0.0, -1, visual)))
         self._layout = physics.layout_version
+        for path in self._written:  # read by now
+            Path(path).unlink()
+        self._written = []
 
-    def _visual_array(self, entries: list[tuple], meshes: list[Mesh]) -> int:
-        """One visual shape array in the mirror holding a link's visual shapes, sizes and frames in
-        mirror units (``meshes``: the code-built ones still to place, consumed in order)."""
-        kinds, sizes, radii, lengths, files, scales = [], [], [], [], [], []
-        for entry in entries:
-            kind, dims, file_name = entry[2], [d * MIRROR_SCALE for d in entry[3]], entry[4]
-            if _from_vertices(entry):
-                file_name = self._obj_file(meshes.pop(0)).encode()
-            elif kind == pybullet.GEOM_BOX:
-                # The plugin's own boxes are lit differently on their two triangles per face, and
-                # it draws one mesh file once per shape array, whatever the scales: a file per size.
-                kind, file_name, dims = pybullet.GEOM_MESH, self._obj_file(box(tuple(dims))).encode(), [1.0, 1.0, 1.0]
-            elif kind not in (pybullet.GEOM_BOX, pybullet.GEOM_SPHERE, pybullet.GEOM_CYLINDER, pybullet.GEOM_CAPSULE, pybullet.GEOM_MESH):
-                raise RendererUnavailable(f"the EGL mirror cannot copy visual shapes of PyBullet geometry type {kind}")
-            kinds.append(kind)
-            sizes.append([d / 2 for d in dims] if kind == pybullet.GEOM_BOX else [0.0, 0.0, 0.0])
-            radii.append(dims[1] if kind in (pybullet.GEOM_CYLINDER, pybullet.GEOM_CAPSULE) else dims[0])
-            lengths.append(dims[0] if kind in (pybullet.GEOM_CYLINDER, pybullet.GEOM_CAPSULE) else 0.0)
-            files.append(file_name.decode() if kind == pybullet.GEOM_MESH else "")
-            scales.append(dims if kind == pybullet.GEOM_MESH else [1.0, 1.0, 1.0])
+    def _visual_shape(self, entry: tuple, meshes: list[Mesh]) -> int:
+        """The mirror's copy of one ``getVisualShapeData`` entry, sizes and frame in mirror units
+        (``meshes``: the body's code-built meshes still to place, taken in order)."""
+        kind, dims, file_name = entry[2], [d * MIRROR_SCALE for d in entry[3]], entry[4]
+        if _from_vertices(entry):
+            file_name = self._obj_file(meshes.pop(0))
+        elif kind == pybullet.GEOM_BOX:  # the plugin lights the two triangles of its own box faces apart
+            kind, file_name, dims = pybullet.GEOM_MESH, self._obj_file(box(tuple(dims))), [1.0, 1.0, 1.0]
+        elif kind not in (pybullet.GEOM_SPHERE, pybullet.GEOM_CYLINDER, pybullet.GEOM_CAPSULE, pybullet.GEOM_MESH):
+            raise RendererUnavailable(f"the EGL mirror cannot copy visual shapes of PyBullet geometry type {kind}")
+        round_ = kind in (pybullet.GEOM_CYLINDER, pybullet.GEOM_CAPSULE)
         with quiet_output():
-            return self.client.createVisualShapeArray(
-                shapeTypes=kinds,
-                halfExtents=sizes,
-                radii=radii,
-                lengths=lengths,
-                fileNames=files,
-                meshScales=scales,
-                rgbaColors=[list(e[7]) for e in entries],
-                visualFramePositions=[[v * MIRROR_SCALE for v in e[5]] for e in entries],
-                visualFrameOrientations=[list(e[6]) for e in entries],
+            return self.client.createVisualShape(
+                kind,
+                radius=dims[1] if round_ else dims[0],
+                length=dims[0] if round_ else 0.0,
+                fileName=file_name if isinstance(file_name, str) else file_name.decode(),
+                meshScale=dims if kind == pybullet.GEOM_MESH else [1.0, 1.0, 1.0],
+                rgbaColor=list(entry[7]),
+                visualFramePosition=[v * MIRROR_SCALE for v in entry[5]],
+                visualFrameOrientation=list(entry[6]),
             )
 
-    def _obj_file(self, mesh: Mesh) -> str:
-        """The path of ``mesh`` written as an OBJ file (once per distinct mesh)."""
+    def _folder_path(self) -> str:
         if self._folder is None:
             raise RendererUnavailable("this EGL mirror has been closed")
-        text = mesh.obj_text()
-        path = Path(self._folder.name) / f"{hashlib.sha256(text.encode()).hexdigest()[:24]}.obj"
-        if not path.exists():
-            atomic_write_text(path, text)
-        return str(path)
+        return self._folder.name
+
+    def _obj_file(self, mesh: Mesh) -> str:
+        """The path of a new OBJ file holding ``mesh``, for this rebuild.
+
+        Files are numbered in the order of the rebuild, so each rebuild uses the same names:
+        pybullet keeps a reference to every file name it is given, and the same string
+        objects cost nothing more. The loader's cache is off, so a file is read when its
+        shape is made and can then be replaced.
+        """
+        number = len(self._written)
+        path = self._names.setdefault(number, str(Path(self._folder_path()) / f"mesh{number}.obj"))
+        atomic_write_text(path, mesh.obj_text())
+        self._written.append(path)
+        return path
+
+
+def _release(client: bullet_client.BulletClient, plugin: int, folder: tempfile.TemporaryDirectory[str]) -> None:
+    """Unload the EGL plugin, disconnect ``client`` and delete ``folder``."""
+    with quiet_output():  # the plugin says goodbye on the C streams
+        try:
+            client.unloadPlugin(plugin)
+            client.disconnect()
+        except pybullet.error:
+            logger.debug("the EGL mirror's server was already disconnected")
+    folder.cleanup()
 
 
 def _from_vertices(entry: tuple) -> bool:
