@@ -3,7 +3,7 @@
 Perception never comes through here: the detections render with TinyRenderer in the
 world's own client (:meth:`StereoCamera.render`), bit for bit as before. What is drawn
 here (``env.render()``, videos) may use PyBullet's EGL renderer in a mirror client of its
-own (:class:`dvrk_gym.sim.physics.mirror.EglMirror`), about ten times faster, and may be
+own (:class:`dvrk_gym.sim.physics.mirror.EglMirror`), 4-5x less CPU a frame, and may be
 smaller than the detection image: its camera is the endoscope's, resampled.
 
 ``renderer``: "auto" uses EGL when it runs here and falls back to TinyRenderer (with one
@@ -18,7 +18,6 @@ import math
 
 import numpy as np
 
-from dvrk_gym import paper
 from dvrk_gym.sim.endoscope.camera import PixelWindow, StereoCamera
 from dvrk_gym.sim.physics.client import Physics
 from dvrk_gym.sim.physics.mirror import EGL_MAX_IMAGE_PX, EglMirror, RendererUnavailable
@@ -34,8 +33,6 @@ EGL_FAR_M = 0.5
 the printed circles, 0.05 mm above it, then flicker through it in stripes. These planes
 resolve 0.02 mm there. Nothing in view comes nearer than about 0.06 m (the shaft leaves the
 frame before it reaches the remote centre, 0.11 m from the camera) or lies beyond 0.3 m."""
-DISPLAY_FOCUS_DEPTH_M = paper.ENDOSCOPE_HEIGHT_M
-"""How far along the optical axis the middle of the scene is, metres (the mirror's focus)."""
 
 
 class EndoscopeDisplay:
@@ -81,12 +78,11 @@ class EndoscopeDisplay:
         if self.requested == "tiny":
             return "tiny"
         try:
-            focus = self.camera.to_world(np.array([0.0, 0.0, DISPLAY_FOCUS_DEPTH_M]))[0]
-            self._mirror = EglMirror(tuple(focus), self._plugin_path)
+            self._mirror = EglMirror(self._plugin_path)
         except RendererUnavailable as reason:
             if self.requested == "egl":
                 raise RendererUnavailable(f"renderer='egl' was asked for, but {reason}; use renderer='auto' or 'tiny'") from None
-            logger.warning("rendering with TinyRenderer (about 10x slower): %s", reason)
+            logger.warning("rendering with TinyRenderer (several times slower than EGL): %s", reason)
             return "tiny"
         return "egl"
 

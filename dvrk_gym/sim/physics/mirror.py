@@ -1,8 +1,9 @@
 """A display copy of a physics world, drawn by PyBullet's EGL renderer (OpenGL without a window).
 
-PyBullet's software renderer (TinyRenderer) takes about a second for a 1920 x 1080 frame
-of the workspace; its EGL plugin (Mesa's llvmpipe on a machine without a GPU) takes a
-tenth of that. The plugin cannot simply be loaded into a world's own client:
+PyBullet's software renderer (TinyRenderer) takes 0.75 s of CPU for a 1920 x 1080 frame of
+the workspace; its EGL plugin (Mesa's llvmpipe on a machine without a GPU) 0.17 s, in four
+tiles (``benchmarks/bench_render.py``). The plugin cannot simply be loaded into a world's
+own client:
 
 * once loaded into a client it draws every ``getCameraImage`` of that client, whatever
   ``renderer=`` says, so the perception images (TinyRenderer's, which the detections and
@@ -12,9 +13,9 @@ tenth of that. The plugin cannot simply be loaded into a world's own client:
   fragments, the tool's shaft): it reads meshes from files only.
 
 So :class:`EglMirror` is a second client, with the plugin loaded before any body, holding
-a copy of each body's visual shapes (meshes built in code are written once as OBJ files
-to a temporary folder), moved to the world's poses before each frame. The world's own
-client is never touched, so its images stay bit for bit what they were.
+a copy of each visual shape (meshes built in code, and boxes, written as OBJ files to a
+temporary folder while the copy is built), moved to the world's poses before each frame.
+The world's own client is never touched, so its images stay bit for bit what they were.
 
 When the plugin cannot be loaded it calls ``exit()`` inside the process (without libEGL,
 for one), so :func:`egl_usable` first tries it in a child process.
@@ -36,7 +37,6 @@ import cv2
 import numpy as np
 import pybullet
 from pybullet_utils import bullet_client
-from scipy.spatial.transform import Rotation
 
 from dvrk_gym.sim.physics.client import Physics, quiet_output
 from dvrk_gym.sim.physics.meshes import Mesh, box
@@ -51,19 +51,12 @@ EGL_MAX_IMAGE_PX = (1024, 768)
 this size, and stretches anything larger from it. Draw larger images in tiles."""
 TINY_LIGHT_DIRECTION = (-50.0, 30.0, 100.0)
 """Where TinyRenderer's light comes from (world frame, z up; PyBullet's default)."""
-EGL_LIGHT_DIRECTION = (-50.0, 30.0, 40.0)
-"""Where the EGL renderer's light comes from, in its own frame: fixed (``getCameraImage``'s
-``lightDirection`` does not reach it). It also draws a shadow map from there, every frame:
-4096 x 4096 texels over +-10 units around the origin, from 1 to 300 units in front of a
-light 71 units out. A scene in metres would shadow itself in 5 mm stripes, so the mirror
-turns the world so that this light falls on it as TinyRenderer's does, scales it by
-:data:`MIRROR_SCALE` and moves it :data:`MIRROR_DISTANCE` units away from the light: all of
-it lies beyond the shadow map's depth range, and so all of it is lit."""
-MIRROR_SCALE = 100.0
-"""Mirror units per metre (GL's float32 then resolves 0.3 micrometres at the mirror's distance)."""
-MIRROR_DISTANCE = 500.0
-"""How far from the origin, away from the light, the focus is put, mirror units: beyond the
-shadow map's 300 units with 0.4 m (40 units) of the world around the focus."""
+LIGHT_DISTANCE_M = 1.0e4
+"""How far away the EGL renderer's light is put (its shader lights by direction). The plugin
+draws a shadow map from the light every frame, 4096 texels over 20 m, 1 m to 300 m in
+front of it: a millimetre scene would shadow itself in 5 mm blotches. A light this far
+away leaves the whole scene beyond the shadow map's depth range: all of it is lit."""
+EGL_LIGHT_POSITION = [LIGHT_DISTANCE_M * v / float(np.linalg.norm(TINY_LIGHT_DIRECTION)) for v in TINY_LIGHT_DIRECTION]
 PROBE_TIMEOUT_S = 60.0
 """How long the child process that tries the EGL plugin may take, seconds."""
 _PROBE_SENTINEL = "dvrk_gym-egl-probe-ok"
@@ -130,20 +123,17 @@ class _Copy:
 class EglMirror:
     """A copy of a world's visual shapes in a client of its own, drawn by the EGL renderer.
 
-    The copy lives in a frame of its own (:data:`EGL_LIGHT_DIRECTION`): the world turned,
-    scaled by :data:`MIRROR_SCALE` about ``focus_m`` and moved away from the light.
-    :meth:`image` takes the world's view matrix and draws what a camera there sees.
+    Each copy sits at its world pose; the light comes from TinyRenderer's direction
+    (:data:`LIGHT_DISTANCE_M`), so the two renderers light the scene alike.
 
     Args:
-        focus_m: the world point (x, y, z), metres, at the middle of what will be drawn;
-            what lies within 0.4 m of it is lit evenly.
         plugin_path: the EGL plugin's file (default: pybullet's own, :func:`egl_plugin_path`).
 
     Raises:
         RendererUnavailable: the plugin is missing or fails to start (one line says why).
     """
 
-    def __init__(self, focus_m: tuple[float, float, float] = (0.0, 0.0, 0.0), plugin_path: str | None = None) -> None:
+    def __init__(self, plugin_path: str | None = None) -> None:
         path = egl_plugin_path() if plugin_path is None else plugin_path
         if path is None:
             raise RendererUnavailable(f"this pybullet has no EGL renderer plugin (module {EGL_PLUGIN_MODULE!r} not found)")
@@ -167,15 +157,6 @@ class EglMirror:
         self._copies: list[_Copy] = []
         self._written: list[str] = []  # the OBJ files written for the rebuild under way
         self._names: dict[int, str] = {}  # their names, one string object each
-        self._rotation = Rotation.align_vectors([EGL_LIGHT_DIRECTION], [TINY_LIGHT_DIRECTION])[0]
-        self._focus = np.asarray(focus_m, dtype=float)
-        behind_light = np.asarray(EGL_LIGHT_DIRECTION) / np.linalg.norm(EGL_LIGHT_DIRECTION)
-        # mirror point = MIRROR_SCALE * R (world point - focus) + offset; and back, for the view matrix
-        self._to_mirror = MIRROR_SCALE * self._rotation.as_matrix()
-        self._offset = MIRROR_DISTANCE * behind_light
-        self._from_mirror = np.eye(4)
-        self._from_mirror[:3, :3] = self._rotation.as_matrix().T / MIRROR_SCALE
-        self._from_mirror[:3, 3] = self._focus - self._from_mirror[:3, :3] @ self._offset
 
     @property
     def client(self) -> bullet_client.BulletClient:
@@ -189,12 +170,6 @@ class EglMirror:
         """(world body id, link index (-1: base), mirror body id) of every mirrored link."""
         return tuple((c.body, c.link, c.mirror_body) for c in self._copies)
 
-    def to_world(self, position: np.ndarray, orientation: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """A pose in the mirror's frame (position in mirror units, quaternion (x, y, z, w)) as a
-        world pose (metres, quaternion)."""
-        world_position = self._from_mirror[:3, :3] @ np.asarray(position, dtype=float) + self._from_mirror[:3, 3]
-        return world_position, (self._rotation.inv() * Rotation.from_quat(orientation)).as_quat()
-
     def sync(self, physics: Physics) -> None:
         """Make the copy match ``physics``: rebuilt if bodies came or went, every link moved to its pose."""
         if self._layout != physics.layout_version:
@@ -202,32 +177,29 @@ class EglMirror:
         source, mirror = physics.client, self.client
         for copy in self._copies:
             position, orientation = link_frame(source, copy.body, copy.link)
-            mirror_position = self._to_mirror @ (np.asarray(position) - self._focus) + self._offset
-            mirror_orientation = (self._rotation * Rotation.from_quat(orientation)).as_quat()
-            mirror.resetBasePositionAndOrientation(copy.mirror_body, mirror_position.tolist(), mirror_orientation.tolist())
+            mirror.resetBasePositionAndOrientation(copy.mirror_body, position, orientation)
 
     def image(self, width: int, height: int, view_matrix: list[float], projection_matrix: list[float]) -> np.ndarray:
         """Draw the copy as it was last synced: (height, width, 3) uint8 RGB, row 0 at the top.
 
         Args:
             width, height: image size, pixels, at most :data:`EGL_MAX_IMAGE_PX`.
-            view_matrix: the world's OpenGL view matrix (world -> eye, metres), column-major, 16 floats.
-            projection_matrix: OpenGL projection matrix (eye space in metres), column-major, 16 floats.
+            view_matrix, projection_matrix: OpenGL matrices, column-major lists of 16 floats.
         """
         if not (0 < width <= EGL_MAX_IMAGE_PX[0] and 0 < height <= EGL_MAX_IMAGE_PX[1]):
             raise ValueError(
                 f"the EGL renderer draws images of 1x1 to {EGL_MAX_IMAGE_PX[0]}x{EGL_MAX_IMAGE_PX[1]} pixels, got {width}x{height}; "
                 "draw a larger one in tiles"
             )
-        view = np.asarray(view_matrix, dtype=float).reshape(4, 4, order="F") @ self._from_mirror
         with quiet_output():  # the plugin prints the GL vendor on some frames
             result = self.client.getCameraImage(
                 width,
                 height,
-                viewMatrix=view.flatten(order="F").tolist(),
+                viewMatrix=view_matrix,
                 projectionMatrix=projection_matrix,
                 renderer=pybullet.ER_BULLET_HARDWARE_OPENGL,
                 shadow=0,
+                lightDirection=EGL_LIGHT_POSITION,
                 flags=pybullet.ER_NO_SEGMENTATION_MASK,
             )
         # (OpenCV drops the alpha channel some 25x faster than a strided numpy copy)
@@ -268,9 +240,9 @@ class EglMirror:
         self._written = []
 
     def _visual_shape(self, entry: tuple, meshes: list[Mesh]) -> int:
-        """The mirror's copy of one ``getVisualShapeData`` entry, sizes and frame in mirror units
-        (``meshes``: the body's code-built meshes still to place, taken in order)."""
-        kind, dims, file_name = entry[2], [d * MIRROR_SCALE for d in entry[3]], entry[4]
+        """The mirror's copy of one ``getVisualShapeData`` entry (``meshes``: the body's
+        code-built meshes still to place, taken in order)."""
+        kind, dims, file_name = entry[2], list(entry[3]), entry[4]
         if _from_vertices(entry):
             file_name = self._obj_file(meshes.pop(0))
         elif kind == pybullet.GEOM_BOX:  # the plugin lights the two triangles of its own box faces apart
@@ -286,7 +258,7 @@ class EglMirror:
                 fileName=file_name if isinstance(file_name, str) else file_name.decode(),
                 meshScale=dims if kind == pybullet.GEOM_MESH else [1.0, 1.0, 1.0],
                 rgbaColor=list(entry[7]),
-                visualFramePosition=[v * MIRROR_SCALE for v in entry[5]],
+                visualFramePosition=list(entry[5]),
                 visualFrameOrientation=list(entry[6]),
             )
 
