@@ -113,7 +113,7 @@ def egl_usable(plugin_path: str) -> str | None:
 
 @dataclass(frozen=True)
 class _Copy:
-    """One mirrored link: the world's body and link index, and the mirror's body drawing it."""
+    """One mirrored visual shape: the world's body and link index it is on, and the mirror's body drawing it."""
 
     body: int
     link: int
@@ -167,11 +167,11 @@ class EglMirror:
 
     @property
     def copies(self) -> tuple[tuple[int, int, int], ...]:
-        """(world body id, link index (-1: base), mirror body id) of every mirrored link."""
+        """(world body id, link index (-1: base), mirror body id) of every mirrored visual shape."""
         return tuple((c.body, c.link, c.mirror_body) for c in self._copies)
 
     def sync(self, physics: Physics) -> None:
-        """Make the copy match ``physics``: rebuilt if bodies came or went, every link moved to its pose."""
+        """Make the copy match ``physics``: rebuilt if bodies came or went, every shape moved to its link's pose."""
         if self._layout != physics.layout_version:
             self._rebuild(physics)
         source, mirror = physics.client, self.client
