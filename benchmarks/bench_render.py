@@ -10,18 +10,22 @@ client, shader compilation), and TinyRenderer's time over EGL's. Issue 18's targ
 timed here (they stay on TinyRenderer at ``camera_resolution``); the 640 x 360 frames come
 from a 1920 x 1080 env through ``render_resolution``. Takes about a minute.
 
-What the profiles found (``--profile`` shows cProfile's view of one TinyRenderer frame):
+What the profiles found (``--profile`` shows cProfile's view of one TinyRenderer frame;
+figures measured with the load average at 10-15 on the 2 cores):
 
-* ``render()`` was TinyRenderer and nothing else: all of a frame's time is inside
-  ``getCameraImage``; the conversion to an (h, w, 3) array takes about 0.1 ms, and there was
-  no post-processing, noise or stereo pair in it. The 2.7 s against 0.76 s of issue 18 were
-  two scenes on a loaded machine: TinyRenderer's time follows what covers the frame (the
-  tray, phantom and paper fill it; every covering surface is shaded) and the load of the two
-  cores, not the Python around it.
-* TinyRenderer at 640 x 360 costs about a tenth of 1920 x 1080: pixels, not triangles.
+* ``render()`` was TinyRenderer's ``getCameraImage`` and one numpy copy, nothing else (no
+  post-processing, noise or stereo pair). The copy, dropping the alpha channel with a
+  strided slice, took 55 ms at 1920 x 1080; OpenCV's ``cvtColor`` gives the same bytes in
+  2 ms, and the perception images use it too. The rest, 0.73 s of CPU, is TinyRenderer
+  shading what covers the frame (the tray, phantom and paper fill it). Issue 18's 2.7 s
+  against 0.76 s was wall time against CPU time: on this machine under load, a frame's wall
+  time is 2.4-3x its CPU time.
+* TinyRenderer at 640 x 360 costs a tenth of 1920 x 1080: pixels, not triangles.
 * The EGL plugin draws into a 1024 x 768 surface and stretches anything larger from it, so a
-  1920 x 1080 frame is drawn as four 960 x 540 tiles. Each draw also renders the plugin's
-  4096 x 4096 shadow map, a fixed cost of about 20 ms CPU a draw on this machine.
+  1920 x 1080 frame is four 960 x 540 tiles. Each draw also renders the plugin's 4096 x 4096
+  shadow map (it cannot be turned off): about 17 ms of CPU a draw, even at 16 x 16 pixels,
+  so 70 of the 160 ms of a 1920 x 1080 frame. Fewer llvmpipe threads (LP_NUM_THREADS 0-2)
+  change nothing.
 """
 
 from __future__ import annotations
