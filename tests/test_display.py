@@ -191,6 +191,21 @@ def test_egl_frame_shows_the_scene_tinyrenderer_shows():
         env.close()
 
 
+@needs_egl
+def test_egl_frames_repeat_bit_for_bit_for_the_same_seed_and_actions():
+    frames = []
+    for _ in range(2):
+        env = gym.make("dvrk_gym/Debridement-v0", camera_resolution=SMALL, render_mode="rgb_array")
+        try:
+            env.reset(seed=5)
+            env.step(np.array([0.03, 0.04, -0.158, 0.0], dtype=np.float32))
+            frames += [env.render(), env.render()]
+            assert env.unwrapped._display.renderer == "egl"
+        finally:
+            env.close()
+    assert all(np.array_equal(frames[0], frame) for frame in frames[1:])
+
+
 # ---------------------------------------------------------------------------------------------- perception
 @needs_egl
 def test_perception_is_bit_identical_with_an_egl_display_at_work():
