@@ -27,12 +27,13 @@ logger = logging.getLogger(__name__)
 DISPLAY_RENDERERS = ("auto", "egl", "tiny")
 """What a display may be asked to draw with (see the module doc)."""
 EGL_NEAR_M = 0.03
+"""The EGL renderer's near clipping plane, metres. At the camera's own (0.01 m) the printed
+circles, 0.05 mm above the paper, showed through it in stripes (measured): the plugin asks
+for a depth buffer of 8 bits or more, and 16 bits at 0.01 m resolve only 0.05 mm at the
+paper; at 0.03 m, 0.02 mm. Nothing in view comes nearer than about 0.06 m (the shaft leaves
+the frame before it reaches the remote centre, 0.11 m from the camera)."""
 EGL_FAR_M = 0.5
-"""The EGL renderer's clipping planes, metres. Its depth buffer may have 16 bits (it asks for
-8 or more), which at the camera's own planes (0.01 m, 1 m) resolves 0.05 mm at the paper:
-the printed circles, 0.05 mm above it, then flicker through it in stripes. These planes
-resolve 0.02 mm there. Nothing in view comes nearer than about 0.06 m (the shaft leaves the
-frame before it reaches the remote centre, 0.11 m from the camera) or lies beyond 0.3 m."""
+"""The EGL renderer's far clipping plane, metres (nothing in view lies beyond 0.3 m)."""
 
 
 class EndoscopeDisplay:
