@@ -21,6 +21,7 @@ import numpy as np
 from gymnasium.error import ResetNeeded
 
 from dvrk_gym.envs.configs import EnvConfig
+from dvrk_gym.sim.endoscope.display import EndoscopeDisplay
 from dvrk_gym.sim.robot.kinematics import JOINT_NAMES
 from dvrk_gym.sim.world import DvrkWorld, WorldConfig
 
@@ -157,6 +158,7 @@ class DvrkEnv(gym.Env, Generic[ConfigT]):
         cable.set_state(np.full(cable.get_state().shape, np.nan))
         self._needs_reset = True
         self._seeded_reset = False  # whether the reset under way was given a seed
+        self._display: EndoscopeDisplay | None = None  # made at the first image rendered
 
     # ------------------------------------------------------------------ gym API
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
@@ -182,10 +184,19 @@ class DvrkEnv(gym.Env, Generic[ConfigT]):
 
     def render(self) -> np.ndarray | list[Any] | None:
         if self.render_mode == "rgb_array":
-            return self.world.render("left")
+            return self._render_frame()
         return None  # "human": the PyBullet GUI shows the world live; None: nothing to draw
 
+    def _render_frame(self) -> np.ndarray:
+        """The left endoscope image to show, (h, w, 3) uint8 RGB at ``render_resolution``."""
+        if self._display is None:
+            self._display = EndoscopeDisplay(self.world.camera, self.config.render_resolution, self.config.renderer)
+        return self._display.image(self.world.physics, "left")
+
     def close(self) -> None:
+        display = getattr(self, "_display", None)  # __init__ may have failed before it was set
+        if display is not None:
+            display.close()
         if hasattr(self, "world"):
             self.world.close()
         super().close()

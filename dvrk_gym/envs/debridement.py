@@ -139,6 +139,8 @@ class DebridementEnv(DvrkEnv[DebridementConfig]):
         delta_yaw_rad: float = 0.0,
         camera_resolution: tuple[int, int] = (1920, 1080),
         pixel_noise_px: float = 0.0,
+        render_resolution: tuple[int, int] | None = None,
+        renderer: str = "auto",
     ) -> None:
         """Debridement-v0, set up by the fields of :class:`DebridementConfig` (listed below)."""
         super().__init__(DebridementConfig(**config_arguments(locals())), render_mode=render_mode)
@@ -237,7 +239,7 @@ class DebridementEnv(DvrkEnv[DebridementConfig]):
 
     def _capture_frame(self) -> None:
         if self.render_mode == "rgb_array_list":
-            self._frames.append(self.world.render("left"))
+            self._frames.append(self._render_frame())
 
     # ------------------------------------------------------------------ a pick
     def _pick(self, action: np.ndarray) -> tuple[float, dict[str, Any]]:

@@ -130,6 +130,8 @@ class CalibrationExplorationEnv(DvrkEnv[ExplorationConfig]):
         max_steps: int = paper.PHASE1_POSES_PER_TRAJECTORY,
         camera_resolution: tuple[int, int] = (1920, 1080),
         pixel_noise_px: float = 0.0,
+        render_resolution: tuple[int, int] | None = None,
+        renderer: str = "auto",
     ) -> None:
         """CalibrationExploration-v0, set up by the fields of :class:`ExplorationConfig` (listed below)."""
         super().__init__(ExplorationConfig(**config_arguments(locals())), render_mode=render_mode)

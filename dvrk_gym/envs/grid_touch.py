@@ -134,6 +134,8 @@ class GridTouchEnv(DvrkEnv[GridTouchConfig]):
         correction_noise_m: float = 0.0002,
         camera_resolution: tuple[int, int] = (1920, 1080),
         pixel_noise_px: float = 0.0,
+        render_resolution: tuple[int, int] | None = None,
+        renderer: str = "auto",
     ) -> None:
         """GridTouch-v0, set up by the fields of :class:`GridTouchConfig` (listed below)."""
         super().__init__(GridTouchConfig(**config_arguments(locals())), render_mode=render_mode)

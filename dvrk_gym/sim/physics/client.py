@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import contextlib
 import functools
+import itertools
 import logging
 import os
 import sys
@@ -18,10 +19,13 @@ from typing import Any
 import pybullet
 from pybullet_utils import bullet_client
 
+from dvrk_gym.sim.physics.meshes import Mesh
+
 logger = logging.getLogger(__name__)
 
 GRAVITY_M_S2 = 9.81
 DEFAULT_TIME_STEP_S = 1.0 / 240.0
+_LAYOUTS = itertools.count()  # layout versions, unique across every Physics of the process
 
 
 class _BoundClient(bullet_client.BulletClient):
@@ -50,20 +54,32 @@ class PhysicsError(RuntimeError):
 
 
 @contextlib.contextmanager
-def _quiet_stdout() -> Iterator[None]:
-    """Silence what C code prints to file descriptor 1 (a no-op where it cannot be redirected)."""
+def quiet_output(stderr: bool = False) -> Iterator[None]:
+    """Silence what C code prints to file descriptor 1 (and 2 with ``stderr``); a no-op for a
+    stream that cannot be redirected."""
+    with contextlib.ExitStack() as stack:
+        for fd in (1, 2) if stderr else (1,):
+            stack.enter_context(_quiet_fd(fd))
+        yield
+
+
+@contextlib.contextmanager
+def _quiet_fd(fd: int) -> Iterator[None]:
     try:
-        sys.stdout.flush()
-        saved = os.dup(1)
+        (sys.stdout if fd == 1 else sys.stderr).flush()
+        saved = os.dup(fd)
     except (OSError, ValueError):
         yield
         return
     try:
-        with open(os.devnull, "w") as devnull:
-            os.dup2(devnull.fileno(), 1)
-            yield
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        try:
+            os.dup2(devnull, fd)
+        finally:
+            os.close(devnull)
+        yield
     finally:
-        os.dup2(saved, 1)
+        os.dup2(saved, fd)
         os.close(saved)
 
 
@@ -87,10 +103,15 @@ class Physics:
             )
             gui = False
         mode = pybullet.GUI if gui else pybullet.DIRECT
-        with _quiet_stdout():  # the server prints "argv[0]=" on every connection
+        with quiet_output():  # the server prints "argv[0]=" on every connection
             self._client: bullet_client.BulletClient | None = _BoundClient(connection_mode=mode)
         self.time_step_s = float(time_step_s)
         self._bodies: dict[str, int] = {}
+        self._meshes: dict[str, tuple[Mesh, ...]] = {}
+        self._pending_meshes: list[Mesh] = []
+        self.layout_version = next(_LAYOUTS)
+        """Changes whenever a body is added or removed, or the world is emptied (a display
+        mirror rebuilds its copy then); no two layouts of any two Physics share one."""
         self._configure()
 
     def _configure(self) -> None:
@@ -111,11 +132,38 @@ class Physics:
         """Whether the server is still running."""
         return self._client is not None
 
+    def mesh_visual(
+        self,
+        mesh: Mesh,
+        rgba: tuple[float, float, float, float],
+        position: tuple[float, float, float] = (0.0, 0.0, 0.0),
+        orientation: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 1.0),
+    ) -> int:
+        """Create ``mesh`` as a visual shape (frame ``position`` m, ``orientation`` quaternion
+        (x, y, z, w) in its link's frame) and return its id.
+
+        The mesh is remembered for the next body :meth:`add` registers, which is the one it
+        belongs to: create a body's meshes right before adding it. PyBullet cannot give a
+        mesh built from vertices back, and a display mirror needs it (:meth:`meshes`).
+        """
+        visual = mesh.visual_shape(self.client, rgba, position, orientation)
+        self._pending_meshes.append(mesh)
+        return visual
+
+    def meshes(self, name: str) -> tuple[Mesh, ...]:
+        """The meshes built in code (:meth:`mesh_visual`) of the body ``name``, in creation order."""
+        self.body(name)
+        return self._meshes[name]
+
     def add(self, name: str, body_id: int) -> int:
-        """Register a body under a unique name and return its id."""
+        """Register a body under a unique name and return its id; the meshes made since the
+        last body was added (:meth:`mesh_visual`) are this body's."""
         if name in self._bodies:
             raise PhysicsError(f"a body named {name!r} already exists")
         self._bodies[name] = body_id
+        self._meshes[name] = tuple(self._pending_meshes)
+        self._pending_meshes.clear()
+        self.layout_version = next(_LAYOUTS)
         return body_id
 
     def body(self, name: str) -> int:
@@ -134,11 +182,13 @@ class Physics:
         """Remove a body from the world."""
         self.client.removeBody(self.body(name))
         del self._bodies[name]
+        del self._meshes[name]
+        self.layout_version = next(_LAYOUTS)
 
     def reset(self) -> None:
         """Remove every body and restore the server's settings (a fresh, empty world)."""
         self.client.resetSimulation()
-        self._bodies.clear()
+        self._forget_bodies()
         self._configure()
 
     def step(self, n: int = 1) -> None:
@@ -154,7 +204,13 @@ class Physics:
             except pybullet.error:  # already gone (e.g. the GUI window was closed)
                 logger.debug("physics server was already disconnected")
             self._client = None
-            self._bodies.clear()
+            self._forget_bodies()
+
+    def _forget_bodies(self) -> None:
+        self._bodies.clear()
+        self._meshes.clear()
+        self._pending_meshes.clear()
+        self.layout_version = next(_LAYOUTS)
 
     def __del__(self) -> None:
         if hasattr(self, "_client"):  # __init__ may have failed before the server existed

@@ -71,7 +71,11 @@ class Mesh:
     def visual_shape(
         self, client, rgba: tuple[float, float, float, float], position=(0.0, 0.0, 0.0), orientation=(0.0, 0.0, 0.0, 1.0)
     ) -> int:
-        """Create this mesh as a PyBullet visual shape and return its id (its lists are :data:`PYBULLET_LISTS`')."""
+        """Create this mesh as a PyBullet visual shape and return its id (its lists are :data:`PYBULLET_LISTS`').
+
+        A body's meshes go through :meth:`dvrk_gym.sim.physics.client.Physics.mesh_visual`,
+        which calls this and remembers the mesh, so that a display mirror can draw it too.
+        """
         with PYBULLET_LISTS.filled() as fill:
             return client.createVisualShape(
                 client.GEOM_MESH,
@@ -82,6 +86,13 @@ class Mesh:
                 visualFramePosition=list(position),
                 visualFrameOrientation=list(orientation),
             )
+
+    def obj_text(self) -> str:
+        """This mesh as the text of a Wavefront OBJ file (vertices and normals in metres, 1-based faces)."""
+        lines = [f"v {x:.9g} {y:.9g} {z:.9g}" for x, y, z in self.vertices.tolist()]
+        lines += [f"vn {x:.9g} {y:.9g} {z:.9g}" for x, y, z in self.normals.tolist()]
+        lines += [f"f {a}//{a} {b}//{b} {c}//{c}" for a, b, c in (self.indices.reshape(-1, 3) + 1).tolist()]
+        return "\n".join(lines) + "\n"
 
 
 def convex_hull_shape(client: Any, vertices: np.ndarray) -> int:
@@ -134,3 +145,26 @@ def cylinder(radius_m: float, length_m: float, segments: int = DEFAULT_SEGMENTS)
         ]
     )
     return Mesh(vertices, np.vstack([side, top_faces, bottom_faces]), normals)
+
+
+def box(size_m: tuple[float, float, float] = (1.0, 1.0, 1.0)) -> Mesh:
+    """A box of full sizes ``size_m`` (x, y, z), centred at the origin (metres): four
+    vertices and two triangles per face, each face with its own normal."""
+    half = np.asarray(size_m, dtype=float) / 2
+    vertices, normals, faces = [], [], []
+    for axis in range(3):
+        u, v = (axis + 1) % 3, (axis + 2) % 3
+        for sign in (-1.0, 1.0):
+            normal = np.zeros(3)
+            normal[axis] = sign
+            corners = []
+            for a, b in ((-1, -1), (1, -1), (1, 1), (-1, 1)):
+                corner = normal.copy()
+                corner[u], corner[v] = a, b
+                corners.append(corner * half)
+            base = len(vertices)
+            vertices += corners
+            normals += [normal] * 4
+            quad = [(base, base + 1, base + 2), (base, base + 2, base + 3)]
+            faces += quad if sign > 0 else [(i, k, j) for i, j, k in quad]  # counter-clockwise seen from outside
+    return Mesh(np.array(vertices), np.array(faces), np.array(normals))

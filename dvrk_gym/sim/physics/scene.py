@@ -152,7 +152,7 @@ def _walls_visual(physics: Physics, size, rgba) -> int:
 def _printed_grid(physics: Physics) -> int:
     """The 35 circles as one visual-only mesh (printing adds no collision geometry)."""
     centers = grid_circle_centers() + [0.0, 0.0, CIRCLE_PRINT_HEIGHT_M]
-    visual = meshes.discs(centers, CIRCLE_RADIUS_M).visual_shape(physics.client, BLACK)
+    visual = physics.mesh_visual(meshes.discs(centers, CIRCLE_RADIUS_M), BLACK)
     return physics.add("grid", physics.client.createMultiBody(0.0, -1, visual))
 
 

@@ -221,7 +221,7 @@ class PSMBody:
 
         if len(shapes) == 1 and shapes[0].kind == "cylinder":  # pybullet draws cylinders too wide
             radius, length = shapes[0].size
-            vis = meshes.cylinder(radius, length).visual_shape(c, shapes[0].rgba, shapes[0].position, shapes[0].orientation)
+            vis = self.physics.mesh_visual(meshes.cylinder(radius, length), shapes[0].rgba, shapes[0].position, shapes[0].orientation)
         else:
             vis = c.createVisualShapeArray(
                 **kwargs(shapes),

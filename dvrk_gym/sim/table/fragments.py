@@ -150,7 +150,7 @@ class Fragment:
         unit, _ = _unit_sphere(_HULL_RINGS, _HULL_SEGMENTS)
         hull = unit * (self.semi_axes_m - COLLISION_MARGIN_M)  # the margin pads it back out
         collision = meshes.convex_hull_shape(c, hull)
-        visual = ellipsoid_mesh(self.semi_axes_m).visual_shape(c, self.kind.color_rgba)
+        visual = self.physics.mesh_visual(ellipsoid_mesh(self.semi_axes_m), self.kind.color_rgba)
         z = WORKSPACE_CENTER_M[2] + self.semi_axes_m[2] + _SPAWN_CLEARANCE_M
         orientation = Rotation.from_euler("z", yaw).as_quat()
         body = c.createMultiBody(

@@ -1,0 +1,311 @@
+"""A display copy of a physics world, drawn by PyBullet's EGL renderer (OpenGL without a window).
+
+PyBullet's software renderer (TinyRenderer) takes 0.75 s of CPU for a 1920 x 1080 frame of
+the workspace; its EGL plugin (Mesa's llvmpipe on a machine without a GPU) 0.17 s, in four
+tiles (``benchmarks/bench_render.py``). The plugin cannot simply be loaded into a world's
+own client:
+
+* once loaded into a client it draws every ``getCameraImage`` of that client, whatever
+  ``renderer=`` says, so the perception images (TinyRenderer's, which the detections and
+  hence every calibration number rest on) would change;
+* it draws only the bodies created after it was loaded;
+* it does not draw visual shapes built from vertices in code (the printed circles, the
+  fragments, the tool's shaft): it reads meshes from files only.
+
+So :class:`EglMirror` is a second client, with the plugin loaded before any body, holding
+a copy of each visual shape (meshes built in code, and boxes, written as OBJ files to a
+temporary folder while the copy is built), moved to the world's poses before each frame.
+The world's own client is never touched, so its images stay bit for bit what they were.
+
+When the plugin cannot be loaded it calls ``exit()`` inside the process (without libEGL,
+for one), so :func:`egl_usable` first tries it in a child process.
+"""
+
+from __future__ import annotations
+
+import functools
+import importlib.util
+import logging
+import subprocess
+import sys
+import tempfile
+import weakref
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pybullet
+from pybullet_utils import bullet_client
+
+from dvrk_gym.sim.physics.client import Physics, quiet_output
+from dvrk_gym.sim.physics.meshes import Mesh, box
+from dvrk_gym.utils.atomic import atomic_write_text
+
+logger = logging.getLogger(__name__)
+
+EGL_PLUGIN_MODULE = "eglRenderer"
+"""The module pybullet's wheel ships its EGL renderer plugin as."""
+EGL_MAX_IMAGE_PX = (1024, 768)
+"""The largest image (width, height) the EGL plugin draws as asked: it draws into a surface of
+this size, and stretches anything larger from it. Draw larger images in tiles."""
+TINY_LIGHT_DIRECTION = (-50.0, 30.0, 100.0)
+"""Where TinyRenderer's light comes from (world frame, z up; PyBullet's default)."""
+LIGHT_DISTANCE_M = 1.0e4
+"""How far away the EGL renderer's light is put (its shader lights by direction). The plugin
+draws a shadow map from the light every frame, 4096 texels over 20 m, 1 m to 300 m in
+front of it: a millimetre scene would shadow itself in 5 mm blotches. A light this far
+away leaves the whole scene beyond the shadow map's depth range: all of it is lit."""
+EGL_LIGHT_POSITION = [LIGHT_DISTANCE_M * v / float(np.linalg.norm(TINY_LIGHT_DIRECTION)) for v in TINY_LIGHT_DIRECTION]
+PROBE_TIMEOUT_S = 60.0
+"""How long the child process that tries the EGL plugin may take, seconds."""
+_PROBE_SENTINEL = "dvrk_gym-egl-probe-ok"
+# Loads the plugin, draws a red box filling a 32 x 24 frame, and says so if the centre is red.
+_PROBE_CODE = f"""
+import sys, numpy, pybullet
+from pybullet_utils import bullet_client
+c = bullet_client.BulletClient(connection_mode=pybullet.DIRECT)
+if c.loadPlugin(sys.argv[1], "_eglRendererPlugin") < 0:
+    sys.exit(3)
+box = c.createVisualShape(pybullet.GEOM_BOX, halfExtents=[1, 1, 0.1], rgbaColor=[1, 0, 0, 1])
+c.createMultiBody(0, baseVisualShapeIndex=box)
+view = pybullet.computeViewMatrix([0, 0, 2], [0, 0, 0], [0, 1, 0])
+proj = pybullet.computeProjectionMatrixFOV(40, 32 / 24, 0.1, 10)
+rgba = c.getCameraImage(32, 24, view, proj, renderer=pybullet.ER_BULLET_HARDWARE_OPENGL)[2]
+r, g, b = (int(v) for v in numpy.reshape(numpy.asarray(rgba, dtype=numpy.uint8), (24, 32, 4))[12, 16, :3])
+c.disconnect()
+print("{_PROBE_SENTINEL}" if r > 200 and g < 60 and b < 60 else f"centre pixel {{(r, g, b)}}", flush=True)
+"""
+
+
+class RendererUnavailable(RuntimeError):
+    """PyBullet's EGL renderer cannot run here (no plugin, no libEGL, no EGL device)."""
+
+
+def egl_plugin_path() -> str | None:
+    """Where pybullet's EGL renderer plugin is, or None if this pybullet has none."""
+    spec = importlib.util.find_spec(EGL_PLUGIN_MODULE)
+    return None if spec is None else spec.origin
+
+
+@functools.lru_cache(maxsize=8)
+def egl_usable(plugin_path: str) -> str | None:
+    """Try the EGL plugin at ``plugin_path`` in a child process (once per path and process).
+
+    Returns:
+        None if it loaded and drew a frame; otherwise why not, in one line.
+    """
+    try:
+        done = subprocess.run(
+            [sys.executable, "-c", _PROBE_CODE, plugin_path],
+            capture_output=True,
+            text=True,
+            timeout=PROBE_TIMEOUT_S,
+            check=False,
+        )
+    except subprocess.TimeoutExpired:
+        return f"trying it took more than {PROBE_TIMEOUT_S:g} s"
+    if _PROBE_SENTINEL in done.stdout:
+        return None
+    said = [line.strip() for line in (done.stderr + done.stdout).splitlines() if line.strip() and "build time" not in line]
+    return f"trying it exited with status {done.returncode}" + (f" ({said[-1]})" if said else "")
+
+
+@dataclass(frozen=True)
+class _Copy:
+    """One mirrored visual shape: the world's body and link index it is on, and the mirror's body drawing it."""
+
+    body: int
+    link: int
+    mirror_body: int
+
+
+class EglMirror:
+    """A copy of a world's visual shapes in a client of its own, drawn by the EGL renderer.
+
+    Each copy sits at its world pose; the light comes from TinyRenderer's direction
+    (:data:`LIGHT_DISTANCE_M`), so the two renderers light the scene alike.
+
+    Args:
+        plugin_path: the EGL plugin's file (default: pybullet's own, :func:`egl_plugin_path`).
+
+    Raises:
+        RendererUnavailable: the plugin is missing or fails to start (one line says why).
+    """
+
+    def __init__(self, plugin_path: str | None = None) -> None:
+        path = egl_plugin_path() if plugin_path is None else plugin_path
+        if path is None:
+            raise RendererUnavailable(f"this pybullet has no EGL renderer plugin (module {EGL_PLUGIN_MODULE!r} not found)")
+        failure = egl_usable(path)
+        if failure is not None:
+            raise RendererUnavailable(f"PyBullet's EGL renderer ({path}) does not run here: {failure}")
+        with quiet_output(stderr=True):  # the server and the plugin print their start-up to the C streams
+            self._client: bullet_client.BulletClient | None = bullet_client.BulletClient(connection_mode=pybullet.DIRECT)
+            self._plugin = self._client.loadPlugin(path, "_eglRendererPlugin")
+        if self._plugin < 0:
+            self._client.disconnect()
+            self._client = None
+            raise RendererUnavailable(f"PyBullet could not load its EGL renderer from {path}")
+        # A loaded OBJ file is cached for the life of the process unless this is off, and
+        # fragments bring new meshes at every reset.
+        self._client.setPhysicsEngineParameter(enableFileCaching=0)
+        self._folder: tempfile.TemporaryDirectory[str] | None = tempfile.TemporaryDirectory(prefix="dvrk_gym_display_")
+        # Frees the client and the folder when closed, collected, or at exit (while the streams still work).
+        self._release = weakref.finalize(self, _release, self._client, self._plugin, self._folder)
+        self._layout: int | None = None  # the layout_version of the Physics copied
+        self._copies: list[_Copy] = []
+        self._written: list[str] = []  # the OBJ files written for the rebuild under way
+        self._names: dict[int, str] = {}  # their names, one string object each
+
+    @property
+    def client(self) -> bullet_client.BulletClient:
+        """The mirror's own client; raises RendererUnavailable once closed."""
+        if self._client is None:
+            raise RendererUnavailable("this EGL mirror has been closed")
+        return self._client
+
+    @property
+    def copies(self) -> tuple[tuple[int, int, int], ...]:
+        """(world body id, link index (-1: base), mirror body id) of every mirrored visual shape."""
+        return tuple((c.body, c.link, c.mirror_body) for c in self._copies)
+
+    def sync(self, physics: Physics) -> None:
+        """Make the copy match ``physics``: rebuilt if bodies came or went, every shape moved to its link's pose."""
+        if self._layout != physics.layout_version:
+            self._rebuild(physics)
+        source, mirror = physics.client, self.client
+        for copy in self._copies:
+            position, orientation = link_frame(source, copy.body, copy.link)
+            mirror.resetBasePositionAndOrientation(copy.mirror_body, position, orientation)
+
+    def image(self, width: int, height: int, view_matrix: list[float], projection_matrix: list[float]) -> np.ndarray:
+        """Draw the copy as it was last synced: (height, width, 3) uint8 RGB, row 0 at the top.
+
+        Args:
+            width, height: image size, pixels, at most :data:`EGL_MAX_IMAGE_PX`.
+            view_matrix, projection_matrix: OpenGL matrices, column-major lists of 16 floats.
+        """
+        if not (0 < width <= EGL_MAX_IMAGE_PX[0] and 0 < height <= EGL_MAX_IMAGE_PX[1]):
+            raise ValueError(
+                f"the EGL renderer draws images of 1x1 to {EGL_MAX_IMAGE_PX[0]}x{EGL_MAX_IMAGE_PX[1]} pixels, got {width}x{height}; "
+                "draw a larger one in tiles"
+            )
+        with quiet_output():  # the plugin prints the GL vendor on some frames
+            result = self.client.getCameraImage(
+                width,
+                height,
+                viewMatrix=view_matrix,
+                projectionMatrix=projection_matrix,
+                renderer=pybullet.ER_BULLET_HARDWARE_OPENGL,
+                shadow=0,
+                lightDirection=EGL_LIGHT_POSITION,
+                flags=pybullet.ER_NO_SEGMENTATION_MASK,
+            )
+        # (OpenCV drops the alpha channel some 25x faster than a strided numpy copy)
+        return cv2.cvtColor(np.asarray(result[2], dtype=np.uint8).reshape(height, width, 4), cv2.COLOR_RGBA2RGB)
+
+    def close(self) -> None:
+        """Unload the plugin, disconnect the client and delete the mesh files; safe to call more than once."""
+        self._release()
+        self._client = None
+        self._folder = None
+        self._copies = []
+
+    # ------------------------------------------------------------------ building the copy
+    def _rebuild(self, physics: Physics) -> None:
+        mirror = self.client
+        with quiet_output():
+            mirror.resetSimulation()
+        self._copies = []
+        for name in physics.body_names:
+            body = physics.body(name)
+            by_link: dict[int, list[tuple]] = {}
+            for entry in physics.client.getVisualShapeData(body):
+                by_link.setdefault(entry[1], []).append(entry)
+            meshes = list(physics.meshes(name))
+            built_in_code = sum(1 for entries in by_link.values() for e in entries if _from_vertices(e))
+            if built_in_code != len(meshes):
+                raise RendererUnavailable(
+                    f"body {name!r} has {built_in_code} visual meshes built from vertices but {len(meshes)} were made "
+                    "through Physics.mesh_visual; make a body's meshes with it, right before Physics.add"
+                )
+            for link in sorted(by_link):
+                for entry in by_link[link]:  # one body per shape: shape arrays leak their file names
+                    visual = self._visual_shape(entry, meshes)
+                    self._copies.append(_Copy(body, link, mirror.createMultiBody(0.0, -1, visual)))
+        self._layout = physics.layout_version
+        for path in self._written:  # read by now
+            Path(path).unlink()
+        self._written = []
+
+    def _visual_shape(self, entry: tuple, meshes: list[Mesh]) -> int:
+        """The mirror's copy of one ``getVisualShapeData`` entry (``meshes``: the body's
+        code-built meshes still to place, taken in order)."""
+        kind, dims, file_name = entry[2], list(entry[3]), entry[4]
+        if _from_vertices(entry):
+            file_name = self._obj_file(meshes.pop(0))
+        elif kind == pybullet.GEOM_BOX:  # the plugin lights the two triangles of its own box faces apart
+            kind, file_name, dims = pybullet.GEOM_MESH, self._obj_file(box(tuple(dims))), [1.0, 1.0, 1.0]
+        elif kind not in (pybullet.GEOM_SPHERE, pybullet.GEOM_CYLINDER, pybullet.GEOM_CAPSULE, pybullet.GEOM_MESH):
+            raise RendererUnavailable(f"the EGL mirror cannot copy visual shapes of PyBullet geometry type {kind}")
+        round_ = kind in (pybullet.GEOM_CYLINDER, pybullet.GEOM_CAPSULE)
+        with quiet_output():
+            return self.client.createVisualShape(
+                kind,
+                radius=dims[1] if round_ else dims[0],
+                length=dims[0] if round_ else 0.0,
+                fileName=file_name if isinstance(file_name, str) else file_name.decode(),
+                meshScale=dims if kind == pybullet.GEOM_MESH else [1.0, 1.0, 1.0],
+                rgbaColor=list(entry[7]),
+                visualFramePosition=list(entry[5]),
+                visualFrameOrientation=list(entry[6]),
+            )
+
+    def _folder_path(self) -> str:
+        if self._folder is None:
+            raise RendererUnavailable("this EGL mirror has been closed")
+        return self._folder.name
+
+    def _obj_file(self, mesh: Mesh) -> str:
+        """The path of a new OBJ file holding ``mesh``, for this rebuild.
+
+        Files are numbered in the order of the rebuild, so each rebuild uses the same names:
+        pybullet keeps a reference to every file name it is given, and the same string
+        objects cost nothing more. The loader's cache is off, so a file is read when its
+        shape is made and can then be replaced.
+        """
+        number = len(self._written)
+        path = self._names.setdefault(number, str(Path(self._folder_path()) / f"mesh{number}.obj"))
+        atomic_write_text(path, mesh.obj_text())
+        self._written.append(path)
+        return path
+
+
+def _release(client: bullet_client.BulletClient, plugin: int, folder: tempfile.TemporaryDirectory[str]) -> None:
+    """Unload the EGL plugin, disconnect ``client`` and delete ``folder``."""
+    with quiet_output():  # the plugin says goodbye on the C streams
+        try:
+            client.unloadPlugin(plugin)
+            client.disconnect()
+        except pybullet.error:
+            logger.debug("the EGL mirror's server was already disconnected")
+    folder.cleanup()
+
+
+def _from_vertices(entry: tuple) -> bool:
+    """Whether a ``getVisualShapeData`` entry is a mesh built from vertices (no file name)."""
+    return entry[2] == pybullet.GEOM_MESH and not entry[4]
+
+
+def link_frame(client: bullet_client.BulletClient, body: int, link: int) -> tuple[tuple[float, ...], tuple[float, ...]]:
+    """The world pose of a link's frame (the frame its visual shapes are placed in): position
+    (m) and quaternion (x, y, z, w). Link -1 is the base, whose frame is its centre of mass
+    less the local inertial offset."""
+    if link >= 0:
+        state = client.getLinkState(body, link, computeForwardKinematics=True)
+        return state[4], state[5]
+    com_position, com_orientation = client.getBasePositionAndOrientation(body)
+    inertial_position, inertial_orientation = client.getDynamicsInfo(body, -1)[3:5]
+    to_frame = client.invertTransform(inertial_position, inertial_orientation)
+    return client.multiplyTransforms(com_position, com_orientation, *to_frame)
