@@ -177,6 +177,7 @@ class StereoCamera:
         intrinsics: CameraIntrinsics = PAPER_INTRINSICS,
         baseline_m: float = PAPER_BASELINE_M,
         pose: np.ndarray | None = None,
+        *,
         calibrated_baseline_m: float | None = None,
         near_m: float = 0.01,
         far_m: float = 1.0,

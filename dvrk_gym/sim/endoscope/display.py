@@ -59,9 +59,23 @@ class EndoscopeDisplay:
             raise ValueError(f"renderer must be one of {list(DISPLAY_RENDERERS)}, got {renderer!r}")
         k = camera.intrinsics
         width, height = (k.width, k.height) if resolution is None else resolution
-        self.camera = StereoCamera(k.scaled(width, height), camera.baseline_m, camera.pose, camera.near_m, camera.far_m)
+        self.camera = StereoCamera(
+            intrinsics=k.scaled(width, height),
+            baseline_m=camera.baseline_m,
+            pose=camera.pose,
+            calibrated_baseline_m=camera.calibrated_baseline_m,
+            near_m=camera.near_m,
+            far_m=camera.far_m,
+        )
         """The camera images are drawn for (the endoscope's, at this display's resolution)."""
-        self._egl_camera = StereoCamera(self.camera.intrinsics, camera.baseline_m, camera.pose, EGL_NEAR_M, EGL_FAR_M)
+        self._egl_camera = StereoCamera(
+            intrinsics=self.camera.intrinsics,
+            baseline_m=camera.baseline_m,
+            pose=camera.pose,
+            calibrated_baseline_m=camera.calibrated_baseline_m,
+            near_m=EGL_NEAR_M,
+            far_m=EGL_FAR_M,
+        )
         self.requested = renderer
         self._plugin_path = plugin_path
         self._mirror: EglMirror | None = None
