@@ -12,7 +12,7 @@ from workers_for_tests import die_once, record
 from dvrk_gym.cli.main import main
 from dvrk_gym.parallel.executors import InlineExecutor, LocalExecutor
 from dvrk_gym.parallel.task_graph import Task, TaskError, run_tasks
-from dvrk_gym.reproduce import QUICK, ReproduceConfig, run_reproduce
+from dvrk_gym.reproduce import TINY, ReproduceConfig, run_reproduce
 from dvrk_gym.reproduce.run import seeded_results
 
 SAME_BYTES = ("calibration/*.npz", "calibration/calibration_table.json", "debridement/*.json")
@@ -75,18 +75,19 @@ def _same_bytes(first: Path, second: Path) -> list[str]:
 
 
 @pytest.mark.slow
-def test_quick_reproduce_on_a_dask_cluster_gives_what_local_processes_give(tmp_path):
-    """The whole quick run twice (about 3 min on 2 quiet cores): 2 local processes, then a
-    LocalCluster of 2 single-thread workers reached at its address as --scheduler would."""
+def test_reproduce_on_a_dask_cluster_gives_what_local_processes_give(tmp_path):
+    """Every stage of a reproduction (the tiny profile: all of the quick run's tasks, on
+    budgets that keep CI short) twice: 2 local processes, then a LocalCluster of 2
+    single-thread workers reached at its address as --scheduler would."""
     distributed = pytest.importorskip("distributed")
     from dvrk_gym.parallel.dask_executor import DaskExecutor
 
-    local = run_reproduce(ReproduceConfig(out=tmp_path / "local", profile=QUICK, workers=2, progress=False))
+    local = run_reproduce(ReproduceConfig(out=tmp_path / "local", profile=TINY, workers=2, progress=False))
     with (
         distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster,
         DaskExecutor(cluster.scheduler_address) as dask,
     ):
-        on_dask = run_reproduce(ReproduceConfig(out=tmp_path / "dask", profile=QUICK, progress=False), dask)
+        on_dask = run_reproduce(ReproduceConfig(out=tmp_path / "dask", profile=TINY, progress=False), dask)
     assert on_dask.data["settings"]["executor"].startswith(f"Dask scheduler {cluster.scheduler_address} (2 workers, 2 threads)")
     assert seeded_results(json.loads(on_dask.results.read_text())) == seeded_results(json.loads(local.results.read_text()))
     assert _same_bytes(tmp_path / "local", tmp_path / "dask") == []
