@@ -34,6 +34,7 @@ LAYER_RANKS = {
     "dvrk_gym.sim.robot": 2,
     "dvrk_gym.sim.endoscope": 3,
     "dvrk_gym.sim.world": 4,
+    "dvrk_gym.sim.world_config": 4,
     "dvrk_gym.sim.table": 5,
     "dvrk_gym.envs": 6,
     "dvrk_gym.demo": 6,

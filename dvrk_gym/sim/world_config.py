@@ -1,0 +1,79 @@
+"""How to build a world (:class:`WorldConfig`) and what one commanded move did (:class:`MoveResult`).
+
+Both are re-exported by :mod:`dvrk_gym.sim.world`, which builds and runs the world.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from dvrk_gym.sim.endoscope.camera import PAPER_INTRINSICS
+from dvrk_gym.sim.endoscope.noise import IDENTIFIED_MARKER_NOISE, MAX_PIXEL_NOISE_PX, DetectionNoise
+from dvrk_gym.sim.robot.bias import BiasConfig
+from dvrk_gym.sim.robot.motion_limits import MotionLimits
+from dvrk_gym.utils.checks import check_bool, check_float_fields, check_int_fields, check_resolution
+
+__all__ = ["MoveResult", "WorldConfig"]
+
+
+@dataclass(frozen=True)
+class WorldConfig:
+    """How to build a world.
+
+    Attributes:
+        camera_resolution: (width, height) of each endoscope image in pixels; the paper's
+            intrinsics are scaled to it.
+        bias: the cable bias, a preset name ("none", "paper", "severe") or a BiasConfig.
+        bias_seed: which instrument to draw from the bias distribution.
+        gui: open the PyBullet GUI (needs a display).
+        motion: the tool's speed and acceleration limits.
+        camera_pose: T_base_leftcam (4x4, metres); None for the paper's set-up. Hidden
+            from agents: they only see pixels.
+        pixel_noise_px: standard deviation of the noise added to every detected pixel
+            coordinate, at 1920 x 1080 (scaled with the resolution), on top of
+            ``marker_noise`` for the red marker.
+        marker_noise: the red-tape detector's own error in each camera (the identified
+            one by default: :data:`dvrk_gym.sim.identified.MARKER_DETECTION_NOISE`).
+    """
+
+    camera_resolution: tuple[int, int] = (PAPER_INTRINSICS.width, PAPER_INTRINSICS.height)
+    bias: str | BiasConfig = "paper"
+    bias_seed: int = 0
+    gui: bool = False
+    motion: MotionLimits = field(default_factory=MotionLimits)
+    camera_pose: np.ndarray | None = None
+    pixel_noise_px: float = 0.0
+    marker_noise: DetectionNoise = IDENTIFIED_MARKER_NOISE
+
+    def __post_init__(self) -> None:
+        check_float_fields("WorldConfig", self, {"pixel_noise_px": (0.0, MAX_PIXEL_NOISE_PX, False)})
+        object.__setattr__(self, "camera_resolution", check_resolution("camera_resolution", self.camera_resolution))
+        check_int_fields("WorldConfig", self, {"bias_seed": (0, 2**31 - 1)})
+        if not isinstance(self.bias, (str, BiasConfig)):
+            raise ValueError(f"bias must be a preset name or a BiasConfig, got {self.bias!r}")
+        check_bool("gui", self.gui)
+        if not isinstance(self.motion, MotionLimits):
+            raise ValueError(f"motion must be a MotionLimits, got {self.motion!r}")
+        if self.camera_pose is not None:
+            pose = np.asarray(self.camera_pose)
+            if pose.shape != (4, 4) or pose.dtype.kind != "f" or not np.all(np.isfinite(pose)):
+                raise ValueError(f"camera_pose must be None or a finite 4x4 float transform (metres), got {self.camera_pose!r}")
+
+
+@dataclass(frozen=True)
+class MoveResult:
+    """What one commanded move did.
+
+    Attributes:
+        duration_s: simulated seconds the move took (including settling).
+        q_cmd: the commanded (and reported) joints after the move.
+        q_true: the joints the cables actually produced.
+        joints_clamped: which joints had to be clamped into their limits (bool, (6,)).
+    """
+
+    duration_s: float
+    q_cmd: np.ndarray
+    q_true: np.ndarray
+    joints_clamped: np.ndarray
