@@ -24,9 +24,11 @@ that chooses its own yaw, how far its yaw is from the one the episode asks for (
 Debridement-v0: ``--trials`` trials of eight picks: success rate and mean true grip offset.
 
 Each run (variant, seed) is written to ``--out/runs/`` as it finishes and reused by the next
-call with the same settings, so an interrupted benchmark resumes. Written: ``--csv`` (every
-point of every run), ``--figure`` (touch error or success against training steps, mean over
-seeds with the range shaded), and the tables printed. Torch runs on one thread per run.
+call with the same settings, so an interrupted benchmark resumes and a later call can add
+seeds or variants: a call trains the ``--variants`` x ``--seeds`` not yet there, then prints
+the tables and writes ``--csv`` (every point) and ``--figure`` (mean over seeds against
+training steps, the range shaded) for every run in ``--out`` with the same ``--env``,
+``--steps``, ``--every`` and ``--trials``. Torch runs on one thread per run.
 
 Duration on 2 cores shared with other jobs: a GridTouch run of 5,000 steps 5-8 minutes (16
 steps/s) with its evaluations; the default 6 variants x 3 seeds about 1.5 hours with 2
@@ -156,10 +158,8 @@ def run_one(env_name: str, variant: str, seed: int, steps: int, every: int, tria
 
     def evaluate(model: Any) -> None:
         start = time.perf_counter()
-        if env_name == "grid_touch":
-            row = evaluate_grid_touch(model, eval_env, recorder)
-        else:
-            row = evaluate_debridement(model, eval_env, trials)
+        grid_touch = env_name == "grid_touch"
+        row = evaluate_grid_touch(model, eval_env, recorder) if grid_touch else evaluate_debridement(model, eval_env, trials)
         points.append({"steps": int(model.num_timesteps), **row})
         clock["eval"] += time.perf_counter() - start
 
@@ -197,24 +197,40 @@ def cached(path: Path, settings: dict[str, Any]) -> dict[str, Any] | None:
     return run if all(run.get(key) == value for key, value in settings.items()) else None
 
 
-def run_all(args: argparse.Namespace) -> list[dict[str, Any]]:
-    """Every (variant, seed), cached runs reused, the others on ``args.workers`` processes."""
-    runs, todo = [], []
-    for seed in args.seeds:
-        for variant in args.variants:
-            settings = {"env": args.env, "variant": variant, "seed": seed, "steps": args.steps, "every": args.every, "trials": args.trials}
-            run = cached(run_path(args.out, args.env, variant, seed), settings)
-            (runs.append(run) if run else todo.append(settings))
+def settings_of(args: argparse.Namespace, variant: str, seed: int) -> dict[str, Any]:
+    return {"env": args.env, "variant": variant, "seed": seed, "steps": args.steps, "every": args.every, "trials": args.trials}
+
+
+def train_missing(args: argparse.Namespace) -> None:
+    """Train every (variant, seed) asked for that has no cached run, on ``args.workers`` processes."""
+    todo = [
+        settings_of(args, v, seed)
+        for seed in args.seeds
+        for v in args.variants
+        if not cached(run_path(args.out, args.env, v, seed), settings_of(args, v, seed))
+    ]
     (args.out / "runs").mkdir(parents=True, exist_ok=True)
-    print(f"{len(runs)} runs cached, {len(todo)} to train on {args.workers} worker(s)", flush=True)
+    print(f"{len(args.seeds) * len(args.variants) - len(todo)} runs cached, {len(todo)} to train on {args.workers} worker(s)", flush=True)
     with ProcessPoolExecutor(max_workers=args.workers, mp_context=multiprocessing.get_context("spawn")) as pool:
         futures = [pool.submit(run_one, s["env"], s["variant"], s["seed"], s["steps"], s["every"], s["trials"]) for s in todo]
         for future in as_completed(futures):
             run = future.result()
             atomic_write_json(run_path(args.out, run["env"], run["variant"], run["seed"]), run, indent=1)
-            print(f"  {run['variant']} seed {run['seed']}: {run['train_seconds']:.0f} s training, {run['eval_seconds']:.0f} s evaluating", flush=True)
-            runs.append(run)
-    return sorted(runs, key=lambda r: (args.variants.index(r["variant"]), r["seed"]))
+            print(
+                f"  {run['variant']} seed {run['seed']}: {run['train_seconds']:.0f} s training, {run['eval_seconds']:.0f} s evaluating",
+                flush=True,
+            )
+
+
+def all_runs(args: argparse.Namespace) -> list[dict[str, Any]]:
+    """Every run in ``--out`` of this env with the same steps, interval and trials (any variant, any seed), in VARIANTS order."""
+    runs = []
+    for variant in VARIANTS[args.env]:
+        for path in sorted((args.out / "runs").glob(f"{args.env}_{variant}_seed*.json")):
+            run = json.loads(path.read_text())
+            if run["variant"] == variant and run == cached(path, settings_of(args, variant, run["seed"])):
+                runs.append(run)
+    return sorted(runs, key=lambda r: (list(VARIANTS[args.env]).index(r["variant"]), r["seed"]))
 
 
 def metrics(env_name: str) -> list[tuple[str, str]]:
@@ -224,28 +240,32 @@ def metrics(env_name: str) -> list[tuple[str, str]]:
     return [("success", "debridement success rate"), ("grip_offset_mm", "mean true grip offset, mm")]
 
 
-def by_variant(runs: list[dict[str, Any]], column: str) -> dict[str, tuple[list[int], np.ndarray]]:
-    """Per variant: the checkpoints and a (seeds, checkpoints) array of ``column``."""
+def by_variant(runs: list[dict[str, Any]], column: str) -> dict[str, tuple[list[int], list[int], np.ndarray]]:
+    """Per variant: its seeds, the checkpoints and a (seeds, checkpoints) array of ``column``."""
     table = {}
     for variant in dict.fromkeys(r["variant"] for r in runs):
         chosen = [r for r in runs if r["variant"] == variant]
         steps = [p["steps"] for p in chosen[0]["points"]]
-        table[variant] = (steps, np.array([[p[column] for p in r["points"]] for r in chosen]))
+        table[variant] = ([r["seed"] for r in chosen], steps, np.array([[p[column] for p in r["points"]] for r in chosen]))
     return table
 
 
 def print_tables(runs: list[dict[str, Any]], env_name: str) -> None:
-    columns = metrics(env_name) + ([("six_success", "success within 1 mm, six settings"), ("six_yaw_error_deg", "|yaw - asked yaw|, deg")] if env_name == "grid_touch" else [])
-    seeds = sorted({r["seed"] for r in runs})
-    for column, label in columns:
-        print(f"\n{label}: mean over seeds {seeds} (min-max at the last point)")
+    extra = [("six_success", "success (within 1 mm), six settings"), ("six_yaw_error_deg", "|yaw - the yaw asked for|, six settings, deg")]
+    for column, label in metrics(env_name) + (extra if env_name == "grid_touch" else []):
         table = by_variant(runs, column)
-        steps = next(iter(table.values()))[0]
-        print(f"{'variant':<17}" + "".join(f"{s:>7}" for s in steps) + "   range")
-        for variant, (_, values) in table.items():
+        steps = next(iter(table.values()))[1]
+        print(f"\n{label}: mean over seeds, against training steps; the seeds' range at the last step")
+        print(f"{'variant':<17}{'seeds':<7}" + "".join(f"{s:>7}" for s in steps) + "   range")
+        for variant, (seeds, _, values) in table.items():
             mean = values.mean(axis=0)
-            print(f"{variant:<17}" + "".join(f"{v:7.2f}" for v in mean) + f"   {values[:, -1].min():.2f}-{values[:, -1].max():.2f}")
-    print("\nwall time per run (training without evaluations, s; steps/s)")
+            seed_list = ",".join(map(str, seeds))
+            print(
+                f"{variant:<17}{seed_list:<7}"
+                + "".join(f"{v:7.2f}" for v in mean)
+                + f"   {values[:, -1].min():.2f}-{values[:, -1].max():.2f}"
+            )
+    print("\nwall time per run: training without the evaluations, s; training steps/s")
     for run in runs:
         print(f"{run['variant']:<17} seed {run['seed']}: {run['train_seconds']:6.0f} s  {run['steps'] / run['train_seconds']:5.1f} steps/s")
 
@@ -267,21 +287,22 @@ def plot(runs: list[dict[str, Any]], env_name: str, path: Path, command: str) ->
     import matplotlib.pyplot as plt
 
     panels = metrics(env_name)
-    fig, axes = plt.subplots(1, len(panels), figsize=(11, 4.2), sharey=env_name == "grid_touch")
-    seeds = sorted({r["seed"] for r in runs})
+    fig, axes = plt.subplots(1, len(panels), figsize=(11, 4.4), sharey=env_name == "grid_touch")
     for ax, (column, label) in zip(axes, panels, strict=True):
-        for variant, (steps, values) in by_variant(runs, column).items():
-            style = {"linewidth": 2.2} if variant in ("raw", "wrap_grid_touch", "wrap_debridement") else {"linewidth": 1.0, "alpha": 0.8}
-            (line,) = ax.plot(steps, values.mean(axis=0), marker="o", markersize=3, label=variant, **style)
+        for variant, (seeds, steps, values) in by_variant(runs, column).items():
+            style = {"linewidth": 2.4} if variant in ("raw", "wrap_grid_touch", "wrap_debridement") else {"linewidth": 1.0, "alpha": 0.85}
+            name = f"{variant} ({len(seeds)} seed{'s' if len(seeds) > 1 else ''})"
+            (line,) = ax.plot(steps, values.mean(axis=0), marker="o", markersize=3, label=name, **style)
             ax.fill_between(steps, values.min(axis=0), values.max(axis=0), color=line.get_color(), alpha=0.12)
         if column.endswith("_mm") and env_name == "grid_touch":
-            ax.axhline(paper.CALIBRATION_MEAN_MM["DNN+RF"], color="k", linestyle=":", linewidth=1, label="paper's DNN+RF (1.08 mm)")
+            ax.axhline(paper.CALIBRATION_MEAN_MM["DNN+RF"], color="k", linestyle=":", linewidth=1, label="the paper's DNN+RF, 1.08 mm")
             ax.set_yscale("log")
         ax.set_xlabel("training steps (robot moves)")
         ax.set_ylabel(label)
         ax.grid(True, which="both", alpha=0.3)
     axes[0].legend(fontsize=7)
-    fig.suptitle(f"Plain SB3 SAC{'+HER' if env_name == 'grid_touch' else ''} on {ENV_IDS[env_name]}, seeds {seeds}\n{command}", fontsize=9)
+    agent = "SAC + HER" if env_name == "grid_touch" else "SAC"
+    fig.suptitle(f"Plain SB3 {agent}, default settings, on {ENV_IDS[env_name]}: mean over seeds, range shaded\n{command}", fontsize=9)
     fig.tight_layout()
     atomic_savefig(fig, path, dpi=110)
     plt.close(fig)
@@ -311,12 +332,15 @@ def main() -> None:
         parser.error("--steps, --every, --workers and --trials must be positive")
     for variant in args.variants:
         print(f"{variant:<17} {VARIANTS[args.env][variant][0]}")
-    runs = run_all(args)
+    train_missing(args)
+    runs = all_runs(args)
     print_tables(runs, args.env)
     csv_path = args.csv or Path(f"docs/rl_budget{suffix}.csv")
     figure = args.figure or Path(f"docs/rl_budget{suffix}.png")
     write_csv(runs, csv_path)
-    command = f"python benchmarks/bench_rl_budget.py --env {args.env} --seeds {' '.join(map(str, args.seeds))} --steps {args.steps} --every {args.every}"
+    command = f"python benchmarks/bench_rl_budget.py --env {args.env} --steps {args.steps} --every {args.every}" + (
+        f" --trials {args.trials}" if suffix else ""
+    )
     plot(runs, args.env, figure, command)
     print(f"\nwrote {csv_path} and {figure}")
 
