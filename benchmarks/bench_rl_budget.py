@@ -76,6 +76,22 @@ class CommandedYaw(gym.Wrapper):
         return result
 
 
+class Deliveries(gym.Wrapper):
+    """Records which steps (1-based) of the raw Debridement-v0 delivered a fragment (reward > 0)."""
+
+    def __init__(self, env: gym.Env) -> None:
+        super().__init__(env)
+        self.steps = 0
+        self.delivered_steps: list[int] = []
+
+    def step(self, action: Any) -> Any:
+        result = self.env.step(action)
+        self.steps += 1
+        if float(result[1]) > 0:
+            self.delivered_steps.append(self.steps)
+        return result
+
+
 def _unit_box(env: gym.Env) -> gym.Env:
     unit = np.ones(env.action_space.shape, dtype=np.float32)
     return RescaleAction(env, min_action=-unit, max_action=unit)
@@ -107,16 +123,13 @@ VARIANTS: dict[str, dict[str, tuple[str, Callable[[gym.Env, bool], gym.Env]]]] =
 """Per env, each variant's description and how it wraps the raw env (``training``: the training env)."""
 
 
-def build_env(env_name: str, variant: str, training: bool) -> tuple[gym.Env, CommandedYaw | None]:
-    """The env as the agent sees it, and the yaw recorder under the wrappers (GridTouch only)."""
-    env = gym.make(ENV_IDS[env_name])
-    recorder = None
-    if env_name == "grid_touch":
-        env = recorder = CommandedYaw(env)
-    return VARIANTS[env_name][variant][1](env, training), recorder
+def build_env(env_name: str, variant: str, training: bool) -> tuple[gym.Env, Any]:
+    """The env as the agent sees it, and the recorder under its wrappers (:class:`CommandedYaw` or :class:`Deliveries`)."""
+    recorder = (CommandedYaw if env_name == "grid_touch" else Deliveries)(gym.make(ENV_IDS[env_name]))
+    return VARIANTS[env_name][variant][1](recorder, training), recorder
 
 
-def evaluate_grid_touch(model: Any, env: gym.Env, recorder: CommandedYaw | None) -> dict[str, float]:
+def evaluate_grid_touch(model: Any, env: gym.Env, recorder: CommandedYaw) -> dict[str, float]:
     """Touch error (mm), success and yaw error (deg) over the 35 circles, at yaw 0 and in the six settings."""
     from dvrk_gym.evaluation.episodes import run_episodes
 
@@ -126,7 +139,6 @@ def evaluate_grid_touch(model: Any, env: gym.Env, recorder: CommandedYaw | None)
     }
     row: dict[str, float] = {}
     for name, options in sets.items():
-        assert recorder is not None
         recorder.yaw_errors_rad.clear()
         results = run_episodes(env, model, N_CIRCLES, seed=EVAL_SEED, options=options, progress=False)
         row[f"{name}_mm"] = float(np.mean([r.metrics["mm_error"] for r in results]))
@@ -151,7 +163,7 @@ def run_one(env_name: str, variant: str, seed: int, steps: int, every: int, tria
     from dvrk_gym.baselines.agents import silent_logger
     from dvrk_gym.utils.torch_threads import torch_threads
 
-    train_env, _ = build_env(env_name, variant, training=True)
+    train_env, deliveries = build_env(env_name, variant, training=True)
     eval_env, recorder = build_env(env_name, variant, training=False)
     points: list[dict[str, float]] = []
     clock = {"eval": 0.0}
@@ -182,6 +194,8 @@ def run_one(env_name: str, variant: str, seed: int, steps: int, every: int, tria
     train_env.close()
     eval_env.close()
     settings = {"env": env_name, "variant": variant, "seed": seed, "steps": steps, "every": every, "trials": trials}
+    if env_name == "debridement":
+        settings["train_delivered_steps"] = deliveries.delivered_steps
     return {**settings, "train_seconds": wall - clock["eval"], "eval_seconds": clock["eval"], "points": points}
 
 
@@ -265,6 +279,11 @@ def print_tables(runs: list[dict[str, Any]], env_name: str) -> None:
                 + "".join(f"{v:7.2f}" for v in mean)
                 + f"   {values[:, -1].min():.2f}-{values[:, -1].max():.2f}"
             )
+    for run in runs:
+        if "train_delivered_steps" in run:
+            delivered = run["train_delivered_steps"]
+            first = f", the first at step {delivered[0]}" if delivered else ""
+            print(f"{run['variant']} seed {run['seed']}: {len(delivered)} of {run['steps']} training picks delivered a fragment{first}")
     print("\nwall time per run: training without the evaluations, s; training steps/s")
     for run in runs:
         print(f"{run['variant']:<17} seed {run['seed']}: {run['train_seconds']:6.0f} s  {run['steps'] / run['train_seconds']:5.1f} steps/s")
