@@ -309,7 +309,9 @@ def plot(runs: list[dict[str, Any]], env_name: str, path: Path, command: str) ->
     fig, axes = plt.subplots(1, len(panels), figsize=(11, 4.4), sharey=env_name == "grid_touch")
     for ax, (column, label) in zip(axes, panels, strict=True):
         for variant, (seeds, steps, values) in by_variant(runs, column).items():
-            style = {"linewidth": 2.4} if variant in ("raw", "wrap_grid_touch", "wrap_debridement") else {"linewidth": 1.0, "alpha": 0.85}
+            style: dict[str, Any] = {"linewidth": 2.4} if variant in ("raw", "wrap_grid_touch", "wrap_debridement") else {"linewidth": 1.0}
+            if variant == "RescaleAction":  # on top of raw's line: dashed, so that both show
+                style.update(linestyle="--", linewidth=1.6)
             name = f"{variant} ({len(seeds)} seed{'s' if len(seeds) > 1 else ''})"
             (line,) = ax.plot(steps, values.mean(axis=0), marker="o", markersize=3, label=name, **style)
             ax.fill_between(steps, values.min(axis=0), values.max(axis=0), color=line.get_color(), alpha=0.12)

@@ -50,7 +50,9 @@ class Block:
 
     @property
     def id(self) -> str:
-        return f"line{self.line}-{re.sub(r'[^a-z]+', '-', self.section.lower()).strip('-')[:30]}"
+        """The section's first words and the block's place among its section's blocks of its language."""
+        same = [b for b in BLOCKS if b.section == self.section and b.language == self.language]
+        return f"{re.sub(r'[^a-z]+', '-', self.section.lower()).strip('-')[:24]}-{same.index(self) + 1}"
 
 
 def _blocks() -> list[Block]:
