@@ -1,10 +1,23 @@
-"""The README is the front door: its commands parse, its paths exist, its first example runs."""
+"""The README is the front door: its code runs, its commands parse, its paths exist, its figures name their command.
 
+Every Python block runs as a script in a fresh interpreter, in a temporary folder, as a
+reader who pastes it would run it; the import lines of the blocks above it in its section
+come first (a reader reading the section top to bottom has them). Blocks that run the
+paper's budgets (see :data:`SLOW_CALLS`) are marked slow. Every shell block is valid bash,
+every command in it takes its arguments (``dvrk-gym`` through its parser, the others with
+``--help`` appended), and every figure (an image, or a table of measured numbers) names
+the command that printed it.
+"""
+
+import ast
 import importlib
+import os
 import re
 import shlex
+import shutil
 import subprocess
 import sys
+from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
@@ -15,13 +28,58 @@ ROOT = Path(__file__).resolve().parents[1]
 README = (ROOT / "README.md").read_text()
 CONTRIBUTING = (ROOT / "CONTRIBUTING.md").read_text()
 COMMANDS = {"--version", "reproduce", "demo", "collect", "calibrate", "evaluate", "search", "debride", "baseline", "fidelity", "sweep"}
+SLOW_CALLS = ("run_reproduce(", "run_calibration(", "run_paper_phase1(", "n_trajectories=57", ".learn(", "dvrk_gym_out/reproduce-quick")
+"""A block with one of these runs the paper's budgets (or reads what they make): seconds to minutes."""
+PREREQUISITES = {"dvrk_gym_out/reproduce-quick": ["reproduce", "--quick", "--no-progress"]}
+"""A block that reads this folder gets the README's command that makes it run first (``dvrk-gym ...``)."""
+COMMAND = re.compile(r"dvrk-gym [a-z-]|python3? (?:-m [\w.]+|benchmarks/\w+\.py)|dask \w+")
+"""A command that prints figures: the package's CLI, a module or a benchmark script."""
+MEASURED = re.compile(r"\d\.\d|\d/\d|\d%")
+"""A table cell with a measured number: a decimal, a count out of a total, a percentage."""
+FIGURE_WINDOW_LINES = 25
+"""A figure's command must be within this many lines of it, in the same section."""
+
+
+@dataclass(frozen=True)
+class Block:
+    """A fenced code block: its language, code, ``##`` section and first line (1-based)."""
+
+    language: str
+    code: str
+    section: str
+    line: int
+
+    @property
+    def id(self) -> str:
+        """The section's first words and the block's place among its section's blocks of its language."""
+        same = [b for b in BLOCKS if b.section == self.section and b.language == self.language]
+        return f"{re.sub(r'[^a-z]+', '-', self.section.lower()).strip('-')[:24]}-{same.index(self) + 1}"
+
+
+def _blocks() -> list[Block]:
+    blocks, section, fence = [], "", None
+    for number, line in enumerate(README.splitlines(), start=1):
+        if fence is None and line.startswith("```"):
+            fence = (line[3:].strip(), number + 1, [])
+        elif fence is not None and line.startswith("```"):
+            blocks.append(Block(fence[0], "\n".join(fence[2]) + "\n", section, fence[1]))
+            fence = None
+        elif fence is not None:
+            fence[2].append(line)
+        elif line.startswith("## "):
+            section = line[3:].strip()
+    return blocks
+
+
+BLOCKS = _blocks()
+PYTHON_BLOCKS = [b for b in BLOCKS if b.language == "python"]
+SHELL_BLOCKS = [b for b in BLOCKS if b.language == "bash"]
 
 
 def _code() -> list[str]:
     """The README's code: each line of its fenced blocks, and each inline code span (joined across lines)."""
-    blocks = re.findall(r"```[a-z]*\n(.*?)```", README, flags=re.S)
     prose = re.sub(r"```[a-z]*\n.*?```", "", README, flags=re.S)
-    lines = [line for block in blocks for line in block.splitlines()]
+    lines = [line for block in BLOCKS for line in block.code.splitlines()]
     return lines + [span.replace("\n", " ") for span in re.findall(r"`([^`]+)`", prose)]
 
 
@@ -36,22 +94,20 @@ def _commands(prefix: str) -> list[str]:
     return sorted(found)
 
 
+def _shell_commands() -> list[str]:
+    """Each command of the shell blocks (lines joined at backslashes, split at ``&&``), comments and [optional] parts removed."""
+    commands = []
+    for block in SHELL_BLOCKS:
+        for line in block.code.replace("\\\n", " ").splitlines():
+            line = re.sub(r"\[[^\]]*\]", "", line.split(" #", 1)[0])
+            commands += [part.strip() for part in line.split("&&") if part.strip()]
+    return commands
+
+
 @pytest.mark.parametrize("command", _commands("dvrk-gym"))
 def test_every_dvrk_gym_command_in_the_readme_parses(command):
     arguments = shlex.split(command)
-    if arguments[0] not in {
-        "--version",
-        "reproduce",
-        "demo",
-        "collect",
-        "calibrate",
-        "evaluate",
-        "search",
-        "debride",
-        "baseline",
-        "fidelity",
-        "sweep",
-    }:
+    if arguments[0] not in COMMANDS:
         pytest.skip(f"prose, not a command: dvrk-gym {command}")
     try:
         build_parser().parse_args(arguments)
@@ -77,6 +133,29 @@ def test_every_benchmark_script_is_listed_and_every_listed_one_exists():
     assert not [name for name in listed if name not in scripts], f"CONTRIBUTING lists benchmarks that do not exist: {listed}"
 
 
+@pytest.mark.parametrize("block", SHELL_BLOCKS, ids=lambda b: b.id)
+def test_every_shell_block_of_the_readme_is_valid_bash(block):
+    result = subprocess.run(["bash", "-n"], input=block.code, capture_output=True, text=True, timeout=30)
+    assert result.returncode == 0, f"README line {block.line}: {result.stderr}"
+
+
+def _other_command_params() -> list:
+    commands = dict.fromkeys(c for c in _shell_commands() if not c.startswith(("dvrk-gym ", "python benchmarks/", ". ")))
+    return [pytest.param(c, id=c[:60], marks=[pytest.mark.slow] if "rl_zoo3" in c else []) for c in commands]  # RL Zoo's import: 30 s
+
+
+@pytest.mark.parametrize("command", _other_command_params())
+def test_every_other_command_of_the_readme_exists_and_takes_its_arguments(command):
+    """pip, venv, pytest, RL Zoo, dask: the program exists and parses the arguments the README gives it."""
+    program, *arguments = shlex.split(command)
+    assert shutil.which(program), f"README runs {program!r}, which is not installed"
+    if program in ("python", "python3"):
+        program = sys.executable
+    # --help last: the options before it are checked, then the help is printed; nothing is installed or run.
+    result = subprocess.run([program, *arguments, "--help"], cwd=ROOT, capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0, f"`{command}`: {result.stderr[-1500:]}"
+
+
 @pytest.mark.parametrize("name", sorted(set(re.findall(r"`(dvrk_gym(?:\.\w+)+)", README))))
 def test_every_module_path_in_the_readme_resolves(name):
     parts = name.split(".")
@@ -91,8 +170,80 @@ def test_every_module_path_in_the_readme_resolves(name):
     pytest.fail(f"{name} does not resolve")
 
 
-def test_the_first_example_of_using_the_environments_runs():
-    section = README.split("## Using the environments", 1)[1]
-    code = section.split("```python", 1)[1].split("```", 1)[0]
-    code = code.replace("camera_resolution=(1920, 1080)", "camera_resolution=(640, 360)")
-    subprocess.run([sys.executable, "-c", code], cwd=ROOT, check=True, capture_output=True, text=True, timeout=300)
+def _imports_above(block: Block) -> str:
+    """The top-level import statements of the Python blocks above ``block`` in its section."""
+    lines = []
+    for above in PYTHON_BLOCKS[: PYTHON_BLOCKS.index(block)]:
+        if above.section == block.section:
+            tree = ast.parse(above.code)
+            lines += [ast.get_source_segment(above.code, node) for node in tree.body if isinstance(node, (ast.Import, ast.ImportFrom))]
+    return "\n".join(line for line in lines if line) + "\n"
+
+
+def _python_block_params() -> list:
+    return [
+        pytest.param(block, id=block.id, marks=[pytest.mark.slow] if any(call in block.code for call in SLOW_CALLS) else [])
+        for block in PYTHON_BLOCKS
+    ]
+
+
+def _run(arguments: list[str], cwd: Path, timeout: float) -> subprocess.CompletedProcess:
+    environment = {**os.environ, "MPLBACKEND": "Agg", "SB3_LOGDIR": str(cwd / "sb3")}  # SB3 makes a log folder per model
+    return subprocess.run(arguments, cwd=cwd, env=environment, capture_output=True, text=True, timeout=timeout)
+
+
+@pytest.mark.parametrize("block", _python_block_params())
+def test_every_python_block_of_the_readme_runs(block, tmp_path):
+    for path, command in PREREQUISITES.items():
+        if path in block.code:
+            made = _run([sys.executable, "-m", "dvrk_gym.cli.main", *command], tmp_path, timeout=3600)
+            assert made.returncode == 0, f"`dvrk-gym {' '.join(command)}`: {made.stderr[-1500:]}"
+    script = tmp_path / "readme_block.py"
+    script.write_text(_imports_above(block) + block.code)
+    result = _run([sys.executable, script.name], tmp_path, timeout=3600)
+    assert result.returncode == 0, f"README line {block.line}:\n{result.stderr[-3000:]}"
+
+
+def _figures() -> list[tuple[int, str]]:
+    """(line, first line) of each image and each table with a measured number in its body, outside code blocks."""
+    lines = re.sub(r"```.*?```", lambda m: "\n" * m.group(0).count("\n"), README, flags=re.S).splitlines()
+    figures, table_start = [], None
+    for number, line in enumerate(lines, start=1):
+        if line.startswith("|") and table_start is None:
+            table_start = number
+        if table_start is not None and not line.startswith("|"):
+            body = lines[table_start + 1 : number - 1]  # after the header and its rule
+            if any(MEASURED.search(row) for row in body):
+                figures.append((table_start, lines[table_start - 1]))
+            table_start = None
+        if line.startswith("!["):
+            figures.append((number, line))
+    return figures
+
+
+def _section_window(line: int) -> str:
+    """The README's text within FIGURE_WINDOW_LINES of ``line`` (1-based), cut at the headings around it."""
+    lines = README.splitlines()
+    start, end = max(line - 1 - FIGURE_WINDOW_LINES, 0), min(line + FIGURE_WINDOW_LINES, len(lines))
+    for index in range(line - 2, start - 1, -1):
+        if lines[index].startswith("#"):
+            start = index
+            break
+    for index in range(line, end):
+        if lines[index].startswith("#"):
+            end = index
+            break
+    return "\n".join(lines[start:end])
+
+
+def test_the_figure_finder_finds_images_and_tables_of_numbers_but_not_reference_tables():
+    starts = {text for _, text in _figures()}
+    assert any(text.startswith("![") for text in starts)
+    assert any(text.startswith("| method |") for text in starts)
+    assert not any("CalibrationExploration-v0" in text for text in starts), "the env reference table holds no measurement"
+
+
+@pytest.mark.parametrize("figure", _figures(), ids=lambda f: f"line{f[0]}")
+def test_every_figure_in_the_readme_names_the_command_that_printed_it(figure):
+    line, text = figure
+    assert COMMAND.search(_section_window(line)), f"README line {line} ({text[:60]}...) names no command near it that printed it"
