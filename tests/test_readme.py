@@ -32,7 +32,7 @@ SLOW_CALLS = ("run_reproduce(", "run_calibration(", "run_paper_phase1(", "n_traj
 """A block with one of these runs the paper's budgets (or reads what they make): seconds to minutes."""
 PREREQUISITES = {"dvrk_gym_out/reproduce-quick": ["reproduce", "--quick", "--no-progress"]}
 """A block that reads this folder gets the README's command that makes it run first (``dvrk-gym ...``)."""
-COMMAND = re.compile(r"dvrk-gym [a-z-]|python3? (?:-m [\w.]+|benchmarks/\w+\.py)|dask \w+")
+COMMAND = re.compile(r"dvrk-gym\s+[a-z-]|python3?\s+(?:-m\s+[\w.]+|benchmarks/\w+\.py)|dask\s+\w+")
 """A command that prints figures: the package's CLI, a module or a benchmark script."""
 MEASURED = re.compile(r"\d\.\d|\d/\d|\d%")
 """A table cell with a measured number: a decimal, a count out of a total, a percentage."""
