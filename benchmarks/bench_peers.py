@@ -1,6 +1,7 @@
 """Our three envs beside panda-gym's, stepped in one process with seeded random actions.
 
 Run: python benchmarks/bench_peers.py  [--steps 1000] [--picks 16] [--rounds 3] [--resolution 1920 1080]
+     python benchmarks/bench_peers.py --profile dvrk_gym/Debridement-v0 [--picks 24]  (cProfile of one env's steps)
 Needs panda-gym (the ``bench`` extra): pip install -e ".[bench]", or pip install panda-gym==3.0.7.
 With --steps 500 --picks 8 it took 4 minutes on the shared 2-core machine (load average 13-18).
 
@@ -59,6 +60,8 @@ Profiles (cProfile and timers, on the 2-core machine shared with other jobs, loa
 from __future__ import annotations
 
 import argparse
+import cProfile
+import pstats
 import statistics
 import sys
 import time
@@ -110,6 +113,24 @@ def time_subject(subject: Subject, seed: int) -> None:
     subject.real_time_factors.append(simulated / elapsed)
 
 
+def profile_env(env_id: str, steps: int, picks: int, resolution: tuple[int, int], seed: int) -> int:
+    """Print cProfile's view (own time, then cumulative) of ``time_subject`` on one of our envs."""
+    import dvrk_gym  # noqa: F401  (registers ours)
+
+    if env_id not in gym.registry or not env_id.startswith("dvrk_gym/"):
+        print(f"--profile takes one of our env ids, e.g. dvrk_gym/Debridement-v0; got {env_id!r}", file=sys.stderr)
+        return 2
+    count = picks if env_id == "dvrk_gym/Debridement-v0" else steps
+    subject = Subject(env_id, {"camera_resolution": resolution}, count)
+    profiler = cProfile.Profile()
+    profiler.runcall(time_subject, subject, seed)
+    print(f"{env_id}: {count} steps, {subject.rates[0]:.1f} steps/s under the profiler")
+    stats = pstats.Stats(profiler)
+    stats.sort_stats("tottime").print_stats(20)
+    stats.sort_stats("cumulative").print_stats(40)
+    return 0
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--steps", type=int, default=1000, help="steps per round of each env but Debridement (default: %(default)s)")
@@ -117,7 +138,10 @@ def main() -> int:
     parser.add_argument("--rounds", type=int, default=3, help="turns of every env; figures are medians (default: %(default)s)")
     parser.add_argument("--seed", type=int, default=0, help="seeds every env and its actions (default: %(default)s)")
     parser.add_argument("--resolution", type=int, nargs=2, default=(1920, 1080), metavar=("W", "H"), help="our endoscope images")
+    parser.add_argument("--profile", metavar="ENV_ID", default=None, help="instead: cProfile one of our envs' steps")
     args = parser.parse_args()
+    if args.profile is not None:
+        return profile_env(args.profile, args.steps, args.picks, tuple(args.resolution), args.seed)
     try:
         import panda_gym  # noqa: F401  (registers the Panda envs)
     except ImportError:
