@@ -30,10 +30,11 @@ the tables and writes ``--csv`` (every point) and ``--figure`` (mean over seeds 
 training steps, the range shaded) for every run in ``--out`` with the same ``--env``,
 ``--steps``, ``--every`` and ``--trials``. Torch runs on one thread per run.
 
-Duration, two runs side by side on 2 cores shared with other jobs: a GridTouch run of 5,000
-steps took 7-17 minutes of training (5-12 steps/s) and under a minute of evaluations, so the
-default 6 variants x 3 seeds take 1.5-2.5 hours; a Debridement run 1.3-2.6 picks/s (2,000
-picks in 13-14 minutes on a quieter machine) and 15-30 s per evaluation of two trials.
+Duration, two runs side by side on a quiet 2-core machine: a GridTouch run of 5,000 steps
+98-108 s of training (46-51 steps/s) and a few seconds of evaluations, so the default 6
+variants x 3 seeds about 16 minutes (7-17 minutes a run when other jobs shared the cores);
+a Debridement run of 2,000 picks about 10 minutes (3.1-3.2 picks/s) and 15-30 s per
+evaluation of two trials.
 """
 
 from __future__ import annotations
