@@ -86,6 +86,12 @@ class Subject:
     real_time_factors: list[float] = field(default_factory=list)
 
 
+def ratio_text(ratio: float) -> str:
+    """A ratio with two decimals, or two significant digits below 0.01 (Debridement's picks
+    against PandaReach's steps: 0.0044, not 0.00)."""
+    return f"{ratio:.2f}" if ratio >= 0.01 else f"{ratio:.2g}"
+
+
 def clock_seconds(env: gym.Env) -> float:
     """Seconds on a dvrk_gym env's simulated clock (reset with each episode)."""
     return env.unwrapped.world.clock.time_s
@@ -165,7 +171,7 @@ def main() -> int:
     for subject in subjects:
         rate = statistics.median(subject.rates)
         factor = statistics.median(subject.real_time_factors)
-        print(f"{subject.env_id.removeprefix('dvrk_gym/'):<36} {rate:>9.1f} {rate / reference:>17.2f} {factor:>15.2f}")
+        print(f"{subject.env_id.removeprefix('dvrk_gym/'):<36} {rate:>9.1f} {ratio_text(rate / reference):>17} {factor:>15.2f}")
     print(f"medians of {args.rounds} rounds; Debridement-v0: one step is one pick ({args.picks} a round); resolution {resolution}")
     return 0
 

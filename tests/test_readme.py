@@ -29,7 +29,8 @@ README = (ROOT / "README.md").read_text()
 CONTRIBUTING = (ROOT / "CONTRIBUTING.md").read_text()
 COMMANDS = {"--version", "reproduce", "demo", "collect", "calibrate", "evaluate", "search", "debride", "baseline", "fidelity", "sweep"}
 SLOW_CALLS = ("run_reproduce(", "run_calibration(", "run_paper_phase1(", "n_trajectories=57", ".learn(", "dvrk_gym_out/reproduce-quick")
-"""A block with one of these runs the paper's budgets (or reads what they make): seconds to minutes."""
+"""A block with one of these runs the paper's budgets (or reads what they make), seconds to minutes: marked
+``paper_budget``, which the default command leaves out and ``.ci/run`` runs after it."""
 PREREQUISITES = {"dvrk_gym_out/reproduce-quick": ["reproduce", "--quick", "--no-progress"]}
 """A block that reads this folder gets the README's command that makes it run first (``dvrk-gym ...``)."""
 COMMAND = re.compile(r"dvrk-gym\s+[a-z-]|python3?\s+(?:-m\s+[\w.]+|benchmarks/\w+\.py)|dask\s+\w+")
@@ -180,9 +181,12 @@ def _imports_above(block: Block) -> str:
     return "\n".join(line for line in lines if line) + "\n"
 
 
+PAPER_BUDGET = [pytest.mark.slow, pytest.mark.paper_budget]
+
+
 def _python_block_params() -> list:
     return [
-        pytest.param(block, id=block.id, marks=[pytest.mark.slow] if any(call in block.code for call in SLOW_CALLS) else [])
+        pytest.param(block, id=block.id, marks=PAPER_BUDGET if any(call in block.code for call in SLOW_CALLS) else [])
         for block in PYTHON_BLOCKS
     ]
 

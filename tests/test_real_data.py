@@ -103,6 +103,7 @@ def test_quaternion_linear_regression_is_no_worse_than_euler(paper_data) -> None
 
 
 @pytest.mark.slow
+@pytest.mark.paper_budget
 def test_chosen_net_cv_error_is_within_the_paper_figure(paper_data) -> None:
     X, y = paper_data
     errors = cross_validate(lambda seed: DNNCalibrator(epochs=TEST_EPOCHS, seed=seed, progress=False), X, y, folds=10)
