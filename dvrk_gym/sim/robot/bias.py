@@ -56,6 +56,9 @@ NOMINAL_WRIST_COUPLING = _frozen([[0.15, 0.15], [1.0, 0.0], [0.5, 1.0]])
 INSTRUMENT_SPREAD = 0.1
 
 
+_NOT_MAGNITUDES = ("around_identified", "encoder_backlash_fraction", "wrist_settle_lag")
+
+
 @dataclass(frozen=True)
 class BiasConfig:
     """Magnitudes of the error terms (SI units). All zero: the robot goes where told.
@@ -83,6 +86,15 @@ class BiasConfig:
             >= 1 one drawn around it with the identification's spread
             (:func:`identified_instrument`). The homing and tool sds above are then unused.
             False: around the nominal instrument, with those sds.
+        encoder_backlash_fraction: the fraction kappa in [0, 1] of the wrist joints'
+            hysteresis lag (roll, wrist pitch, wrist yaw) that the encoders see, so that
+            the reported pose is nominal FK of ``q_cmd + kappa * lag`` on those joints
+            (prototype of the reported-pose lag; 0: the encoders report the command).
+        wrist_settle_lag: the fraction alpha in [0, 1) of each commanded wrist-pitch and
+            wrist-yaw step that the motors have not made when the pose is recorded (a
+            servo stopped short of its command): the motors go to
+            ``q_cmd + alpha * (previous motors - q_cmd)``, the cables follow the motors and
+            the encoders report them (prototype; 0: the motors reach the command).
     """
 
     homing_offset_rad: float = 0.0
@@ -97,17 +109,23 @@ class BiasConfig:
     backlash_wrist_rad: float = 0.0
     repeatability_m: float = 0.0
     around_identified: bool = False
+    encoder_backlash_fraction: float = 0.0
+    wrist_settle_lag: float = 0.0
 
     def __post_init__(self) -> None:
         for name in self.magnitude_names():
             value = getattr(self, name)
             if not (np.isfinite(value) and value >= 0):
                 raise ValueError(f"BiasConfig.{name} = {value}; expected a finite value >= 0")
+        if not 0.0 <= self.encoder_backlash_fraction <= 1.0:
+            raise ValueError(f"BiasConfig.encoder_backlash_fraction = {self.encoder_backlash_fraction}; expected a value in [0, 1]")
+        if not 0.0 <= self.wrist_settle_lag < 1.0:
+            raise ValueError(f"BiasConfig.wrist_settle_lag = {self.wrist_settle_lag}; expected a value in [0, 1)")
 
     @classmethod
     def magnitude_names(cls) -> tuple[str, ...]:
-        """The names of the fields that are magnitudes (all but ``around_identified``)."""
-        return tuple(f.name for f in dataclasses.fields(cls) if f.name != "around_identified")
+        """The names of the fields that are magnitudes (all but ``around_identified`` and the two fractions)."""
+        return tuple(f.name for f in dataclasses.fields(cls) if f.name not in _NOT_MAGNITUDES)
 
     def scaled(self, factor: float) -> BiasConfig:
         """This configuration with every magnitude multiplied by factor (>= 0)."""
