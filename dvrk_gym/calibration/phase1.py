@@ -22,6 +22,7 @@ from tqdm.auto import tqdm
 from dvrk_gym import paper
 from dvrk_gym.calibration.records import ArrayRecord
 from dvrk_gym.envs.exploration import PITCH_RANGE_RAD, ROLL_RANGE_RAD, SAFE_X_M, SAFE_Y_M, SAFE_Z_M, YAW_RANGE_RAD
+from dvrk_gym.sim.robot.bias import BiasConfig
 
 MAX_YAW_STEP_RAD = float(np.deg2rad(150.0))
 """The authors' sampler redraws a yaw more than this from the previous one (no extreme flips), rad."""
@@ -243,7 +244,7 @@ def run_paper_phase1(
     n_trajectories: int = paper.PHASE1_TRAJECTORIES,
     seed: int = 0,
     steps_per_trajectory: int = paper.PHASE1_POSES_PER_TRAJECTORY,
-    bias: str = "paper",
+    bias: str | BiasConfig = "paper",
     bias_seed: int = 0,
     camera_resolution: tuple[int, int] = paper.ENDOSCOPE_RESOLUTION_PX,
     progress: bool = True,
@@ -254,7 +255,7 @@ def run_paper_phase1(
         n_trajectories: trajectories (episodes) to run (the paper: 57).
         seed: seeds the exploration policy and the episodes (:func:`collect_phase1`).
         steps_per_trajectory: commanded poses per trajectory.
-        bias: the cable bias preset.
+        bias: the cable bias preset, or a configuration.
         bias_seed: which instrument.
         camera_resolution: the endoscope's image size (width, height), pixels.
         progress: show a progress bar.

@@ -16,6 +16,7 @@ def _run_fidelity(args: argparse.Namespace) -> int:
     run = run_fidelity(
         bias=args.bias,
         bias_seed=args.bias_seed,
+        wrist_settle_lag=args.wrist_settle_lag,
         n_trajectories=args.trajectories,
         seed=args.seed,
         camera_resolution=tuple(args.resolution),
@@ -25,6 +26,16 @@ def _run_fidelity(args: argparse.Namespace) -> int:
     json_path, png_path = write_report(run, args.out)
     print(f"wrote {json_path}, {png_path}")
     return 0
+
+
+def _settle_lag(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a fraction in [0, 1), got {text!r}") from None
+    if not 0.0 <= value < 1.0:
+        raise argparse.ArgumentTypeError(f"expected a fraction in [0, 1), got {value}")
+    return value
 
 
 def add_commands(subparsers: argparse._SubParsersAction) -> None:
@@ -43,5 +54,13 @@ def add_commands(subparsers: argparse._SubParsersAction) -> None:
     )
     fidelity.add_argument("--seed", type=int, default=0, help="seeds the exploration and the forest (default: %(default)s)")
     add_instrument_options(fidelity)
+    fidelity.add_argument(
+        "--wrist-settle-lag",
+        type=_settle_lag,
+        default=0.0,
+        metavar="FRACTION",
+        help="the preset with wrist motors that stop this fraction of each step short, in [0, 1): the reported "
+        "pose lags the command (not in any preset yet; the real rows suggest 0.2-0.3; default: %(default)s)",
+    )
     add_progress_option(fidelity)
     fidelity.set_defaults(func=_run_fidelity)

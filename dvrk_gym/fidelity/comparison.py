@@ -9,6 +9,7 @@ of the half-range of the paper's pitches, -15 to 25 degrees) of it.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -17,6 +18,7 @@ from dvrk_gym import paper
 from dvrk_gym.calibration.datasets import load_paper_phase1
 from dvrk_gym.calibration.phase1 import run_paper_phase1
 from dvrk_gym.fidelity.statistics import PAPER_YAWS_DEG, FidelityStatistics, fidelity_statistics
+from dvrk_gym.sim.robot.bias import BIAS_PRESETS
 
 __all__ = [
     "RELATIVE_TOLERANCE",
@@ -144,6 +146,7 @@ class FidelityRun:
 def run_fidelity(
     bias: str = "paper",
     bias_seed: int = 0,
+    wrist_settle_lag: float = 0.0,
     n_trajectories: int = paper.PHASE1_TRAJECTORIES,
     seed: int = 0,
     camera_resolution: tuple[int, int] = paper.ENDOSCOPE_RESOLUTION_PX,
@@ -154,6 +157,8 @@ def run_fidelity(
     Args:
         bias: the cable bias preset of the simulated instrument.
         bias_seed: which instrument.
+        wrist_settle_lag: the preset with this ``BiasConfig.wrist_settle_lag`` instead
+            (the fraction of each wrist step the motors leave undone, in [0, 1)).
         n_trajectories: Phase I trajectories (the paper: 57; about 35-50 s at 1920 x 1080).
         seed: seeds the exploration and the episodes, and the cross-validated forest.
         camera_resolution: the endoscope's image size (width, height), pixels.
@@ -162,10 +167,12 @@ def run_fidelity(
     Raises:
         ValueError: when the simulation keeps too few rows for the statistics.
     """
+    if wrist_settle_lag and bias not in BIAS_PRESETS:
+        raise ValueError(f"unknown bias preset {bias!r}; the presets are {sorted(BIAS_PRESETS)}")
     data = run_paper_phase1(
         n_trajectories,
         seed,
-        bias=bias,
+        bias=dataclasses.replace(BIAS_PRESETS[bias], wrist_settle_lag=wrist_settle_lag) if wrist_settle_lag else bias,
         bias_seed=bias_seed,
         camera_resolution=(int(camera_resolution[0]), int(camera_resolution[1])),
         progress=progress,
@@ -177,6 +184,7 @@ def run_fidelity(
     settings: dict[str, object] = {
         "bias": bias,
         "bias_seed": int(bias_seed),
+        "wrist_settle_lag": float(wrist_settle_lag),
         "trajectories": int(n_trajectories),
         "seed": int(seed),
         "camera_resolution": [int(v) for v in camera_resolution],

@@ -140,11 +140,9 @@ class DvrkWorld:
     def reported_pose(self) -> np.ndarray:
         """The pose the robot reports: nominal FK of its encoders (4x4, base frame, m).
 
-        The encoders read the command unless the bias makes them lag it
-        (:meth:`~dvrk_gym.sim.robot.cables.CableModel.measured_joints`)."""
-        if self.cable.reports_lag:
-            return self._nominal_pose(self.cable.measured_joints(self.q_cmd)).copy()
-        return self._nominal_pose(self.q_cmd).copy()
+        The encoders read the command unless the wrist settles short of it
+        (``BiasConfig.wrist_settle_lag``; :meth:`~dvrk_gym.sim.robot.cables.CableModel.measured_joints`)."""
+        return self._nominal_pose(self.cable.measured_joints(self.q_cmd)).copy()
 
     def _nominal_pose(self, q: np.ndarray) -> np.ndarray:
         """Nominal FK of joints ``q`` (4x4, m), remembered for the last few joint vectors:

@@ -56,7 +56,7 @@ NOMINAL_WRIST_COUPLING = _frozen([[0.15, 0.15], [1.0, 0.0], [0.5, 1.0]])
 INSTRUMENT_SPREAD = 0.1
 
 
-_NOT_MAGNITUDES = ("around_identified", "encoder_backlash_fraction", "wrist_settle_lag")
+_NOT_MAGNITUDES = ("around_identified", "wrist_settle_lag")
 
 
 @dataclass(frozen=True)
@@ -86,15 +86,13 @@ class BiasConfig:
             >= 1 one drawn around it with the identification's spread
             (:func:`identified_instrument`). The homing and tool sds above are then unused.
             False: around the nominal instrument, with those sds.
-        encoder_backlash_fraction: the fraction kappa in [0, 1] of the wrist joints'
-            hysteresis lag (roll, wrist pitch, wrist yaw) that the encoders see, so that
-            the reported pose is nominal FK of ``q_cmd + kappa * lag`` on those joints
-            (prototype of the reported-pose lag; 0: the encoders report the command).
-        wrist_settle_lag: the fraction alpha in [0, 1) of each commanded wrist-pitch and
-            wrist-yaw step that the motors have not made when the pose is recorded (a
-            servo stopped short of its command): the motors go to
-            ``q_cmd + alpha * (previous motors - q_cmd)``, the cables follow the motors and
-            the encoders report them (prototype; 0: the motors reach the command).
+        wrist_settle_lag: the fraction in [0, 1) of each commanded wrist-pitch and
+            wrist-yaw step that their motors have not made when a move ends (a servo
+            stopped short of its command): the motors go to ``q_cmd + wrist_settle_lag *
+            (previous motors - q_cmd)``, the cables follow the motors, and the encoders
+            report the motors, so the reported pose lags the command. 0 (every preset): the
+            motors reach the command. The real rows suggest 0.2-0.3 (README, *Fidelity*);
+            not yet in the ``paper`` preset, whose other values were identified without it.
     """
 
     homing_offset_rad: float = 0.0
@@ -109,7 +107,6 @@ class BiasConfig:
     backlash_wrist_rad: float = 0.0
     repeatability_m: float = 0.0
     around_identified: bool = False
-    encoder_backlash_fraction: float = 0.0
     wrist_settle_lag: float = 0.0
 
     def __post_init__(self) -> None:
@@ -117,14 +114,12 @@ class BiasConfig:
             value = getattr(self, name)
             if not (np.isfinite(value) and value >= 0):
                 raise ValueError(f"BiasConfig.{name} = {value}; expected a finite value >= 0")
-        if not 0.0 <= self.encoder_backlash_fraction <= 1.0:
-            raise ValueError(f"BiasConfig.encoder_backlash_fraction = {self.encoder_backlash_fraction}; expected a value in [0, 1]")
         if not 0.0 <= self.wrist_settle_lag < 1.0:
             raise ValueError(f"BiasConfig.wrist_settle_lag = {self.wrist_settle_lag}; expected a value in [0, 1)")
 
     @classmethod
     def magnitude_names(cls) -> tuple[str, ...]:
-        """The names of the fields that are magnitudes (all but ``around_identified`` and the two fractions)."""
+        """The names of the fields that are magnitudes (all but ``around_identified`` and ``wrist_settle_lag``)."""
         return tuple(f.name for f in dataclasses.fields(cls) if f.name not in _NOT_MAGNITUDES)
 
     def scaled(self, factor: float) -> BiasConfig:

@@ -249,43 +249,34 @@ class CableModel:
         self._noise_std = repeatability_std(config)
         # NaN = no history yet: the first command finds the cables at rest there.
         self._plays = np.full((len(PLAY_FRACTIONS), _N_JOINTS), np.nan)
-        self._kappa = config.encoder_backlash_fraction
-        self._alpha = config.wrist_settle_lag
-        # Where the motors are and what the encoders read after the last move (only kept
-        # when the encoders can differ from the command: :attr:`reports_lag`).
-        self._motors: np.ndarray | None = None
-        self._measured: np.ndarray | None = None
-
-    @property
-    def reports_lag(self) -> bool:
-        """Whether the encoders can read other joints than the command (kappa > 0 or alpha > 0)."""
-        return self._kappa > 0.0 or self._alpha > 0.0
+        self._settle_lag = config.wrist_settle_lag
+        # Where the motors stopped on the last move (what the encoders read): the commands
+        # themselves unless the wrist settles short (``wrist_settle_lag``); NaN before the first.
+        self._motors = np.full(_N_JOINTS, np.nan)
 
     def measured_joints(self, q_cmd: np.ndarray) -> np.ndarray:
         """The joints (6,) rad / m the encoders read after the last move, whose command was ``q_cmd``.
 
-        ``q_cmd`` itself unless :attr:`reports_lag`: then the motors' position (short of
-        the command by ``wrist_settle_lag`` of the wrist's last step) plus
-        ``encoder_backlash_fraction`` of the wrist joints' hysteresis lag there.
+        ``q_cmd`` itself (a copy) unless the wrist settles short of its commands
+        (``BiasConfig.wrist_settle_lag`` > 0) and a move was made: then where the motors stopped.
         """
-        if not self.reports_lag or self._measured is None:
+        if self._settle_lag == 0.0 or np.isnan(self._motors).any():
             return np.array(q_cmd, dtype=float)
-        return self._measured.copy()
+        return self._motors.copy()
 
     def _motor_joints(self, q_cmd: np.ndarray) -> np.ndarray:
         """Where the motors stop for the command ``q_cmd`` (6,), without moving them."""
-        if self._alpha == 0.0 or self._motors is None or np.isnan(self._plays).any():
+        if self._settle_lag == 0.0 or np.isnan(self._motors).any():
             return q_cmd
         motors = q_cmd.copy()
-        motors[_WRIST_BENDING] += self._alpha * (self._motors[_WRIST_BENDING] - q_cmd[_WRIST_BENDING])
+        motors[_WRIST_BENDING] += self._settle_lag * (self._motors[_WRIST_BENDING] - q_cmd[_WRIST_BENDING])
         return motors
 
     def reset(self, q_cmd: np.ndarray) -> None:
         """Put the cables at rest at q_cmd (6,): no hysteresis gap."""
         q_cmd = _checked_joints(q_cmd, "q_cmd")
         self._plays = np.tile(q_cmd, (len(PLAY_FRACTIONS), 1))
-        if self.reports_lag:
-            self._motors, self._measured = q_cmd.copy(), q_cmd.copy()
+        self._motors = q_cmd.copy()
 
     def true_joints(self, q_cmd: np.ndarray, noise_rng: np.random.Generator | None = None) -> np.ndarray:
         """Move to a joint command and return the joints the arm really takes.
@@ -299,15 +290,9 @@ class CableModel:
             (6,) true joint values, rad / m.
         """
         q_cmd = _checked_joints(q_cmd, "q_cmd")
-        if self.reports_lag:
-            motors = self._motor_joints(q_cmd)
-            self._plays, q_true = self._advance(motors)
-            measured = motors.copy()
-            lag = hysteresis_output(self._plays, motors) - motors
-            measured[_WRIST] += self._kappa * lag[_WRIST]
-            self._motors, self._measured = motors, measured
-        else:
-            self._plays, q_true = self._advance(q_cmd)
+        motors = self._motor_joints(q_cmd)
+        self._plays, q_true = self._advance(motors)
+        self._motors = motors.copy()  # the cables follow the motors
         if noise_rng is not None:
             q_true = q_true + noise_rng.normal(0.0, 1.0, _N_JOINTS) * self._noise_std
         return q_true
@@ -316,8 +301,7 @@ class CableModel:
         """The joints (6,) rad / m that a noiseless move to ``q_cmd`` (6,) would give, without
         moving: the hysteresis state stays as it is. The same numbers as ``true_joints(q_cmd)``
         between ``get_state()`` and ``set_state()``, without copying the state."""
-        q_cmd = _checked_joints(q_cmd, "q_cmd")
-        return self._advance(self._motor_joints(q_cmd) if self.reports_lag else q_cmd)[1]
+        return self._advance(self._motor_joints(_checked_joints(q_cmd, "q_cmd")))[1]
 
     def _advance(self, q_cmd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(the play outputs after a move to ``q_cmd``, the noiseless true joints there)."""
@@ -332,14 +316,16 @@ class CableModel:
         return plays, q + self.instrument.homing_offsets + error
 
     def get_state(self) -> np.ndarray:
-        """A copy of the hysteresis state, (n_plays, 6); NaN before the first move."""
-        return self._plays.copy()
+        """A copy of the cables' history, (n_plays + 1, 6): the play outputs, then where the
+        motors stopped; NaN before the first move."""
+        return np.vstack([self._plays, self._motors])
 
     def set_state(self, state: np.ndarray) -> None:
         """Restore a state from get_state (all finite, or all NaN for 'no history')."""
         state = np.array(state, dtype=float)
-        if state.shape != self._plays.shape:
-            raise ValueError(f"state must have shape {self._plays.shape}, got {state.shape}")
+        shape = (len(PLAY_FRACTIONS) + 1, _N_JOINTS)
+        if state.shape != shape:
+            raise ValueError(f"state must have shape {shape}, got {state.shape}")
         if not (np.isfinite(state).all() or np.isnan(state).all()):
             raise ValueError("state must be all finite, or all NaN (no history)")
-        self._plays = state
+        self._plays, self._motors = state[:-1].copy(), state[-1].copy()

@@ -1,0 +1,86 @@
+"""The wrist that settles short of its command (BiasConfig.wrist_settle_lag): the motors, the
+cables behind them and the encoders that report them (sim.robot.cables, sim.world)."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from dvrk_gym.sim.robot import kinematics as kin
+from dvrk_gym.sim.robot.bias import BIAS_PRESETS, BiasConfig
+from dvrk_gym.sim.robot.cables import CableModel
+from dvrk_gym.sim.world import DvrkWorld, WorldConfig
+
+_DEG = np.pi / 180.0
+_START = np.array([10 * _DEG, -15 * _DEG, 0.15, -2.6, 5 * _DEG, -5 * _DEG])
+
+
+_NO_BIAS = BiasConfig()
+
+
+def _lagging(alpha: float, base: BiasConfig = _NO_BIAS) -> BiasConfig:
+    return dataclasses.replace(base, wrist_settle_lag=alpha)
+
+
+def test_a_lag_outside_zero_to_one_is_rejected_and_not_scaled() -> None:
+    for bad in (-0.1, 1.0, float("nan")):
+        with pytest.raises(ValueError, match="wrist_settle_lag"):
+            BiasConfig(wrist_settle_lag=bad)
+    assert _lagging(0.3).scaled(2.0).wrist_settle_lag == 0.3  # a fraction, not a magnitude
+
+
+def test_without_a_lag_the_encoders_report_the_command() -> None:
+    model = CableModel(BIAS_PRESETS["paper"])
+    model.reset(_START)
+    q = _START + np.array([0, 0, 0, 0, 20 * _DEG, -20 * _DEG])
+    model.true_joints(q)
+    np.testing.assert_array_equal(model.measured_joints(q), q)
+
+
+def test_the_motors_stop_a_fraction_of_the_wrist_step_short() -> None:
+    alpha = 0.4
+    model = CableModel(_lagging(alpha))
+    model.reset(_START)
+    step = np.array([0.01, 0.01, 0.001, 0.3, 20 * _DEG, -10 * _DEG])
+    model.true_joints(_START + step)
+    measured = model.measured_joints(_START + step)
+    # Only wrist pitch and wrist yaw lag; with no other error the true joints are the motors'.
+    np.testing.assert_allclose(measured - _START, step * np.array([1, 1, 1, 1, 1 - alpha, 1 - alpha]))
+    # A second move to the same command closes alpha of what is left: 0.6 + 0.4 * 0.6 = 0.84.
+    np.testing.assert_allclose(model.peek_true_joints(_START + step), _START + step * np.array([1, 1, 1, 1, 0.84, 0.84]))
+
+
+def test_the_state_carries_the_motors_so_a_restored_move_repeats_bit_for_bit() -> None:
+    model = CableModel(_lagging(0.3, BIAS_PRESETS["paper"]))
+    model.reset(_START)
+    rng = np.random.default_rng(4)
+    for _ in range(5):
+        model.true_joints(_START + rng.normal(scale=0.1, size=6) * [1, 1, 0.01, 1, 1, 1])
+    saved = model.get_state()
+    target = _START + np.array([0, 0, 0, 0.2, -15 * _DEG, 10 * _DEG])
+    expected, expected_measured = model.true_joints(target), model.measured_joints(target)
+    model.true_joints(_START)  # wander off: plays and motors move
+    model.set_state(saved)
+    np.testing.assert_array_equal(model.true_joints(target), expected)
+    np.testing.assert_array_equal(model.measured_joints(target), expected_measured)
+    with pytest.raises(ValueError, match="shape"):
+        model.set_state(saved[:-1])  # the plays alone
+
+
+def test_the_world_reports_the_lagging_wrist_and_the_tip_with_it() -> None:
+    world = DvrkWorld(WorldConfig(bias=_lagging(0.5, BIAS_PRESETS["paper"]), camera_resolution=(320, 180)))
+    try:
+        world.reset_robot(_START)
+        pose = kin.forward_kinematics(_START)
+        turned = pose.copy()
+        turned[:3, :3] = pose[:3, :3] @ np.array([[np.cos(0.3), 0, np.sin(0.3)], [0, 1, 0], [-np.sin(0.3), 0, np.cos(0.3)]])
+        world.move_to(turned)
+        reported = world.reported_pose()
+        # A turn about the tool's y axis is a wrist-pitch step: the command kept the tool
+        # frame where it was; the half-turned wrist (9.1 mm wrist offset) reports it elsewhere.
+        assert np.linalg.norm(reported[:3, 3] - pose[:3, 3]) > 0.5e-3
+        np.testing.assert_allclose(reported, kin.forward_kinematics(world.cable.measured_joints(world.q_cmd)))
+    finally:
+        world.close()
