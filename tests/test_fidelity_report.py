@@ -86,7 +86,14 @@ def test_fidelity_command_writes_finite_numbers_with_the_real_rows_in_the_real_c
     report = json.loads((out / "fidelity.json").read_text())
     assert (out / "fidelity.png").stat().st_size > 10_000
     assert sorted(p.name for p in out.iterdir()) == ["fidelity.json", "fidelity.png"]
-    assert report["settings"] == {"bias": "paper", "bias_seed": 0, "trajectories": 2, "seed": 0, "camera_resolution": [640, 360]}
+    assert report["settings"] == {
+        "bias": "paper",
+        "bias_seed": 0,
+        "wrist_settle_lag": 0.0,
+        "trajectories": 2,
+        "seed": 0,
+        "camera_resolution": [640, 360],
+    }
     real = fidelity_statistics(*load_paper_phase1()).to_dict()
     assert report["real"] == real
     assert report["sim"]["raw_rows"] == 2 * 93 and 10 <= report["sim"]["rows"] <= report["sim"]["raw_rows"]
@@ -96,3 +103,40 @@ def test_fidelity_command_writes_finite_numbers_with_the_real_rows_in_the_real_c
             continue
         assert math.isfinite(row["real"]) and math.isfinite(row["sim"]) and math.isfinite(row["value"]), row
     assert report["passed"] == sum(row["passed"] for row in report["comparison"])
+
+
+@pytest.mark.slow
+def test_a_settle_lag_makes_the_reported_position_move_between_rows_of_one_pause(tmp_path):
+    shares = {}
+    for lag in ("0", "0.3"):
+        out = tmp_path / lag
+        assert (
+            main(
+                [
+                    "fidelity",
+                    "--trajectories",
+                    "2",
+                    "--resolution",
+                    "640",
+                    "360",
+                    "--wrist-settle-lag",
+                    lag,
+                    "--out",
+                    str(out),
+                    "--no-progress",
+                ]
+            )
+            == 0
+        )
+        report = json.loads((out / "fidelity.json").read_text())
+        assert report["settings"]["wrist_settle_lag"] == float(lag)
+        shares[lag] = report["sim"]["same_position_share"]
+    # Without a lag the arm reports its command, repeated at each pause; with it the reported tip moves.
+    assert shares["0"] > 0.3 and shares["0.3"] < 0.1
+
+
+@pytest.mark.parametrize("bad", ["1.0", "-0.1", "x"])
+def test_a_settle_lag_outside_zero_to_one_is_refused(bad, capsys):
+    with pytest.raises(SystemExit) as exit_info:
+        main(["fidelity", "--wrist-settle-lag", bad])
+    assert exit_info.value.code == 2 and "fraction in [0, 1)" in capsys.readouterr().err
