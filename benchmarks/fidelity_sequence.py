@@ -10,11 +10,15 @@ pitches are correlated (0.27 against 0.06). This script measures, on the authors
    reported positions move by less than 10 mm from one to the next) the rows within 3
    degrees, on every angle, of the orientation that recurs most are those returns. Their
    spread about their median is what the reported angles scatter by for one command.
-2. Whether a dead band in the measured joints explains the correlation: the protocol's
-   pitch commands (57 trajectories of 23 pauses, the trajectory's own pitch then three
-   uniform in [-15, 25] degrees) through a play operator of half-width ``h`` (the measured
-   joint stops ``h`` short of a command it approaches), 37% of rows kept at random: the
-   spread of the returns and the lag-1 correlation of the kept pitches, per ``h``.
+2. Which model of the reported pitch gives both that spread and the real rows' pitch
+   correlation at lags 1-4. The protocol's pitch commands (57 trajectories of 23 pauses:
+   the trajectory's own pitch, three uniform in [-15, 25] degrees, and an unrecorded
+   return to its own pitch before the arm moves on), 37% of rows kept at random, through
+   (a) a dead band: a play operator of half-width ``h`` (the measured joint stops ``h``
+   short of a command it approaches); (b) a first-order lag: each move leaves a fraction
+   ``alpha`` of the previous error, ``reported = command + alpha (previous reported -
+   command)``. The best ``alpha`` matches the spread and the four correlations in least
+   squares (three seeds of the toy protocol each).
 
     python benchmarks/fidelity_sequence.py
 """
@@ -57,6 +61,30 @@ def protocol_pitches(rng: np.random.Generator, trajectories: int = 57, pauses: i
     return np.array(commands), np.array(returns).reshape(trajectories, pauses)
 
 
+def lagged(commands: np.ndarray, alpha: float, returns: np.ndarray) -> np.ndarray:
+    """Each move keeps ``alpha`` of the previous error; an unrecorded return move to the
+    trajectory's own pitch precedes every pause's first row but the trajectory's first."""
+    output, state = np.empty_like(commands), float(commands[0])
+    first_rows = set(returns[:, 1:].ravel().tolist())
+    for i, command in enumerate(commands):
+        if i in first_rows:  # the return to the own pitch, at the end of the last pause
+            state = command + alpha * (state - command)
+        state = command + alpha * (state - command)
+        output[i] = state
+    return output
+
+
+def correlations(values: np.ndarray, lags: tuple[int, ...] = (1, 2, 3, 4)) -> np.ndarray:
+    """Pearson correlations of the sequence with itself ``lag`` rows later."""
+    return np.array([np.corrcoef(values[:-lag], values[lag:])[0, 1] for lag in lags])
+
+
+def return_spread(measured: np.ndarray, returns: np.ndarray) -> float:
+    """RMS of the returns about their median per trajectory, degrees (as on the real rows)."""
+    at_returns = measured[returns]
+    return float(np.sqrt(np.mean((at_returns - np.median(at_returns, axis=1, keepdims=True)) ** 2)))
+
+
 def play(commands: np.ndarray, half_width: float) -> np.ndarray:
     """A play operator: the output follows the input only when it leaves a band of +-half_width around it."""
     output, state = np.empty_like(commands), float(commands[0])
@@ -75,15 +103,27 @@ if __name__ == "__main__":
     print(f"real rows: {len(deviations)} returns to a trajectory's own orientation")
     print(f"  reported spread about their median, RMS (yaw, pitch, roll): {rms[0]:.2f}, {rms[1]:.2f}, {rms[2]:.2f} deg")
     print(f"  pitch lag-1 correlation of the rows: {lag_one_correlation(X[:, 4]):.2f}")
-    rng = np.random.default_rng(0)
-    commands, returns = protocol_pitches(rng)
-    kept = rng.random(len(commands)) < _KEPT_SHARE
-    print("the protocol's pitch commands through a dead band of half-width h, 37% of rows kept at random:")
+    real_correlations = correlations(X[:, 4])
+    print(f"  pitch correlation at lags 1-4: {np.array2string(real_correlations, precision=2)}")
+    toys = []
+    for seed in range(3):
+        rng = np.random.default_rng(seed)
+        commands, returns = protocol_pitches(rng)
+        toys.append((commands, returns, rng.random(len(commands)) < _KEPT_SHARE))
+    print("(a) the protocol's pitch commands through a dead band of half-width h, 37% of rows kept at random (seed 0):")
+    commands, returns, kept = toys[0]
     for half_width in (0.0, 1.0, 1.5, 2.0, 3.0, 4.0, 6.0):
         measured = play(commands, half_width)
-        at_returns = measured[returns]  # (trajectories, pauses): about their median, as on the real rows
-        spread = np.sqrt(np.mean((at_returns - np.median(at_returns, axis=1, keepdims=True)) ** 2))
-        correlation = lag_one_correlation(measured[kept])
-        print(
-            f"  h {half_width:3.1f} deg: spread of the returns {spread:4.2f} deg, pitch lag-1 correlation of kept rows {correlation:+.2f}"
-        )
+        lag_one = lag_one_correlation(measured[kept])
+        spread = return_spread(measured, returns)
+        print(f"  h {half_width:3.1f} deg: spread of the returns {spread:4.2f} deg, lag-1 correlation {lag_one:+.2f}")
+    print("(b) a first-order lag, each move keeping alpha of the previous error (mean of 3 seeds):")
+    target = np.r_[rms[1], real_correlations]
+    scale = np.r_[rms[1], np.ones(4) * 0.1]  # the spread relative, the correlations in tenths
+    best = (np.inf, 0.0)
+    for alpha in np.round(np.arange(0.0, 0.61, 0.05), 2):
+        figures = np.mean([np.r_[return_spread(lagged(c, alpha, r), r), correlations(lagged(c, alpha, r)[k])] for c, r, k in toys], axis=0)
+        misfit = float(np.sum(((figures - target) / scale) ** 2))
+        best = min(best, (misfit, float(alpha)))
+        print(f"  alpha {alpha:4.2f}: spread {figures[0]:4.2f} deg, correlations at lags 1-4 {np.array2string(figures[1:], precision=2)}")
+    print(f"best alpha {best[1]:.2f} (least squares on the spread, relative, and the four correlations)")
