@@ -102,7 +102,8 @@ if __name__ == "__main__":
     rms = np.sqrt(np.mean(deviations**2, axis=0))
     print(f"real rows: {len(deviations)} returns to a trajectory's own orientation")
     print(f"  reported spread about their median, RMS (yaw, pitch, roll): {rms[0]:.2f}, {rms[1]:.2f}, {rms[2]:.2f} deg")
-    print(f"  pitch lag-1 correlation of the rows: {lag_one_correlation(X[:, 4]):.2f}")
+    yaw, pitch, roll = (lag_one_correlation(angles[:, axis]) for axis in range(3))
+    print(f"  lag-1 correlation of consecutive rows, yaw / pitch / roll: {yaw:.2f} / {pitch:.2f} / {roll:.2f}")
     real_correlations = correlations(X[:, 4])
     print(f"  pitch correlation at lags 1-4: {np.array2string(real_correlations, precision=2)}")
     toys = []
