@@ -20,6 +20,8 @@ REFERENCE = FidelityStatistics(
     view_axis_jitter_mm=5.0,
     image_plane_jitter_mm=1.0,
     jitter_pairs=90,
+    same_position_share=0.03,
+    pitch_autocorrelation=0.27,
     kept_fraction_per_yaw=(0.1, 0.3, 0.3, 0.2, 0.1),
     pitch_p5_deg=-10.0,
     pitch_p95_deg=20.0,
@@ -41,7 +43,7 @@ def test_ratios_within_25_percent_and_shares_within_006_pass():
         "kept share of raw rows",
     ):
         assert verdicts_near[name] and not verdicts_far[name], name
-    assert len(verdicts_near) == 19 and all(verdicts_near.values())
+    assert len(verdicts_near) == 21 and all(verdicts_near.values())
 
 
 def test_median_pitch_per_yaw_passes_within_5_degrees_absolute():
@@ -55,10 +57,20 @@ def test_median_pitch_per_yaw_passes_within_5_degrees_absolute():
     assert far_rows["median pitch at yaw +90 (deg)"].target == "|diff| <= 5"
 
 
+def test_pitch_autocorrelation_passes_within_01_and_same_position_within_006():
+    near = dataclasses.replace(REFERENCE, pitch_autocorrelation=0.27 - 0.099, same_position_share=0.03 + 0.059)
+    far = dataclasses.replace(REFERENCE, pitch_autocorrelation=0.27 - 0.101, same_position_share=0.03 + 0.061)
+    near_rows = {row.name: row for row in compare(REFERENCE, near, 0.37, 0.37)}
+    far_rows = {row.name: row for row in compare(REFERENCE, far, 0.37, 0.37)}
+    for name in ("pitch autocorrelation, consecutive rows", "same reported position, consecutive rows (share)"):
+        assert near_rows[name].passed and not far_rows[name].passed, name
+    assert far_rows["pitch autocorrelation, consecutive rows"].target == "|diff| <= 0.1"
+
+
 def test_cross_validation_rows_are_left_out_when_not_run():
     sim = dataclasses.replace(REFERENCE, cv_linear_mm2=None, cv_forest_mm2=None)
     names = [row.name for row in compare(REFERENCE, sim, 0.37, 0.37)]
-    assert len(names) == 17 and not any("CV" in name for name in names)
+    assert len(names) == 19 and not any("CV" in name for name in names)
 
 
 def test_atomic_write_replaces_whole_or_keeps_the_old_file(tmp_path):

@@ -8,7 +8,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from dvrk_gym.calibration.datasets import load_paper_phase1
-from dvrk_gym.fidelity.statistics import PAPER_YAWS_DEG, fidelity_statistics, rigid_residuals_camera
+from dvrk_gym.fidelity.statistics import PAPER_YAWS_DEG, SAME_POSITION_M, fidelity_statistics, lag_one_correlation, rigid_residuals_camera
 
 
 @pytest.mark.slow
@@ -19,6 +19,8 @@ def test_real_rows_give_the_issues_real_robot_column():
     assert round(stats.view_axis_share, 2) == 0.89
     assert round(stats.view_axis_jitter_mm, 1) == 5.2
     assert round(stats.image_plane_jitter_mm, 1) == 1.0
+    assert round(stats.same_position_share, 2) == 0.03
+    assert round(stats.pitch_autocorrelation, 2) == 0.27
     assert [round(f, 2) for f in stats.kept_fraction_per_yaw] == [0.13, 0.30, 0.28, 0.20, 0.09]
     assert (round(stats.pitch_p5_deg), round(stats.pitch_p95_deg)) == (-11, 21)
     assert [round(p, 1) for p in stats.pitch_median_per_yaw_deg] == [11.7, 7.6, -1.0, -3.0, -1.1]
@@ -99,3 +101,25 @@ def test_millimetres_or_degrees_are_refused(column, scale, message):
     X[:, column] *= scale
     with pytest.raises(ValueError, match=message):
         fidelity_statistics(X, y, cross_validation=False)
+
+
+def test_lag_one_correlation_of_an_autoregressive_sequence_is_its_coefficient():
+    rng = np.random.default_rng(3)
+    values = np.zeros(20000)
+    for i in range(1, values.size):
+        values[i] = 0.6 * values[i - 1] + rng.normal()
+    assert lag_one_correlation(values) == pytest.approx(0.6, abs=0.02)
+    assert lag_one_correlation(rng.normal(size=20000)) == pytest.approx(0.0, abs=0.03)
+    assert lag_one_correlation(np.full(10, 0.2)) == 0.0
+    with pytest.raises(ValueError, match="at least 2"):
+        lag_one_correlation(np.array([1.0]))
+
+
+def test_rows_repeating_their_reported_position_count_as_same_position():
+    X, y = _synthetic_rows(np.zeros(3), rows=400)
+    assert fidelity_statistics(X, y, cross_validation=False).same_position_share < 0.02  # a 1 mm walk rarely stays put
+    y[1::2] = y[0::2] + SAME_POSITION_M / 2  # every other row within the threshold of the one before
+    stats = fidelity_statistics(X, y, cross_validation=False)
+    assert 200 / 399 <= stats.same_position_share < 200 / 399 + 0.02
+    X[:, 4] = np.repeat(X[0::2, 4], 2)  # pairs of rows share their pitch
+    assert fidelity_statistics(X, y, cross_validation=False).pitch_autocorrelation > 0.4

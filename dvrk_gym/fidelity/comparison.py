@@ -3,7 +3,8 @@ statistics of both, and a verdict per statistic against the issue 15 targets.
 
 Targets: every statistic within ``RELATIVE_TOLERANCE`` (25%) of the real value, every
 share (a fraction of rows or of residual energy) within ``SHARE_TOLERANCE`` (0.06) of it,
-and every per-yaw median pitch within ``PITCH_MEDIAN_TOLERANCE_DEG`` (5 degrees: a quarter
+the pitch autocorrelation within ``CORRELATION_TOLERANCE`` (0.1) of it, and every per-yaw
+median pitch within ``PITCH_MEDIAN_TOLERANCE_DEG`` (5 degrees: a quarter
 of the half-range of the paper's pitches, -15 to 25 degrees) of it.
 """
 
@@ -24,6 +25,7 @@ __all__ = [
     "RELATIVE_TOLERANCE",
     "SHARE_TOLERANCE",
     "PITCH_MEDIAN_TOLERANCE_DEG",
+    "CORRELATION_TOLERANCE",
     "ComparisonRow",
     "FidelityRun",
     "compare",
@@ -36,6 +38,9 @@ SHARE_TOLERANCE = 0.06
 """A share passes when |sim - real| is at most this (absolute)."""
 PITCH_MEDIAN_TOLERANCE_DEG = 5.0
 """A per-yaw median pitch passes when |sim - real| is at most this, degrees (absolute)."""
+CORRELATION_TOLERANCE = 0.1
+"""A correlation passes when |sim - real| is at most this (absolute): about four standard
+errors of a correlation over 1,939 rows."""
 REAL_KEPT_SHARE = paper.PHASE1_KEPT_SAMPLES / paper.PHASE1_RAW_SAMPLES
 """The real Phase I's kept share of raw rows (1939 of 5256)."""
 
@@ -95,6 +100,8 @@ def compare(real: FidelityStatistics, sim: FidelityStatistics, real_kept_share: 
         _row("residual share along view axis", real.view_axis_share, sim.view_axis_share, True),
         _row("jitter along view axis (mm)", real.view_axis_jitter_mm, sim.view_axis_jitter_mm, False),
         _row("jitter in image plane (mm)", real.image_plane_jitter_mm, sim.image_plane_jitter_mm, False),
+        _row("same reported position, consecutive rows (share)", real.same_position_share, sim.same_position_share, True),
+        _row("pitch autocorrelation, consecutive rows", real.pitch_autocorrelation, sim.pitch_autocorrelation, True, CORRELATION_TOLERANCE),
     ]
     for yaw, real_fraction, sim_fraction in zip(PAPER_YAWS_DEG, real.kept_fraction_per_yaw, sim.kept_fraction_per_yaw):
         rows.append(_row(f"kept rows at yaw {yaw:+.0f} (share)", real_fraction, sim_fraction, True))

@@ -15,7 +15,14 @@ from typing import Any
 import numpy as np
 from matplotlib.figure import Figure
 
-from dvrk_gym.fidelity.comparison import PITCH_MEDIAN_TOLERANCE_DEG, RELATIVE_TOLERANCE, SHARE_TOLERANCE, ComparisonRow, FidelityRun
+from dvrk_gym.fidelity.comparison import (
+    CORRELATION_TOLERANCE,
+    PITCH_MEDIAN_TOLERANCE_DEG,
+    RELATIVE_TOLERANCE,
+    SHARE_TOLERANCE,
+    ComparisonRow,
+    FidelityRun,
+)
 from dvrk_gym.fidelity.statistics import PAPER_YAWS_DEG, rigid_residuals_camera
 from dvrk_gym.utils.atomic import atomic_savefig, atomic_write_text
 
@@ -52,7 +59,7 @@ def format_table(run: FidelityRun) -> str:
     lines.append(
         f"{run.passed} of {len(run.rows)} statistics within target "
         f"(ratio within {RELATIVE_TOLERANCE:.0%}, shares within {SHARE_TOLERANCE:.2f} absolute, "
-        f"median pitches within {PITCH_MEDIAN_TOLERANCE_DEG:.0f} degrees)"
+        f"the pitch autocorrelation within {CORRELATION_TOLERANCE:.1f}, median pitches within {PITCH_MEDIAN_TOLERANCE_DEG:.0f} degrees)"
     )
     return "\n".join(lines)
 
@@ -70,6 +77,7 @@ def report_dict(run: FidelityRun) -> dict[str, Any]:
             "relative_tolerance": RELATIVE_TOLERANCE,
             "share_tolerance": SHARE_TOLERANCE,
             "pitch_median_tolerance_deg": PITCH_MEDIAN_TOLERANCE_DEG,
+            "correlation_tolerance": CORRELATION_TOLERANCE,
         },
         "real": run.real.to_dict(),
         "sim": {**run.sim.to_dict(), "raw_rows": run.sim_raw_rows},

@@ -7,7 +7,8 @@ and the robot's reported orientation in radians; ``y`` is (bx, by, bz), the repo
 position in metres; rows are in collection order.
 
 Definitions (the issue 15 table; on the authors' 1939 rows they give 6.6 mm, 0.89, 5.2 mm,
-1.0 mm, .13/.30/.28/.20/.09, -11 to 21 deg and 3.76 / 5.0 mm^2):
+1.0 mm, .13/.30/.28/.20/.09, -11 to 21 deg and 3.76 / 5.0 mm^2; beyond the table, a same
+reported position for 0.03 of consecutive pairs and a pitch autocorrelation of 0.27):
 
 - Rigid residual: for each nearest paper yaw (-90, -45, 0, 45, 90 deg) a least-squares
   rigid transform ``b ~= R c + t`` (:class:`RigidBodyCalibrator`, the paper's RBT); the
@@ -20,6 +21,12 @@ Definitions (the issue 15 table; on the authors' 1939 rows they give 6.6 mm, 0.8
   one: across a larger jump, between trajectories or past many dropped rows, the smooth
   cable bias changes too). Along the view axis the RMS is of ``r_z``; in the image plane it
   is of ``r_x`` and ``r_y`` pooled, so both are per-axis figures.
+- Same reported position: the share of consecutive rows whose reported base positions lie
+  within ``SAME_POSITION_M`` of each other. The authors' protocol commands four orientations
+  at every pause of the arm's path, so a robot that reports its command repeats the
+  position up to three times a pause; the real rows do so for 3% of their pairs.
+- Pitch autocorrelation: the correlation of consecutive rows' pitch (lag 1). The protocol
+  draws each random orientation afresh; the real rows' consecutive pitches are correlated.
 - Kept rows per nearest yaw: the fraction of rows whose yaw is nearest each paper yaw.
 - Pitch of kept rows: the 5th and 95th percentiles, degrees in the report.
 - Cross-validation as the authors ran it: ``CV_FOLDS`` contiguous, unshuffled folds
@@ -50,9 +57,11 @@ __all__ = [
     "CV_FOLDS",
     "CV_FOREST_TREES",
     "JITTER_MAX_STEP_M",
+    "SAME_POSITION_M",
     "PAPER_YAWS_DEG",
     "FidelityStatistics",
     "consecutive_pairs",
+    "lag_one_correlation",
     "contiguous_cv_mse_mm2",
     "fidelity_statistics",
     "rigid_residuals_camera",
@@ -60,6 +69,9 @@ __all__ = [
 
 JITTER_MAX_STEP_M = 0.010
 """Consecutive rows count for the jitter when their reported base positions are this close, m."""
+SAME_POSITION_M = 0.0002
+"""Consecutive rows whose reported base positions lie this close count as one position, m
+(the real rows' steps between pauses are about 1 mm)."""
 CV_FOLDS = 10
 """Folds of the authors' cross-validation (contiguous, unshuffled)."""
 CV_FOREST_TREES = 100
@@ -86,6 +98,10 @@ class FidelityStatistics:
         view_axis_jitter_mm: sample-to-sample jitter along camera z, mm.
         image_plane_jitter_mm: sample-to-sample jitter per image-plane axis (camera x, y), mm.
         jitter_pairs: consecutive row pairs the jitter was measured on.
+        same_position_share: share of consecutive row pairs whose reported base positions
+            lie within ``SAME_POSITION_M`` of each other, in [0, 1].
+        pitch_autocorrelation: correlation of consecutive rows' pitch (lag 1), in [-1, 1]
+            (0 when the pitch does not vary).
         kept_fraction_per_yaw: fraction of rows nearest each of ``PAPER_YAWS_DEG``.
         pitch_p5_deg: 5th percentile of the rows' pitch, degrees.
         pitch_p95_deg: 95th percentile of the rows' pitch, degrees.
@@ -103,6 +119,8 @@ class FidelityStatistics:
     view_axis_jitter_mm: float
     image_plane_jitter_mm: float
     jitter_pairs: int
+    same_position_share: float
+    pitch_autocorrelation: float
     kept_fraction_per_yaw: tuple[float, ...]
     pitch_p5_deg: float
     pitch_p95_deg: float
@@ -153,6 +171,20 @@ def consecutive_pairs(y: np.ndarray, max_step_m: float = JITTER_MAX_STEP_M) -> n
     return np.flatnonzero(steps <= max_step_m)
 
 
+def lag_one_correlation(values: np.ndarray) -> float:
+    """Pearson correlation of consecutive values (lag 1); 0 when either side does not vary.
+
+    Args:
+        values: (N,) a sequence, N >= 2 (any unit: the correlation has none).
+    """
+    values = np.asarray(values, dtype=float)
+    if values.ndim != 1 or values.size < 2:
+        raise ValueError(f"values must be a sequence of at least 2 numbers, got shape {values.shape}")
+    earlier, later = values[:-1] - values[:-1].mean(), values[1:] - values[1:].mean()
+    scale = np.sqrt(np.sum(earlier**2) * np.sum(later**2))
+    return float(np.sum(earlier * later) / scale) if scale > 0.0 else 0.0
+
+
 def contiguous_cv_mse_mm2(make: Callable[[], Regressor], X: np.ndarray, y: np.ndarray, folds: int = CV_FOLDS) -> float:
     """Mean over contiguous, unshuffled folds of the held-out mean squared L2 error, mm^2
     (the model search's :func:`~dvrk_gym.calibration.search.cross_validate`, unshuffled)."""
@@ -188,6 +220,7 @@ def fidelity_statistics(
     if pairs.size == 0:
         raise ValueError(f"no consecutive rows lie within {JITTER_MAX_STEP_M} m of each other; the jitter needs at least one pair")
     jumps = residual[pairs + 1] - residual[pairs]
+    steps = np.linalg.norm(np.diff(y, axis=0), axis=1)
     groups = nearest_yaw_index(X[:, 3])
     pitch_deg = np.rad2deg(X[:, 4])
     linear = forest = None
@@ -203,6 +236,8 @@ def fidelity_statistics(
         view_axis_jitter_mm=float(np.sqrt(np.mean(jumps[:, 2] ** 2) / 2.0) * _M_TO_MM),
         image_plane_jitter_mm=float(np.sqrt(np.mean(jumps[:, :2] ** 2) / 2.0) * _M_TO_MM),
         jitter_pairs=int(pairs.size),
+        same_position_share=float(np.mean(steps <= SAME_POSITION_M)),
+        pitch_autocorrelation=lag_one_correlation(X[:, 4]),
         kept_fraction_per_yaw=tuple(float(f) for f in np.bincount(groups, minlength=len(PAPER_YAWS_RAD)) / X.shape[0]),
         pitch_p5_deg=float(np.percentile(pitch_deg, PITCH_PERCENTILES[0])),
         pitch_p95_deg=float(np.percentile(pitch_deg, PITCH_PERCENTILES[1])),
