@@ -2,7 +2,10 @@
 
 The dVRK controller turns a commanded tool pose into joint commands with the *nominal*
 inverse kinematics, and its encoders (at the motors) report those commands, so the
-reported pose is ``forward_kinematics(q_cmd, PSM_DH)``. Between the motors and the joints
+reported pose is ``forward_kinematics(q_cmd, PSM_DH)``; unless the wrist settles short
+(``BiasConfig.wrist_settle_lag``): then the wrist motors stop short of their commands, the
+encoders report where (:meth:`CableModel.measured_joints`), and the cables follow the
+motors. Between the motors and the joints
 run cables that stretch, slip and stick; the instrument itself is machined to a
 tolerance. :class:`CableModel` turns the commands, and their history, into the joint
 angles the arm really takes, ``q_true``; with the instrument's real DH table
