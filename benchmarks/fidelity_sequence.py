@@ -27,6 +27,7 @@ import numpy as np
 
 from dvrk_gym.calibration.datasets import load_paper_phase1
 from dvrk_gym.fidelity.statistics import JITTER_MAX_STEP_M, lag_one_correlation
+from dvrk_gym.sim.robot.cables import play_update
 
 _CLUSTER_DEG = 3.0
 _MIN_RETURNS = 4
@@ -86,11 +87,12 @@ def return_spread(measured: np.ndarray, returns: np.ndarray) -> float:
 
 
 def play(commands: np.ndarray, half_width: float) -> np.ndarray:
-    """A play operator: the output follows the input only when it leaves a band of +-half_width around it."""
-    output, state = np.empty_like(commands), float(commands[0])
+    """The simulator's play operator (:func:`~dvrk_gym.sim.robot.cables.play_update`) run
+    over a sequence: the output follows the input only when it leaves a band of +-half_width around it."""
+    output, state = np.empty_like(commands), np.array(commands[:1])
     for i, command in enumerate(commands):
-        state = min(max(state, command - half_width), command + half_width)
-        output[i] = state
+        state = play_update(state, command, half_width)
+        output[i] = state[0]
     return output
 
 

@@ -167,8 +167,12 @@ def rigid_residuals_camera(X: np.ndarray, y: np.ndarray) -> np.ndarray:
 
 def consecutive_pairs(y: np.ndarray, max_step_m: float = JITTER_MAX_STEP_M) -> np.ndarray:
     """Indices ``i`` such that rows ``i`` and ``i + 1`` are within ``max_step_m`` in base position."""
-    steps = np.linalg.norm(np.diff(np.asarray(y, dtype=float), axis=0), axis=1)
-    return np.flatnonzero(steps <= max_step_m)
+    return np.flatnonzero(_steps(y) <= max_step_m)
+
+
+def _steps(y: np.ndarray) -> np.ndarray:
+    """(N - 1,) distance between consecutive reported base positions, m."""
+    return np.linalg.norm(np.diff(np.asarray(y, dtype=float), axis=0), axis=1)
 
 
 def lag_one_correlation(values: np.ndarray) -> float:
@@ -180,9 +184,10 @@ def lag_one_correlation(values: np.ndarray) -> float:
     values = np.asarray(values, dtype=float)
     if values.ndim != 1 or values.size < 2:
         raise ValueError(f"values must be a sequence of at least 2 numbers, got shape {values.shape}")
-    earlier, later = values[:-1] - values[:-1].mean(), values[1:] - values[1:].mean()
-    scale = np.sqrt(np.sum(earlier**2) * np.sum(later**2))
-    return float(np.sum(earlier * later) / scale) if scale > 0.0 else 0.0
+    earlier, later = values[:-1], values[1:]
+    if np.ptp(earlier) == 0.0 or np.ptp(later) == 0.0:  # np.corrcoef would divide by zero
+        return 0.0
+    return float(np.corrcoef(earlier, later)[0, 1])
 
 
 def contiguous_cv_mse_mm2(make: Callable[[], Regressor], X: np.ndarray, y: np.ndarray, folds: int = CV_FOLDS) -> float:
@@ -216,11 +221,11 @@ def fidelity_statistics(
         raise ValueError(f"X has {X.shape[0]} rows; the statistics need at least {max(folds, 2)} (folds={folds})")
     residual = rigid_residuals_camera(X, y)
     energy = np.sum(residual**2, axis=0)
-    pairs = consecutive_pairs(y)
+    steps = _steps(y)
+    pairs = np.flatnonzero(steps <= JITTER_MAX_STEP_M)  # consecutive_pairs(y), from the steps it needs anyway
     if pairs.size == 0:
         raise ValueError(f"no consecutive rows lie within {JITTER_MAX_STEP_M} m of each other; the jitter needs at least one pair")
     jumps = residual[pairs + 1] - residual[pairs]
-    steps = np.linalg.norm(np.diff(y, axis=0), axis=1)
     groups = nearest_yaw_index(X[:, 3])
     pitch_deg = np.rad2deg(X[:, 4])
     linear = forest = None

@@ -260,11 +260,12 @@ class CableModel:
     def measured_joints(self, q_cmd: np.ndarray) -> np.ndarray:
         """The joints (6,) rad / m the encoders read after the last move, whose command was ``q_cmd``.
 
-        ``q_cmd`` itself (a copy) unless the wrist settles short of its commands
-        (``BiasConfig.wrist_settle_lag`` > 0) and a move was made: then where the motors stopped.
+        ``q_cmd`` itself (not a copy: read it, do not modify it) unless the wrist settles
+        short of its commands (``BiasConfig.wrist_settle_lag`` > 0) and a move was made:
+        then a copy of where the motors stopped.
         """
         if self._settle_lag == 0.0 or np.isnan(self._motors).any():
-            return np.array(q_cmd, dtype=float)
+            return q_cmd
         return self._motors.copy()
 
     def _motor_joints(self, q_cmd: np.ndarray) -> np.ndarray:
