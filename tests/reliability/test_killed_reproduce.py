@@ -20,11 +20,20 @@ def _start(profile_path, out, log):
     return subprocess.Popen(cli_command(*arguments), stdout=log, stderr=subprocess.STDOUT, env=environment(), cwd=ROOT)
 
 
+def _command_line(process: psutil.Process) -> str:
+    """The process's command line, or "" once it has ended or is a zombie (a child that
+    exits while the run's processes are listed: a race, not a worker)."""
+    try:
+        return " ".join(process.cmdline())
+    except psutil.NoSuchProcess:  # ZombieProcess included
+        return ""
+
+
 def _wait_for_workers_and_a_result(parent: psutil.Process, out, timeout_s: float = 240.0) -> list[psutil.Process]:
     """The run's processes once both workers run and at least one task result is cached."""
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
-        workers = [p for p in parent.children(recursive=True) if "spawn_main" in " ".join(p.cmdline())]
+        workers = [p for p in parent.children(recursive=True) if "spawn_main" in _command_line(p)]
         if len(workers) >= 2 and any((out / "tasks").glob("*.json")):
             return parent.children(recursive=True)
         time.sleep(0.2)
@@ -42,7 +51,7 @@ def test_sigkill_leaves_no_worker_and_the_rerun_matches_an_uninterrupted_run(tmp
         first.send_signal(signal.SIGKILL)
         first.wait()
     _, alive = psutil.wait_procs(children, timeout=15)
-    assert not alive, f"processes outlived the killed run: {[(p.pid, p.cmdline()[-1]) for p in alive]}"
+    assert not alive, f"processes outlived the killed run: {[(p.pid, _command_line(p)) for p in alive]}"
     assert not (out / "results.json").exists()
 
     again = subprocess.run(
