@@ -6,15 +6,16 @@ offsets, cable stretch, backlash; :mod:`dvrk_gym.fidelity.instrument_model`) to 
 bootstrap sd, and the pixel and camera-frame residuals on the training and the held-out
 rows, against the camera-and-tape fit alone. Then the red-tape detector's error from the
 rows' row differences, the robot's repeatability from the image-plane jitter the rest
-leaves on the real rows, and, with one simulated Phase I, the detector's misses from the
-share of rows kept. The values in
+leaves on the real rows, the reported pose's lag from how often consecutive rows report
+the same position (six simulated Phase I collections, one per lag of a grid), and, with one
+more, the detector's misses from the share of rows kept. The values in
 :mod:`dvrk_gym.sim.identified` come from this script's output.
 
 Usage:
     python benchmarks/identify_instrument.py [--bootstrap 16] [--out identified.json]
 
-About 2 minutes for the fits and 1 for the simulated Phase I, plus about 30 s per bootstrap
-replicate (one core of a loaded machine).
+About 2 minutes for the fits, 1 per simulated Phase I (seven), plus about 30 s per
+bootstrap replicate (one core).
 """
 
 from __future__ import annotations
@@ -36,6 +37,7 @@ from dvrk_gym.fidelity.identify import (
     detector_plane_noise_mm,
     fit_parameters,
     match_miss_probability,
+    match_settle_lag,
     model_jitter_mm,
     repeatability_from_jitter,
     residual_rms,
@@ -112,7 +114,12 @@ def main() -> None:
         f"detector {detector_mm:.3f}: repeatability {repeatability * 1e3:.3f} mm RMS across the shaft"
     )
     print(f"view-axis jitter (mm): real rows {real.view_axis_jitter_mm:.3f}, fitted model alone on them {view_jitter:.3f}")
-    miss = match_miss_probability()
+    lag = match_settle_lag()
+    print(f"\nsame-position share of consecutive rows: real {lag.real_share:.4f}")
+    for value, share, correlation in zip(lag.lags, lag.sim_shares, lag.sim_pitch_autocorrelations):
+        print(f"  simulated Phase I, settle lag {value:.2f}: share {share:.4f}, pitch autocorrelation {correlation:.3f}")
+    print(f"wrist settle lag: {lag.wrist_settle_lag:.2f} (the first whose share falls to the real one)")
+    miss = match_miss_probability(wrist_settle_lag=lag.wrist_settle_lag)
     print(
         f"simulated Phase I (identified instrument, no repeatability, no misses): kept share {miss.sim_kept_share:.3f} "
         f"(real {miss.real_kept_share:.3f}): detector miss probability {miss.miss_probability:.3f}; "
@@ -121,6 +128,7 @@ def main() -> None:
     results.update(
         detector_noise={"core_px": noise.core_px, "outlier_px": noise.outlier_px, "outlier_probability": noise.outlier_probability},
         repeatability_m=repeatability,
+        settle_lag=dataclasses.asdict(lag),
         miss=dataclasses.asdict(miss),
     )
     if args.out is not None:

@@ -99,12 +99,18 @@ def test_paper_rigid_fit_leaves_the_identified_robots_residual(paper_statistics:
     assert paper_statistics["raw_mean_m"] > paper_statistics["rigid_mean_m"]
 
 
-def test_paper_smooth_model_learns_the_cables_but_not_the_noise() -> None:
-    quiet = CableModel(dataclasses.replace(BIAS_PRESETS["paper"], repeatability_m=0.0), bias_seed=0)
-    statistics = bias_statistics(quiet, np.random.default_rng(1), STATISTICS_SAMPLES)
-    # Measured: 0.79 mm after the rigid fits, 0.47 mm after a smooth model (the wrist's
-    # hysteresis is left); with the identified repeatability both rise to about 1.3 mm.
-    assert statistics["smooth_mean_m"] < 0.7 * statistics["rigid_mean_m"]
+@pytest.mark.parametrize(("lag", "share_left"), [(0.0, 0.7), (None, 0.8)], ids=["no settle lag", "paper's settle lag"])
+def test_paper_smooth_model_learns_the_cables_but_not_the_noise(lag: float | None, share_left: float) -> None:
+    config = dataclasses.replace(BIAS_PRESETS["paper"], repeatability_m=0.0)
+    if lag is not None:
+        config = dataclasses.replace(config, wrist_settle_lag=lag)
+    statistics = bias_statistics(CableModel(config, bias_seed=0), np.random.default_rng(1), STATISTICS_SAMPLES)
+    # Measured (rng seeds 1-3): without the settle lag 0.76-0.79 mm after the rigid fits and
+    # 0.47-0.48 mm after a smooth model (0.60-0.61 of it: the wrist's hysteresis is left);
+    # with the paper's lag 0.69-0.71 and 0.49-0.53 mm (0.71-0.75), since where the motors
+    # stopped moves the wrist's backlash, which no function of the reported pose knows.
+    # With the identified repeatability both rise to about 1.3 mm.
+    assert statistics["smooth_mean_m"] < share_left * statistics["rigid_mean_m"]
     assert 0.3 * MM <= statistics["smooth_mean_m"] <= 0.7 * MM
 
 

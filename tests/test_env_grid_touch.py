@@ -115,7 +115,8 @@ def test_bad_config_values_are_clear_errors(make_env):
 
 
 def test_reset_lifts_from_the_last_touch_and_stays_put_without_one(make_env):
-    env = make_env("dvrk_gym/GridTouch-v0")
+    # Without the settle lag, so that the reported pose is the command and the lift is exact.
+    env = make_env("dvrk_gym/GridTouch-v0", bias=dataclasses.replace(BIAS_PRESETS["paper"], wrist_settle_lag=0.0))
     obs, _ = env.reset(seed=0)
     home = obs["observation"][:3].copy()
     _, _, _, _, info = env.step(_nominal_action(env, 0))

@@ -11,6 +11,7 @@ from dvrk_gym.calibration.datasets import load_paper_phase1
 from dvrk_gym.cli.main import main
 from dvrk_gym.fidelity.comparison import SHARE_TOLERANCE, compare
 from dvrk_gym.fidelity.statistics import FidelityStatistics, fidelity_statistics
+from dvrk_gym.sim import identified
 from dvrk_gym.utils.atomic import atomic_path, atomic_write_text
 
 REFERENCE = FidelityStatistics(
@@ -101,7 +102,7 @@ def test_fidelity_command_writes_finite_numbers_with_the_real_rows_in_the_real_c
     assert report["settings"] == {
         "bias": "paper",
         "bias_seed": 0,
-        "wrist_settle_lag": 0.0,
+        "wrist_settle_lag": identified.WRIST_SETTLE_LAG,  # the preset's own
         "trajectories": 2,
         "seed": 0,
         "camera_resolution": [640, 360],

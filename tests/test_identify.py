@@ -8,7 +8,16 @@ import pytest
 from dvrk_gym import paper
 from dvrk_gym.calibration.datasets import load_paper_phase1
 from dvrk_gym.fidelity import detector_noise
-from dvrk_gym.fidelity.identify import CAMERA_AND_TAPE, fit_parameters, repeatability_from_jitter, residual_rms, split, start_camera_pose
+from dvrk_gym.fidelity.identify import (
+    CAMERA_AND_TAPE,
+    first_crossing,
+    fit_parameters,
+    match_settle_lag,
+    repeatability_from_jitter,
+    residual_rms,
+    split,
+    start_camera_pose,
+)
 from dvrk_gym.fidelity.instrument_model import (
     PARAMETER_NAMES,
     _wrist_yaw_frames,
@@ -123,3 +132,34 @@ def test_a_camera_and_tape_fit_from_the_start_finds_the_paper_camera(rows):
 def test_repeatability_takes_what_the_model_and_detector_leave_of_the_jitter():
     assert repeatability_from_jitter(1.0, 0.6, 0.0) == pytest.approx(0.8e-3 * np.sqrt(2))
     assert repeatability_from_jitter(0.5, 0.6, 0.1) == 0.0
+
+
+def test_the_settle_lag_is_the_first_of_the_grid_whose_share_falls_to_the_real_one():
+    lags = (0.1, 0.2, 0.3)
+    assert first_crossing(lags, (0.09, 0.03, 0.02), 0.0304) == 0.2
+    assert first_crossing(lags, (0.09, 0.04, 0.0304), 0.0304) == 0.3  # at most the target
+    assert first_crossing(lags, (0.01, 0.04, 0.02), 0.0304) == 0.1  # the first, not the closest
+    with pytest.raises(ValueError, match="extend the grid"):
+        first_crossing(lags, (0.09, 0.05, 0.04), 0.0304)
+    with pytest.raises(ValueError, match="increase"):
+        first_crossing((0.2, 0.1, 0.3), (0.09, 0.03, 0.02), 0.0304)
+    with pytest.raises(ValueError, match="one share per lag"):
+        first_crossing(lags, (0.09, 0.03), 0.0304)
+
+
+def test_settle_lag_match_collects_at_each_lag_and_a_larger_lag_reports_fewer_repeats():
+    # Two short collections: without a lag the paused positions repeat; with a large one
+    # the lagging wrist moves the reported tip between the rows of one pause.
+    match = match_settle_lag(lags=(0.0, 0.6), n_trajectories=3)
+    assert match.lags == (0.0, 0.6) and len(match.sim_shares) == len(match.sim_pitch_autocorrelations) == 2
+    assert match.real_share == pytest.approx(0.0304, abs=5e-4)
+    assert match.sim_shares[0] > 0.2 > match.sim_shares[1]
+    assert match.wrist_settle_lag == 0.6
+
+
+def test_the_identified_lag_is_the_paper_presets_and_within_the_grid():
+    from dvrk_gym.fidelity.identify import SETTLE_LAG_GRID
+    from dvrk_gym.sim.robot.bias import BIAS_PRESETS
+
+    assert BIAS_PRESETS["paper"].wrist_settle_lag == identified.WRIST_SETTLE_LAG
+    assert identified.WRIST_SETTLE_LAG in SETTLE_LAG_GRID

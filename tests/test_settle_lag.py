@@ -8,6 +8,7 @@ import dataclasses
 import numpy as np
 import pytest
 
+from dvrk_gym.sim import identified
 from dvrk_gym.sim.robot import kinematics as kin
 from dvrk_gym.sim.robot.bias import BIAS_PRESETS, BiasConfig
 from dvrk_gym.sim.robot.cables import CableModel
@@ -31,8 +32,14 @@ def test_a_lag_outside_zero_to_one_is_rejected_and_not_scaled() -> None:
     assert _lagging(0.3).scaled(2.0).wrist_settle_lag == 0.3  # a fraction, not a magnitude
 
 
+def test_the_paper_preset_carries_the_identified_lag_and_severe_keeps_it() -> None:
+    assert BIAS_PRESETS["paper"].wrist_settle_lag == identified.WRIST_SETTLE_LAG > 0.0
+    assert BIAS_PRESETS["severe"].wrist_settle_lag == identified.WRIST_SETTLE_LAG
+    assert BIAS_PRESETS["none"].wrist_settle_lag == 0.0
+
+
 def test_without_a_lag_the_encoders_report_the_command() -> None:
-    model = CableModel(BIAS_PRESETS["paper"])
+    model = CableModel(_lagging(0.0, BIAS_PRESETS["paper"]))
     model.reset(_START)
     q = _START + np.array([0, 0, 0, 0, 20 * _DEG, -20 * _DEG])
     model.true_joints(q)

@@ -153,7 +153,7 @@ class FidelityRun:
 def run_fidelity(
     bias: str = "paper",
     bias_seed: int = 0,
-    wrist_settle_lag: float = 0.0,
+    wrist_settle_lag: float | None = None,
     n_trajectories: int = paper.PHASE1_TRAJECTORIES,
     seed: int = 0,
     camera_resolution: tuple[int, int] = paper.ENDOSCOPE_RESOLUTION_PX,
@@ -165,7 +165,8 @@ def run_fidelity(
         bias: the cable bias preset of the simulated instrument.
         bias_seed: which instrument.
         wrist_settle_lag: the preset with this ``BiasConfig.wrist_settle_lag`` instead
-            (the fraction of each wrist step the motors leave undone, in [0, 1)).
+            of its own (the fraction of each wrist step the motors leave undone, in
+            [0, 1); ``paper``'s is 0.25); None: the preset's.
         n_trajectories: Phase I trajectories (the paper: 57; about 35-50 s at 1920 x 1080).
         seed: seeds the exploration and the episodes, and the cross-validated forest.
         camera_resolution: the endoscope's image size (width, height), pixels.
@@ -174,12 +175,15 @@ def run_fidelity(
     Raises:
         ValueError: when the simulation keeps too few rows for the statistics.
     """
-    if wrist_settle_lag and bias not in BIAS_PRESETS:
+    if bias not in BIAS_PRESETS:
         raise ValueError(f"unknown bias preset {bias!r}; the presets are {sorted(BIAS_PRESETS)}")
+    config = BIAS_PRESETS[bias]
+    if wrist_settle_lag is not None:
+        config = dataclasses.replace(config, wrist_settle_lag=wrist_settle_lag)
     data = run_paper_phase1(
         n_trajectories,
         seed,
-        bias=dataclasses.replace(BIAS_PRESETS[bias], wrist_settle_lag=wrist_settle_lag) if wrist_settle_lag else bias,
+        bias=config,
         bias_seed=bias_seed,
         camera_resolution=(int(camera_resolution[0]), int(camera_resolution[1])),
         progress=progress,
@@ -191,7 +195,7 @@ def run_fidelity(
     settings: dict[str, object] = {
         "bias": bias,
         "bias_seed": int(bias_seed),
-        "wrist_settle_lag": float(wrist_settle_lag),
+        "wrist_settle_lag": float(config.wrist_settle_lag),
         "trajectories": int(n_trajectories),
         "seed": int(seed),
         "camera_resolution": [int(v) for v in camera_resolution],

@@ -18,6 +18,10 @@ collection order) and judged on the held-out rest:
    the detector leave on the real rows (:func:`repeatability_from_jitter`), and the
    detector's misses, from the share of rows kept against a simulated Phase I
    (:func:`match_miss_probability`).
+4. The reported pose's lag (``BiasConfig.wrist_settle_lag``), from how often consecutive
+   real rows report the same position, against simulated Phase I collections over a grid
+   of lags (:func:`match_settle_lag`). It runs before the misses are matched again: the lag
+   changes which orientations keep their tape in view.
 
 ``python benchmarks/identify_instrument.py`` runs it all and prints every figure quoted in
 :mod:`dvrk_gym.sim.identified`.
@@ -34,7 +38,8 @@ from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
 from dvrk_gym import paper
-from dvrk_gym.calibration.phase1 import PaperExplorationPolicy, collect_phase1
+from dvrk_gym.calibration.datasets import load_paper_phase1
+from dvrk_gym.calibration.phase1 import PaperExplorationPolicy, collect_phase1, run_paper_phase1
 from dvrk_gym.envs.exploration import CalibrationExplorationEnv
 from dvrk_gym.fidelity.instrument_model import PARAMETERS, initial_vector, predict_camera_points, predict_pixels
 from dvrk_gym.fidelity.statistics import fidelity_statistics
@@ -57,6 +62,10 @@ __all__ = [
     "repeatability_from_jitter",
     "MissMatch",
     "match_miss_probability",
+    "SETTLE_LAG_GRID",
+    "SettleLagMatch",
+    "first_crossing",
+    "match_settle_lag",
 ]
 
 logger = logging.getLogger(__name__)
@@ -226,15 +235,20 @@ class MissMatch:
     sim_plane_jitter_mm: float
 
 
-def match_miss_probability(n_trajectories: int = paper.PHASE1_TRAJECTORIES, seed: int = 0) -> MissMatch:
+def match_miss_probability(
+    n_trajectories: int = paper.PHASE1_TRAJECTORIES, seed: int = 0, wrist_settle_lag: float | None = None
+) -> MissMatch:
     """The detector's misses from the share of rows kept, with one simulated Phase I.
 
-    Collects the paper's Phase I on the identified instrument (without repeatability)
-    with a detector that never misses. A miss in either camera loses a row, so the kept
-    share goes as (1 - miss)^2: miss = 1 - sqrt(real share / simulated share). (The rows
-    cannot tell a missed detection from one the 12 px gate threw out.)
+    Collects the paper's Phase I on the identified instrument (without repeatability;
+    with the ``paper`` preset's settle lag, or ``wrist_settle_lag`` when given) with a
+    detector that never misses. A miss in either camera loses a row, so the kept share
+    goes as (1 - miss)^2: miss = 1 - sqrt(real share / simulated share). (The rows cannot
+    tell a missed detection from one the 12 px gate threw out.)
     """
     config = dataclasses.replace(BIAS_PRESETS["paper"], repeatability_m=0.0)
+    if wrist_settle_lag is not None:
+        config = dataclasses.replace(config, wrist_settle_lag=wrist_settle_lag)
     env = CalibrationExplorationEnv(bias=config, max_steps=paper.PHASE1_POSES_PER_TRAJECTORY)
     try:
         world = env.world
@@ -248,3 +262,71 @@ def match_miss_probability(n_trajectories: int = paper.PHASE1_TRAJECTORIES, seed
     miss = 1.0 - np.sqrt(min(real_share / sim_share, 1.0))
     jitter = fidelity_statistics(kept.X, kept.y, cross_validation=False).image_plane_jitter_mm
     return MissMatch(float(miss), float(sim_share), float(real_share), float(jitter))
+
+
+SETTLE_LAG_GRID = (0.10, 0.15, 0.20, 0.25, 0.30, 0.35)
+"""The settle lags :func:`match_settle_lag` collects at (the real rows' sequence suggests
+0.2-0.4: ``benchmarks/fidelity_sequence.py``)."""
+
+
+@dataclass(frozen=True)
+class SettleLagMatch:
+    """The wrist's settle lag matched to the real rows' same-position share.
+
+    Attributes:
+        wrist_settle_lag: the first lag of the grid whose simulated share falls to the real one.
+        real_share: the real rows' same-position share.
+        lags: the lags collected at.
+        sim_shares: the simulated same-position share at each lag.
+        sim_pitch_autocorrelations: the simulated pitch autocorrelation (lag 1) at each
+            lag, for the record (the real rows: 0.27).
+    """
+
+    wrist_settle_lag: float
+    real_share: float
+    lags: tuple[float, ...]
+    sim_shares: tuple[float, ...]
+    sim_pitch_autocorrelations: tuple[float, ...]
+
+
+def first_crossing(lags: tuple[float, ...], shares: tuple[float, ...], target: float) -> float:
+    """The first of ``lags`` (increasing) whose share is at most ``target``.
+
+    Raises:
+        ValueError: lags and shares differ in length, lags do not increase, or no share
+            falls to the target (the grid stops short).
+    """
+    if len(lags) != len(shares) or not lags:
+        raise ValueError(f"expected one share per lag, got {len(lags)} lags and {len(shares)} shares")
+    if any(b <= a for a, b in zip(lags, lags[1:])):
+        raise ValueError(f"lags must increase, got {lags}")
+    for lag, share in zip(lags, shares):
+        if share <= target:
+            return float(lag)
+    raise ValueError(f"no lag in {lags} brings the share to {target:.4f} (the last gives {shares[-1]:.4f}); extend the grid")
+
+
+def match_settle_lag(
+    lags: tuple[float, ...] = SETTLE_LAG_GRID, n_trajectories: int = paper.PHASE1_TRAJECTORIES, seed: int = 0
+) -> SettleLagMatch:
+    """The reported pose's lag from how often consecutive rows report the same position.
+
+    A robot that reports its command reports the same position whenever the protocol
+    pauses at one position for several orientations (a simulated Phase I without a lag:
+    0.44 of consecutive kept rows); the real rows do so 3% of the time, because the wrist
+    stops short of each new orientation and the reported tip moves with it. Collects the
+    paper's Phase I on the ``paper`` instrument (its detector and repeatability included)
+    at each lag and returns the first whose same-position share is at most the real one.
+    """
+    real_X, real_y = load_paper_phase1()
+    real_share = fidelity_statistics(real_X, real_y, cross_validation=False).same_position_share
+    shares, correlations = [], []
+    for lag in lags:
+        config = dataclasses.replace(BIAS_PRESETS["paper"], wrist_settle_lag=float(lag))
+        kept = run_paper_phase1(n_trajectories, seed, bias=config, progress=False).cleaned()
+        statistics = fidelity_statistics(kept.X, kept.y, cross_validation=False)
+        shares.append(statistics.same_position_share)
+        correlations.append(statistics.pitch_autocorrelation)
+        logger.info("settle lag %.2f: same-position share %.4f", lag, statistics.same_position_share)
+    chosen = first_crossing(tuple(lags), tuple(shares), real_share)
+    return SettleLagMatch(chosen, float(real_share), tuple(float(v) for v in lags), tuple(shares), tuple(correlations))

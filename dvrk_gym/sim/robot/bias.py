@@ -90,9 +90,10 @@ class BiasConfig:
             wrist-yaw step that their motors have not made when a move ends (a servo
             stopped short of its command): the motors go to ``q_cmd + wrist_settle_lag *
             (previous motors - q_cmd)``, the cables follow the motors, and the encoders
-            report the motors, so the reported pose lags the command. 0 (every preset): the
-            motors reach the command. The real rows suggest 0.2-0.3 (README, *Fidelity*);
-            not yet in the ``paper`` preset, whose other values were identified without it.
+            report the motors, so the reported pose lags the command. 0: the motors reach
+            the command. ``paper`` and ``severe``: the lag matched to the real rows
+            (:data:`dvrk_gym.sim.identified.WRIST_SETTLE_LAG`, 0.25); a fraction, not a
+            magnitude, so ``scaled`` leaves it.
     """
 
     homing_offset_rad: float = 0.0
@@ -131,9 +132,11 @@ class BiasConfig:
 # (dvrk_gym.sim.identified, where each value's fit, held-out residual and command are
 # given): outer stretch about 0.37 deg (not the 2.6 deg once tuned to the paper's table),
 # wrist stretch 0.09, a wrist backlash of 3.4 deg and no outer one, and a repeatability of
-# about 1.0 mm across the shaft (what the rows leave unexplained from one row to the next). Gravity sag and
-# the insertion's backlash are not separable from the camera pose and the other terms in
-# those rows, so they are left out (0) rather than guessed.
+# about 1.0 mm across the shaft (what the rows leave unexplained from one row to the next),
+# and wrist motors that stop a quarter of each step short (the reported pose's lag, matched
+# to how often consecutive real rows report the same position). Gravity sag and the
+# insertion's backlash are not separable from the camera pose and the other terms in those
+# rows, so they are left out (0) rather than guessed.
 _PAPER = BiasConfig(
     outer_stretch_rad=identified.OUTER_STRETCH_MAGNITUDE_RAD,
     wrist_stretch=abs(identified.INSTRUMENT.wrist_stretch),
@@ -141,6 +144,7 @@ _PAPER = BiasConfig(
     backlash_wrist_rad=identified.INSTRUMENT.backlash_wrist_rad,
     repeatability_m=identified.INSTRUMENT.repeatability_m,
     around_identified=True,
+    wrist_settle_lag=identified.WRIST_SETTLE_LAG,
 )
 BIAS_PRESETS: dict[str, BiasConfig] = {
     "none": BiasConfig(),
@@ -149,7 +153,7 @@ BIAS_PRESETS: dict[str, BiasConfig] = {
 }
 """``none``: the robot goes where told. ``paper``: the identified instrument (bias_seed 0)
 and instruments drawn around it (bias_seed >= 1). ``severe``: ``paper`` with every
-magnitude doubled."""
+magnitude doubled (the settle lag, a fraction, kept)."""
 
 
 def resolve_bias(bias: str | BiasConfig) -> BiasConfig:

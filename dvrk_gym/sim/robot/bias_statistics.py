@@ -55,8 +55,9 @@ class BiasSamples:
 
     Attributes:
         q_cmd: (n, 6) joint commands, rad / m.
-        euler: (n, 3) commanded (yaw, pitch, roll), rad.
-        reported: (n, 3) reported touch points, m.
+        euler: (n, 3) reported (yaw, pitch, roll), rad: the commanded ones unless the
+            wrist settles short of its commands (``BiasConfig.wrist_settle_lag``).
+        reported: (n, 3) reported touch points (from the measured joints), m.
         true: (n, 3) true touch points, m.
         yaw_group: (n,) index into PAPER_YAWS_RAD of the nearest paper yaw.
     """
@@ -95,16 +96,22 @@ def sample_bias(model: CableModel, rng: np.random.Generator, n_samples: int = 20
 
     The hysteresis state runs on from move to move (each sample is approached from the
     previous one) and each move gets its noise from rng; the model's state is restored
-    afterwards.
+    afterwards. The reported pose is the measured joints' (the command's, unless the wrist
+    settles short of it), as the robot would report it.
     """
     q_cmd, euler = sample_paper_commands(rng, n_samples)
     saved = model.get_state()
     model.reset(q_cmd[0])
-    true = np.array([kin.touch_point(model.true_joints(q, rng), model.true_dh) for q in q_cmd])
+    true, measured = [], []
+    for q in q_cmd:
+        true.append(kin.touch_point(model.true_joints(q, rng), model.true_dh))
+        measured.append(np.array(model.measured_joints(q)))
     model.set_state(saved)
-    reported = np.array([kin.touch_point(q) for q in q_cmd])
+    reported = np.array([kin.touch_point(q) for q in measured])
+    if model.config.wrist_settle_lag > 0.0:
+        euler = np.array([kin.euler_from_pose(kin.forward_kinematics(q)) for q in measured]).reshape(-1, 3)
     yaw_group = np.argmin(np.abs(euler[:, :1] - kin.PAPER_YAWS_RAD), axis=1)
-    return BiasSamples(q_cmd, euler, reported, true, yaw_group)
+    return BiasSamples(q_cmd, euler, reported, np.array(true), yaw_group)
 
 
 def rigid_fit_residuals(reported: np.ndarray, true: np.ndarray) -> np.ndarray:
