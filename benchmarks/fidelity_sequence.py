@@ -1,9 +1,11 @@
 """What the real Phase I rows' sequence says about the pose the dVRK reports.
 
-The simulator reports the pose it was commanded (``World.reported_pose``: nominal FK of the
-joint command). Two statistics of ``dvrk-gym fidelity`` say the real robot does not: its
-consecutive rows rarely report the same position (0.03 against 0.44), and consecutive
-pitches are correlated (0.27 against 0.06). This script measures, on the authors' rows:
+A simulator whose encoders report the command (``wrist_settle_lag=0``) reports the pose it
+was commanded (``World.reported_pose``: nominal FK of the measured joints). Two statistics
+of ``dvrk-gym fidelity`` say the real robot does not: its consecutive rows rarely report the
+same position (0.03 against 0.44 without the lag), and consecutive pitches are correlated
+(0.27 against 0.06). This script measured, on the authors' rows, what led to the ``paper``
+preset's settle lag (:data:`dvrk_gym.sim.identified.WRIST_SETTLE_LAG`):
 
 1. How far a repeated command is reported apart. The authors' protocol returns to the
    trajectory's own orientation at every pause; within each trajectory (a run of rows whose

@@ -5,7 +5,8 @@ for each, the pose the dVRK reported and where the stereo endoscope saw the red 
 values here are fitted to those rows by ``python benchmarks/identify_instrument.py``
 (:mod:`dvrk_gym.fidelity.identify`), on a training part (the first 70% of the rows, in
 collection order) and checked on the held-out rest; the script prints every figure quoted
-below (about 10 minutes on a quiet machine with 16 bootstrap replicates). ``bias="paper"``
+below (4.3 minutes with ``--bootstrap 2`` on a busy 2-core machine, and about 30 s more per
+replicate of the default 16). ``bias="paper"``
 (:mod:`dvrk_gym.sim.robot.bias`), the default camera
 (:func:`dvrk_gym.sim.endoscope.camera.default_camera_pose`), the red tape's place on the
 jaws (:data:`dvrk_gym.sim.robot.body.MARKER`) and the red-tape detector

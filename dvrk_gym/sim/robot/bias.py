@@ -1,8 +1,9 @@
 """How far the dVRK misses, and which instrument it is: the bias's magnitudes and draws.
 
 The dVRK controller turns a commanded tool pose into joint commands with the *nominal*
-inverse kinematics, and its encoders report those commands; cables between the motors
-and the joints, and an instrument machined to a tolerance, put the tool elsewhere. This
+inverse kinematics, and its encoders report where the motors went (the commands, but for a
+wrist that settles short of them); cables between the motors and the joints, and an
+instrument machined to a tolerance, put the tool elsewhere. This
 module holds the magnitudes of those errors (:class:`BiasConfig`, the presets
 ``none`` / ``paper`` / ``severe`` and why the ``paper`` ones) and the draws that make one
 instrument (:func:`draw_instrument`: homing offsets, true DH table, cable gains).
