@@ -211,29 +211,46 @@ def _link_constants(dh: tuple[DHRow, ...]) -> list[tuple[float, float, float, fl
     return entry[1]
 
 
-def _then_link(c: Frame, link: tuple[float, float, float, float, float, bool], q: float) -> Frame:
-    """Frame ``c`` composed with one modified-DH link at joint value ``q`` (rad or m)."""
-    ca, sa, a, theta_offset, d_offset, prismatic = link
+def _link_terms(link: tuple[float, float, float, float, float, bool], q: float) -> tuple[float, ...]:
+    """(ct, st, st ca, ct ca, -sa d, st sa, ct sa, ca d) of one modified-DH link at joint value
+    ``q`` (rad or m): its rows are (ct, -st, 0, a), (st ca, ct ca, -sa, -sa d), (st sa, ct sa, ca, ca d)."""
+    ca, sa, _, theta_offset, d_offset, prismatic = link
     theta, d = (theta_offset + 0.0, d_offset + q) if prismatic else (theta_offset + q, d_offset + 0.0)
     ct, st = math.cos(theta), math.sin(theta)
-    # The link's rows: (ct, -st, 0, a), (st ca, ct ca, -sa, -sa d), (st sa, ct sa, ca, ca d).
-    t10, t11, t13, t20, t21, t23 = st * ca, ct * ca, -sa * d, st * sa, ct * sa, ca * d
+    return ct, st, st * ca, ct * ca, -sa * d, st * sa, ct * sa, ca * d
+
+
+def _then_link(c: Frame, link: tuple[float, float, float, float, float, bool], q: float) -> Frame:
+    """Frame ``c`` composed with one modified-DH link at joint value ``q`` (rad or m)."""
+    ca, sa, a = link[0], link[1], link[2]
+    ct, st, t10, t11, t13, t20, t21, t23 = _link_terms(link, q)
     a0, a1, a2, a3, b0, b1, b2, b3, c0, c1, c2, c3 = c
     return (
-        *(a0 * ct + a1 * t10 + a2 * t20, -a0 * st + a1 * t11 + a2 * t21, -a1 * sa + a2 * ca, a0 * a + a1 * t13 + a2 * t23 + a3),
-        *(b0 * ct + b1 * t10 + b2 * t20, -b0 * st + b1 * t11 + b2 * t21, -b1 * sa + b2 * ca, b0 * a + b1 * t13 + b2 * t23 + b3),
-        *(c0 * ct + c1 * t10 + c2 * t20, -c0 * st + c1 * t11 + c2 * t21, -c1 * sa + c2 * ca, c0 * a + c1 * t13 + c2 * t23 + c3),
+        a0 * ct + a1 * t10 + a2 * t20,
+        -a0 * st + a1 * t11 + a2 * t21,
+        -a1 * sa + a2 * ca,
+        a0 * a + a1 * t13 + a2 * t23 + a3,
+        b0 * ct + b1 * t10 + b2 * t20,
+        -b0 * st + b1 * t11 + b2 * t21,
+        -b1 * sa + b2 * ca,
+        b0 * a + b1 * t13 + b2 * t23 + b3,
+        c0 * ct + c1 * t10 + c2 * t20,
+        -c0 * st + c1 * t11 + c2 * t21,
+        -c1 * sa + c2 * ca,
+        c0 * a + c1 * t13 + c2 * t23 + c3,
     )
-
-
-_IDENTITY_FRAME: Frame = (1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0)
 
 
 def last_frame_floats(q: list[float], dh: tuple[DHRow, ...] = PSM_DH) -> Frame:
     """The chain's last frame (as :func:`~dvrk_gym.sim.robot.kinematics.last_frame`) for
-    joint values ``q`` (rad / m, one per row of ``dh``, finite: not checked), in floats."""
-    frame = _IDENTITY_FRAME
-    for link, value in zip(_link_constants(dh), q):
+    joint values ``q`` (rad / m, one per row of ``dh``, at least one; finite: not checked),
+    in floats. The first link's rows are the first frame (numpy's identity @ link can turn
+    a -0.0 into 0.0; nothing else differs)."""
+    links = _link_constants(dh)
+    first = links[0]
+    ct, st, t10, t11, t13, t20, t21, t23 = _link_terms(first, q[0])
+    frame: Frame = (ct, -st, 0.0, first[2], t10, t11, -first[1], t13, t20, t21, first[0], t23)
+    for link, value in zip(links[1:], q[1:]):
         frame = _then_link(frame, link, value)
     return frame
 
@@ -273,16 +290,17 @@ def _physical_branch_floats(p6: list[float], r6: list[float]) -> list[float] | N
     r5 = (x0, n0, z5[0], x1, n1, z5[1], x2, n2, z5[2])
     f3 = last_frame_floats([yaw, pitch, insertion], _OUTER_LINKS)
     r3 = (f3[0], f3[1], f3[2], f3[4], f3[5], f3[6], f3[8], f3[9], f3[10])
-
-    def t_times(a: tuple[float, ...] | list[float], b: tuple[float, ...] | list[float], i: int, j: int) -> float:
-        """(a.T @ b)[i, j] for row-major 3x3 a and b."""
-        return a[i] * b[j] + a[3 + i] * b[3 + j] + a[6 + i] * b[6 + j]
-
     s = _ALPHA5_SIGN
-    roll = math.atan2(s * t_times(r3, r5, 0, 2), -s * t_times(r3, r5, 1, 2))
-    wrist_pitch = math.atan2(s * t_times(r3, r5, 2, 0), s * t_times(r3, r5, 2, 1))
-    m00, m10, m20 = t_times(r5, r6, 0, 0), t_times(r5, r6, 1, 0), t_times(r5, r6, 2, 0)
-    wrist_yaw = math.atan2(_ROTATION_X6_COS * m10 + _ROTATION_X6_SIN * m20, m00) - PSM_DH[5].theta_offset_rad
+    # (r3.T @ r5)[i, j] = column i of r3 . column j of r5, and likewise (r5.T @ r6).
+    m02 = r3[0] * r5[2] + r3[3] * r5[5] + r3[6] * r5[8]
+    m12 = r3[1] * r5[2] + r3[4] * r5[5] + r3[7] * r5[8]
+    m20 = r3[2] * r5[0] + r3[5] * r5[3] + r3[8] * r5[6]
+    m21 = r3[2] * r5[1] + r3[5] * r5[4] + r3[8] * r5[7]
+    roll, wrist_pitch = math.atan2(s * m02, -s * m12), math.atan2(s * m20, s * m21)
+    n00 = r5[0] * r6[0] + r5[3] * r6[3] + r5[6] * r6[6]
+    n10 = r5[1] * r6[0] + r5[4] * r6[3] + r5[7] * r6[6]
+    n20 = r5[2] * r6[0] + r5[5] * r6[3] + r5[8] * r6[6]
+    wrist_yaw = math.atan2(_ROTATION_X6_COS * n10 + _ROTATION_X6_SIN * n20, n00) - PSM_DH[5].theta_offset_rad
     wrist_pitch -= PSM_DH[4].theta_offset_rad
     return [yaw, pitch, insertion, _wrap(roll), _wrap(wrist_pitch), _wrap(wrist_yaw)]
 
