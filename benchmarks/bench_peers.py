@@ -66,6 +66,33 @@ PandaReach-v3 stepped at 906/s in a run of this script the same hour (GridTouch-
 0.50x; Debridement-v0 4.0 picks/s). Every part left is the same few numpy evaluations on
 3- to 6-element arrays; the 2x target needs them compiled or written in scalars, whose
 roundings differ (every figure would be made again).
+
+Float paths (2026-11-25, issue 18; load average 7-9 from a ``dvrk-gym reproduce`` on both
+cores, so ratios within one run): a bit-for-bit scalar path is not possible here, because
+numpy's 3x3 / 4x4 products go to OpenBLAS, whose kernel fuses multiply-adds (all 4,800
+elements of 300 random products matched an FMA chain; plain Python sums about half), Python
+3.11 has no exact fma, and np.arctan2 / np.hypot / np.tanh differ from math's in the
+last bit on a few percent of inputs (np.sin / np.cos did not). So GridTouch-v0's touch
+evaluations (the contact search, the simulated person's correction, the reset's lift) and
+its two moves' inverse kinematics and true touch points run in Python floats
+(``ik.inverse_kinematics_floats``, ``ik.touch_point_floats``,
+``CableModel.peek_true_joints_floats``; numpy where a pose is clamped or singular); the
+moves themselves (cables, physics, reported pose) are untouched, and the other envs do not
+use these paths. An evaluation took 29 us against about 120 us (timeit, same process).
+Differences over 2,100 seeded steps (yaw 0 and random) against the numpy path: observations,
+goals, rewards and successes the same; true tip, reported position and correction at most
+1.7e-16 m, pixel error 4.5e-13 px, mm error 1.1e-13 mm, simulated time 2.9e-14 s;
+CalibrationExploration-v0 and Debridement-v0 bit for bit the same (tests/test_float_paths.py
+bounds each path's difference). ``python benchmarks/bench_peers.py --steps 500 --picks 4
+--rounds 3``, old code then new, minutes apart: GridTouch-v0 0.47x -> 0.76x PandaReach-v3, and
+0.41x -> 0.77x in a second pair (0.85x in a third run of the new code, its PandaReach slow)
+(timers: a step and its reset 2.27 -> 1.44 ms, the correction 0.73 -> 0.25 ms, the contact
+search 0.31 -> 0.10 ms). Left (cProfile, 2,000 steps): the two moves (cable model in numpy,
+the planned move's FK, eight ``resetJointState`` calls each: about 0.27 ms), the touch
+evaluations still (7.4 a step, the correction iterating 5.3 times on average, at 29 us:
+inverse kinematics 10, cables 9, touch point 6.5), the stereo view of the touch point (twice
+a step) and the reset; 2x needs most of these in floats or compiled, and the moves in floats
+would change the other envs' numbers.
 """
 
 from __future__ import annotations

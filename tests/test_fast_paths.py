@@ -18,7 +18,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
-from dvrk_gym.envs.grid_touch import SURFACE_Z_M, tool_pose
+from dvrk_gym.envs.grid_touch import tool_pose
 from dvrk_gym.sim.physics.client import Physics
 from dvrk_gym.sim.robot import cables, ik
 from dvrk_gym.sim.robot import kinematics as kin
@@ -186,44 +186,6 @@ def test_the_reported_pose_follows_every_change_of_the_command(commanded_world):
         assert _same(world.reported_pose(), kin.forward_kinematics(world.q_cmd))
         world.reported_pose()[0, 3] = 99.0  # a caller's copy: the next reading is untouched
         assert _same(world.reported_pose(), kin.forward_kinematics(world.q_cmd))
-
-
-def _reference_contact_height(world: DvrkWorld, target: np.ndarray, yaw: float) -> float:
-    """GridTouch's contact search as it was: the cable state copied out and back per point."""
-
-    def tip_z(position: np.ndarray) -> float:
-        state = world.cable.get_state()
-        q_cmd, _ = ik.inverse_kinematics_clamped(tool_pose(position, yaw), q_ref=world.q_cmd)
-        tip = kin.touch_point(world.cable.true_joints(q_cmd), world.cable.true_dh)
-        world.cable.set_state(state)
-        return float(tip[2])
-
-    z = float(target[2])
-    if tip_z(target) >= SURFACE_Z_M:
-        return z
-    for _ in range(8):
-        gap = tip_z(np.array([target[0], target[1], z])) - SURFACE_Z_M
-        if abs(gap) < 1e-7:
-            break
-        z -= gap
-    return z
-
-
-def test_grid_touch_contact_search_finds_the_same_height(make_env):
-    env = make_env("dvrk_gym/GridTouch-v0")
-    env.reset(seed=0)
-    grid = env.unwrapped
-    rng = np.random.default_rng(7)
-    heights = []
-    for _ in range(40):
-        centre = grid.circle_centers[rng.integers(len(grid.circle_centers))]
-        target = np.array([centre[0], centre[1], centre[2] + rng.uniform(-0.006, 0.015)])
-        yaw = float(rng.uniform(-np.pi / 2, np.pi / 2))
-        grid.world.move_to(tool_pose(target + [0.0, 0.0, 0.008], yaw), noise_rng=rng, clamp_to_limits=True)
-        z = grid._contact_height(target, yaw)
-        assert _same(z, _reference_contact_height(grid.world, target, yaw))
-        heights.append(z != target[2])
-    assert any(heights) and not all(heights)  # both branches: into the paper and above it
 
 
 def test_a_physics_client_forgets_its_bound_functions_when_it_disconnects():

@@ -28,6 +28,7 @@ from dvrk_gym.sim.physics.scene import GRID_COLUMNS, GRID_ROWS, WORKSPACE_CENTER
 from dvrk_gym.sim.robot import ik
 from dvrk_gym.sim.robot import kinematics as kin
 from dvrk_gym.sim.robot.bias import BiasConfig
+from dvrk_gym.sim.world_config import MoveResult
 
 N_CIRCLES = GRID_ROWS * GRID_COLUMNS
 ACTION_NAMES = ("bx", "by", "bz", "yaw")
@@ -192,16 +193,14 @@ class GridTouchEnv(DvrkEnv[GridTouchConfig]):
             return world.q_cmd.copy()
         lifted = world.reported_pose()
         lifted[2, 3] += self.config.approach_height_m
-        return ik.inverse_kinematics_clamped(lifted, q_ref=world.q_cmd)[0]
+        command = ik.inverse_kinematics_floats(lifted[:3, 3].tolist(), lifted[:3, :3], world.q_cmd)
+        return ik.inverse_kinematics_clamped(lifted, q_ref=world.q_cmd)[0] if command is None else np.array(command)
 
     def _step_episode(self, action: np.ndarray, clamped: np.ndarray):
         target, yaw = action[:3], float(action[3])
         above = target + [0.0, 0.0, self.config.approach_height_m]
-        first = self.world.move_to(tool_pose(above, yaw), noise_rng=self.np_random, clamp_to_limits=True)
-        touch_z = self._contact_height(target, yaw)
-        touch = self.world.move_to(
-            tool_pose(np.array([target[0], target[1], touch_z]), yaw), noise_rng=self.np_random, clamp_to_limits=True
-        )
+        first = self._move(above, yaw)
+        touch = self._move(np.array([target[0], target[1], self._contact_height(target, yaw)]), yaw)
         self._achieved = self._seen_touch_point()
         self._touched = True
         info = self._touch_info(yaw, clamped, first.joints_clamped | touch.joints_clamped)
@@ -223,11 +222,30 @@ class GridTouchEnv(DvrkEnv[GridTouchConfig]):
         return -1e3 * distance
 
     # ------------------------------------------------------------------ physics of a touch
+    def _command_floats(self, position: np.ndarray, yaw: float) -> list[float] | None:
+        """The joint command (6,) rad / m for the tool at ``position`` (m) and ``yaw`` (rad), by
+        the inverse kinematics in floats; None if it needs the numpy path (clamped or singular)."""
+        return ik.inverse_kinematics_floats(kin.finite_vector(position, 3, "position").tolist(), _tool_rotation(yaw), self.world.q_cmd)
+
+    def _move(self, position: np.ndarray, yaw: float) -> MoveResult:
+        """Move the tool to ``position`` (m) at ``yaw`` (rad), with noise; joints clamped into their
+        limits where the pose needs it (``world.move_to`` with ``clamp_to_limits``)."""
+        command = self._command_floats(position, yaw)
+        if command is None:
+            return self.world.move_to(tool_pose(position, yaw), noise_rng=self.np_random, clamp_to_limits=True)
+        return self.world.move_joints(np.array(command), noise_rng=self.np_random)
+
+    def _true_touch_point(self) -> np.ndarray:
+        """``world.true_touch_point()`` (m), computed in floats."""
+        return ik.touch_point_floats(self.world.q_true.tolist(), self.world.cable.true_dh)
+
     def _true_tip_for(self, position: np.ndarray, yaw: float) -> np.ndarray:
         """Where the jaws would truly be if commanded to ``position`` now (state untouched)."""
         cable = self.world.cable
-        q_cmd, _ = ik.inverse_kinematics_clamped(tool_pose(position, yaw), q_ref=self.world.q_cmd)
-        return kin.touch_point(cable.peek_true_joints(q_cmd), cable.true_dh)
+        command = self._command_floats(position, yaw)
+        if command is None:  # a clamped or singular pose: the numpy path
+            command = ik.inverse_kinematics_clamped(tool_pose(position, yaw), q_ref=self.world.q_cmd)[0].tolist()
+        return ik.touch_point_floats(cable.peek_true_joints_floats(command), cable.true_dh)
 
     def _contact_height(self, target: np.ndarray, yaw: float) -> float:
         """The commanded height at which the descent stops: the command, or first contact.
@@ -264,7 +282,7 @@ class GridTouchEnv(DvrkEnv[GridTouchConfig]):
     def _seen_touch_point(self) -> np.ndarray:
         """The jaws' touch point as the endoscope sees it (projected, with pixel noise)."""
         camera = self.world.camera
-        left, right = camera.project(self.world.true_touch_point())
+        left, right = camera.project(self._true_touch_point())
         noise = self.world.pixel_noise
         left = noise.apply(left, self.np_random)
         right = noise.apply(right, self.np_random)  # after left's: the draw order is part of the episode
@@ -285,7 +303,7 @@ class GridTouchEnv(DvrkEnv[GridTouchConfig]):
     def _touch_info(self, yaw: float, clamped: np.ndarray, joints_clamped: np.ndarray) -> dict[str, Any]:
         index = self._circle
         circle = self.circle_centers[index]
-        tip = self.world.true_touch_point()
+        tip = self._true_touch_point()
         circle_px = self.world.observe_grid()[index].left_uv
         tip_px = self.world.camera.project(tip)[0][0]
         return {

@@ -75,6 +75,7 @@ OUTER_STRETCH_SCALE_RAD = 8.0 * _DEG
 OUTER_UNLOADED_RAD = _frozen(np.array([5.0, -22.0]) * _DEG)
 WRIST_STRETCH_SCALE_RAD = 30.0 * _DEG
 INSERTION_MAX_M = float(kin.JOINT_UPPER[2])
+_OUTER_UNLOADED_FLOATS = OUTER_UNLOADED_RAD.tolist()
 # Lever arms (m) from each joint's motion to the jaw tip in the paper's workspace, used
 # to express tip repeatability as joint noise: RCM to tissue for the outer joints, the
 # jaw's distance off the shaft axis for roll, wrist offset + jaw for wrist pitch, the jaw
@@ -161,6 +162,31 @@ def _least_squares(a: np.ndarray, b: np.ndarray) -> np.ndarray:
         return np.linalg.lstsq(a, b, rcond=None)[0]
     rcond = np.finfo(np.float64).eps * max(a.shape)
     return _lstsq_gufunc(a, b[:, np.newaxis], rcond, signature="ddd->ddid")[0][:, 0]
+
+
+def _gravity_sag_floats(q: list[float], config: BiasConfig) -> tuple[float, float]:
+    """:func:`gravity_sag` (2,) rad in floats. The Jacobian's columns, (cy cp, 0, sy cp) and
+    (-sy sp, -cp, cy sp), are orthogonal, so its least squares is two projections; it
+    differs from gelsd's in the last bits."""
+    yaw, pitch, insertion = q[0], q[1], q[2]
+    cy, sy, cp, sp = math.cos(yaw), math.sin(yaw), math.cos(pitch), math.sin(pitch)
+    shaft = (sy * cp, -sp, -cy * cp)
+    along = -shaft[2]  # down . shaft, down = (0, 0, -1)
+    toward_down = (-along * shaft[0], -along * shaft[1], -1.0 - along * shaft[2])
+    factor = config.sag_m / INSERTION_MAX_M * (insertion / INSERTION_MAX_M) ** 2
+    r = [factor * t for t in toward_down]
+    return (cy * cp * r[0] + sy * cp * r[2]) / (cp * cp), -sy * sp * r[0] - cp * r[1] + cy * sp * r[2]
+
+
+def _lag_sum(motor: float, plays: tuple[float, ...], radii: list[float]) -> float:
+    """One joint's sum, in order, of ``motor - play`` over its plays (rad or m) after
+    :func:`play_update` (np.clip's arithmetic): the floats of :func:`hysteresis_output`'s sum."""
+    total = 0.0
+    for i, (play, radius) in enumerate(zip(plays, radii)):
+        low, high = motor - radius, motor + radius
+        lag = motor - (low if play < low else high if play > high else play)
+        total = lag if i == 0 else total + lag
+    return total
 
 
 def play_update(plays: np.ndarray, q_cmd: np.ndarray, radii: np.ndarray) -> np.ndarray:
@@ -256,6 +282,10 @@ class CableModel:
         # Where the motors stopped on the last move (what the encoders read): the commands
         # themselves unless the wrist settles short (``wrist_settle_lag``); NaN before the first.
         self._motors = np.full(_N_JOINTS, np.nan)
+        # The float path's constants (peek_true_joints_floats).
+        self._radii_columns, self._n_plays = self._radii.T.tolist(), len(PLAY_FRACTIONS)
+        self._offsets = self.instrument.homing_offsets.tolist()
+        self._outer_gains, self._coupling = self.instrument.outer_gains.tolist(), self.instrument.wrist_coupling.tolist()
 
     def measured_joints(self, q_cmd: np.ndarray) -> np.ndarray:
         """The joints (6,) rad / m the encoders read after the last move, whose command was ``q_cmd``.
@@ -306,6 +336,33 @@ class CableModel:
         moving: the hysteresis state stays as it is. The same numbers as ``true_joints(q_cmd)``
         between ``get_state()`` and ``set_state()``, without copying the state."""
         return self._advance(self._motor_joints(_checked_joints(q_cmd, "q_cmd")))[1]
+
+    def peek_true_joints_floats(self, q_cmd: list[float]) -> list[float]:
+        """:meth:`peek_true_joints` for a finite command (6,) rad / m (not checked), in Python
+        floats: a few ulps from it (the gravity sag solves its least squares in closed form,
+        math.tanh can differ from numpy's in the last bit)."""
+        if math.isnan(self._plays[0, 0]) or math.isnan(self._motors[0]):  # no history yet: the numpy path
+            return self.peek_true_joints(np.array(q_cmd)).tolist()
+        motors = list(q_cmd)
+        if self._settle_lag != 0.0:
+            for i in (4, 5):
+                motors[i] += self._settle_lag * (float(self._motors[i]) - motors[i])
+        q = [
+            motor - _lag_sum(motor, plays, radii) / self._n_plays
+            for motor, plays, radii in zip(motors, zip(*self._plays.tolist()), self._radii_columns)
+        ]
+        return [value + offset + error for value, offset, error in zip(q, self._offsets, self._errors_floats(q))]
+
+    def _errors_floats(self, q: list[float]) -> list[float]:
+        """The stretch and sag errors (6,) rad / m at the hysteresis output ``q``, in floats."""
+        config, gains = self.config, self._outer_gains
+        unloaded, scale = _OUTER_UNLOADED_FLOATS, OUTER_STRETCH_SCALE_RAD
+        stretch = [gains[i] * config.outer_stretch_rad * math.tanh((q[i] - unloaded[i]) / scale) for i in (0, 1)]
+        sag = _gravity_sag_floats(q, config)
+        w = WRIST_STRETCH_SCALE_RAD
+        wrist = [config.wrist_stretch * w * math.tanh(q[i] / w) for i in (4, 5)]
+        c = self._coupling
+        return [stretch[0] + sag[0], stretch[1] + sag[1], 0.0] + [c[i][0] * wrist[0] + c[i][1] * wrist[1] for i in range(3)]
 
     def _advance(self, q_cmd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(the play outputs after a move to ``q_cmd``, the noiseless true joints there)."""

@@ -1,0 +1,145 @@
+"""The float paths of issue 18 (GridTouch's touch evaluations in Python floats) against numpy's.
+
+Unlike tests/test_fast_paths.py these are not bit for bit: numpy's 3x3 / 4x4 products (BLAS)
+fuse multiply-adds, the gravity sag's least squares is solved in closed form, and math's
+atan2 / hypot / tanh can differ from numpy's in the last bit. Each test bounds the
+difference to a few ulps of the values (well under any error a wrong formula would make)
+and checks that the paths fall back to numpy exactly where they must.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from dvrk_gym.envs.grid_touch import SURFACE_Z_M, _tool_rotation, tool_pose
+from dvrk_gym.sim.robot import cables, ik
+from dvrk_gym.sim.robot import kinematics as kin
+from dvrk_gym.sim.robot.bias import resolve_bias
+from dvrk_gym.sim.world import DvrkWorld
+
+ULPS_M = 2e-15  # positions of ~0.2 m: about 70 ulps
+ULPS_RAD = 2e-14  # angles up to ~5 rad (roll branches): about 20 ulps
+
+
+def _random_q(rng: np.random.Generator, spread: float = 0.9) -> np.ndarray:
+    q = rng.uniform(kin.JOINT_LOWER * spread, kin.JOINT_UPPER * spread)
+    q[2] = rng.uniform(0.05, 0.23)
+    return q
+
+
+@pytest.mark.parametrize("preset", ["none", "paper", "severe"])
+def test_the_float_chain_and_touch_point_match_numpys(preset):
+    dh = cables.CableModel(resolve_bias(preset), bias_seed=5).true_dh
+    rng = np.random.default_rng(1)
+    lower_points = 0
+    for _ in range(300):
+        q = _random_q(rng)
+        frame = np.array(ik.last_frame_floats(q.tolist(), dh)).reshape(3, 4)
+        np.testing.assert_allclose(frame, kin.last_frame(q, dh)[:3], rtol=0, atol=ULPS_M)
+        reference = kin.touch_point(q, dh)
+        np.testing.assert_allclose(ik.touch_point_floats(q.tolist(), dh), reference, rtol=0, atol=ULPS_M)
+        lower_points += bool(reference[2] < kin.last_frame(q, dh)[2, 3])
+    assert 0 < lower_points < 300  # both ends of the jaws were the lowest point
+
+
+def test_the_float_inverse_kinematics_matches_numpys_or_hands_over():
+    rng = np.random.default_rng(2)
+    solved = handed_over = 0
+    for _ in range(600):
+        q = _random_q(rng, spread=1.15)  # some poses need joints past their limits
+        pose = kin.forward_kinematics(q)
+        q_ref = rng.uniform(-4.0, 4.0, 6)
+        floats = ik.inverse_kinematics_floats(pose[:3, 3].tolist(), pose[:3, :3], q_ref)
+        expected, clamped = ik.inverse_kinematics_clamped(pose, q_ref)
+        if floats is None:  # only where the numpy path clamps (or solves on another branch)
+            handed_over += 1
+            assert clamped.any() or not kin.within_joint_limits(q, 0.0)
+            continue
+        solved += 1
+        assert not clamped.any()
+        np.testing.assert_allclose(floats, expected, rtol=0, atol=ULPS_RAD)
+        assert kin.within_joint_limits(np.array(floats))
+    assert solved > 300 and handed_over > 30
+
+
+@pytest.mark.parametrize("settle_lag", [0.0, 0.25])
+def test_the_float_peek_matches_numpys_and_moves_nothing(settle_lag):
+    config = dataclasses.replace(resolve_bias("severe"), wrist_settle_lag=settle_lag)
+    model = cables.CableModel(config, bias_seed=4)
+    rng = np.random.default_rng(3)
+    q0 = _random_q(rng)
+    assert model.peek_true_joints_floats(q0.tolist()) == model.peek_true_joints(q0).tolist()  # no history: numpy's
+    for _ in range(5):
+        model.true_joints(_random_q(rng), rng)
+    for _ in range(300):
+        q = _random_q(rng)
+        state = model.get_state()
+        floats = model.peek_true_joints_floats(q.tolist())
+        assert model.get_state().tobytes() == state.tobytes()
+        np.testing.assert_allclose(floats, model.peek_true_joints(q), rtol=0, atol=ULPS_M)
+        model.true_joints(q if rng.random() < 0.5 else _random_q(rng), rng)  # a history of moves, reversals too
+
+
+def test_the_float_lag_sums_are_the_hysteresis_sums_bit_for_bit():
+    radii = cables.play_radii(resolve_bias("severe"))
+    rng = np.random.default_rng(4)
+    for _ in range(300):
+        q = _random_q(rng)
+        plays = q + rng.normal(0.0, 3.0, radii.shape) * radii
+        expected = np.add.reduce(q - cables.play_update(plays, q, radii), axis=0)
+        got = [cables._lag_sum(m, p, r) for m, p, r in zip(q.tolist(), zip(*plays.tolist()), radii.T.tolist())]
+        assert np.array(got).tobytes() == expected.tobytes()
+
+
+def test_the_float_gravity_sag_matches_the_least_squares():
+    config = resolve_bias("severe")
+    rng = np.random.default_rng(5)
+    for _ in range(300):
+        q = _random_q(rng)
+        np.testing.assert_allclose(cables._gravity_sag_floats(q.tolist(), config), cables.gravity_sag(q, config), rtol=1e-12, atol=1e-18)
+
+
+def test_grid_touch_tool_rotation_feeds_the_float_path_the_pose_of_tool_pose():
+    pose = tool_pose(np.array([0.01, 0.02, -0.1]), 0.4)
+    assert _tool_rotation(0.4).tobytes() == pose[:3, :3].tobytes()
+
+
+def _reference_contact_height(world: DvrkWorld, target: np.ndarray, yaw: float) -> float:
+    """GridTouch's contact search as it was: the cable state copied out and back per point."""
+
+    def tip_z(position: np.ndarray) -> float:
+        state = world.cable.get_state()
+        q_cmd, _ = ik.inverse_kinematics_clamped(tool_pose(position, yaw), q_ref=world.q_cmd)
+        tip = kin.touch_point(world.cable.true_joints(q_cmd), world.cable.true_dh)
+        world.cable.set_state(state)
+        return float(tip[2])
+
+    z = float(target[2])
+    if tip_z(target) >= SURFACE_Z_M:
+        return z
+    for _ in range(8):
+        gap = tip_z(np.array([target[0], target[1], z])) - SURFACE_Z_M
+        if abs(gap) < 1e-7:
+            break
+        z -= gap
+    return z
+
+
+def test_grid_touch_contact_search_finds_the_height_of_the_numpy_path(make_env):
+    env = make_env("dvrk_gym/GridTouch-v0")
+    env.reset(seed=0)
+    grid = env.unwrapped
+    rng = np.random.default_rng(7)
+    heights = []
+    for _ in range(40):
+        centre = grid.circle_centers[rng.integers(len(grid.circle_centers))]
+        target = np.array([centre[0], centre[1], centre[2] + rng.uniform(-0.006, 0.015)])
+        yaw = float(rng.uniform(-np.pi / 2, np.pi / 2))
+        grid.world.move_to(tool_pose(target + [0.0, 0.0, 0.008], yaw), noise_rng=rng, clamp_to_limits=True)
+        z = grid._contact_height(target, yaw)
+        assert abs(z - _reference_contact_height(grid.world, target, yaw)) <= 1e-12  # m
+        heights.append(z != target[2])
+    assert any(heights) and not all(heights)  # both branches: into the paper and above it
