@@ -211,7 +211,7 @@ def repeatability_from_jitter(real_plane_jitter_mm: float, model_plane_jitter_mm
     shaft is within about 10 degrees of the view axis). Measured on the real rows' own
     sequence, so that it is the robot's and not the exploration's: a simulated Phase I
     changes orientation more between consecutive rows than the real one did (median
-    pitch change 11.7 against 7.2 degrees), which adds jitter of its own.
+    pitch change 11.7 against 7.2 degrees without the settle lag), which adds jitter of its own.
     """
     per_axis = np.sqrt(max(real_plane_jitter_mm**2 - model_plane_jitter_mm**2 - detector_plane_mm**2, 0.0))
     return float(per_axis * np.sqrt(2.0) * 1e-3)
