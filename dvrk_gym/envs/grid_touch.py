@@ -178,7 +178,7 @@ class GridTouchEnv(DvrkEnv[GridTouchConfig]):
         # its hysteresis state carries over unless the user asks for relaxed cables.
         self.world.reset_robot(self._start_joints(relax), relax=relax)
         self._touched = False
-        self._achieved = self._seen_touch_point()
+        self._achieved = self._seen_touch_point(*self.world.camera.project(self._true_touch_point()))
         info = {"circle_index": self._circle, "target_yaw": self._yaw, "sim_time_s": 0.0}
         return self._observation(), info
 
@@ -201,9 +201,11 @@ class GridTouchEnv(DvrkEnv[GridTouchConfig]):
         above = target + [0.0, 0.0, self.config.approach_height_m]
         first = self._move(above, yaw)
         touch = self._move(np.array([target[0], target[1], self._contact_height(target, yaw)]), yaw)
-        self._achieved = self._seen_touch_point()
+        tip = self._true_touch_point()
+        left, right = self.world.camera.project(tip)
+        self._achieved = self._seen_touch_point(left, right)
         self._touched = True
-        info = self._touch_info(yaw, clamped, first.joints_clamped | touch.joints_clamped)
+        info = self._touch_info(yaw, clamped, first.joints_clamped | touch.joints_clamped, tip, left[0])
         observation = self._observation()
         reward = float(self.compute_reward(observation["achieved_goal"], observation["desired_goal"], info))
         distance = float(np.linalg.norm(observation["achieved_goal"] - observation["desired_goal"]))
@@ -279,10 +281,10 @@ class GridTouchEnv(DvrkEnv[GridTouchConfig]):
         return command - reported + noise
 
     # ------------------------------------------------------------------ what is seen
-    def _seen_touch_point(self) -> np.ndarray:
-        """The jaws' touch point as the endoscope sees it (projected, with pixel noise)."""
+    def _seen_touch_point(self, left: np.ndarray, right: np.ndarray) -> np.ndarray:
+        """The jaws' touch point as the endoscope sees it, from its exact projections ``left``
+        and ``right`` ((1, 2) px each) with pixel noise, camera frame, m."""
         camera = self.world.camera
-        left, right = camera.project(self._true_touch_point())
         noise = self.world.pixel_noise
         left = noise.apply(left, self.np_random)
         right = noise.apply(right, self.np_random)  # after left's: the draw order is part of the episode
@@ -300,12 +302,13 @@ class GridTouchEnv(DvrkEnv[GridTouchConfig]):
             "desired_goal": _clip_camera(self._desired(self._circle)),
         }
 
-    def _touch_info(self, yaw: float, clamped: np.ndarray, joints_clamped: np.ndarray) -> dict[str, Any]:
+    def _touch_info(
+        self, yaw: float, clamped: np.ndarray, joints_clamped: np.ndarray, tip: np.ndarray, tip_px: np.ndarray
+    ) -> dict[str, Any]:
+        """The step's info; ``tip`` is the true touch point (m) and ``tip_px`` its exact left pixel."""
         index = self._circle
         circle = self.circle_centers[index]
-        tip = self._true_touch_point()
         circle_px = self.world.observe_grid()[index].left_uv
-        tip_px = self.world.camera.project(tip)[0][0]
         return {
             "circle_index": index,
             "target_yaw": self._yaw,

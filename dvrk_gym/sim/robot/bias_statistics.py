@@ -105,7 +105,7 @@ def sample_bias(model: CableModel, rng: np.random.Generator, n_samples: int = 20
     true, measured = [], []
     for q in q_cmd:
         true.append(kin.touch_point(model.true_joints(q, rng), model.true_dh))
-        measured.append(np.array(model.measured_joints(q)))
+        measured.append(model.measured_joints(q))  # a row of q_cmd, or a copy of the motors
     model.set_state(saved)
     reported = np.array([kin.touch_point(q) for q in measured])
     if model.config.wrist_settle_lag > 0.0:
