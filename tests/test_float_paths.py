@@ -83,15 +83,16 @@ def test_the_float_peek_matches_numpys_and_moves_nothing(settle_lag):
         model.true_joints(q if rng.random() < 0.5 else _random_q(rng), rng)  # a history of moves, reversals too
 
 
-def test_the_float_lag_sums_are_the_hysteresis_sums_bit_for_bit():
+def test_the_float_plays_and_their_sums_are_numpys_bit_for_bit():
     radii = cables.play_radii(resolve_bias("severe"))
     rng = np.random.default_rng(4)
     for _ in range(300):
         q = _random_q(rng)
         plays = q + rng.normal(0.0, 3.0, radii.shape) * radii
-        expected = np.add.reduce(q - cables.play_update(plays, q, radii), axis=0)
-        got = [cables._lag_sum(m, p, r) for m, p, r in zip(q.tolist(), zip(*plays.tolist()), radii.T.tolist())]
-        assert np.array(got).tobytes() == expected.tobytes()
+        updated = cables.play_update(plays, q, radii)
+        got = [cables._play_floats(m, p, r) for m, p, r in zip(q.tolist(), zip(*plays.tolist()), radii.T.tolist())]
+        assert np.array([column for column, _ in got]).T.tobytes() == updated.tobytes()
+        assert np.array([total for _, total in got]).tobytes() == np.add.reduce(q - updated, axis=0).tobytes()
 
 
 def test_the_float_gravity_sag_matches_the_least_squares():
@@ -143,3 +144,70 @@ def test_grid_touch_contact_search_finds_the_height_of_the_numpy_path(make_env):
         assert abs(z - _reference_contact_height(grid.world, target, yaw)) <= 1e-12  # m
         heights.append(z != target[2])
     assert any(heights) and not all(heights)  # both branches: into the paper and above it
+
+
+@pytest.mark.parametrize("settle_lag", [0.0, 0.25])
+def test_the_float_move_of_the_cables_matches_numpys_state_draw_and_joints(settle_lag):
+    config = dataclasses.replace(resolve_bias("severe"), wrist_settle_lag=settle_lag)
+    floats, reference = (cables.CableModel(config, bias_seed=6) for _ in range(2))
+    rng = np.random.default_rng(8)
+    q0 = _random_q(rng)
+    first = floats.true_joints_floats(q0.tolist())  # no history: numpy's path, exactly
+    assert first == reference.true_joints(q0).tolist()
+    for i in range(300):
+        q = _random_q(rng) if i % 3 else q0 + rng.normal(0.0, 0.01, 6)  # small moves reverse inside the plays
+        seed = int(rng.integers(2**32))
+        noise = (np.random.default_rng(seed), np.random.default_rng(seed)) if i % 2 else (None, None)
+        got = floats.true_joints_floats(q.tolist(), noise[0])
+        np.testing.assert_allclose(got, reference.true_joints(q, noise[1]), rtol=0, atol=ULPS_RAD)
+        assert floats.get_state().tobytes() == reference.get_state().tobytes()  # the plays are clip choices: exact
+        if noise[0] is not None:  # the same draw was taken
+            assert noise[0].random() == noise[1].random()
+
+
+def test_the_float_forward_kinematics_matches_numpys():
+    rng = np.random.default_rng(9)
+    for _ in range(300):
+        q = _random_q(rng)
+        np.testing.assert_allclose(ik.forward_kinematics_floats(q.tolist()), kin.forward_kinematics(q), rtol=0, atol=ULPS_M)
+
+
+def test_the_float_projection_triangulation_and_pixel_noise_match_the_cameras():
+    world = DvrkWorld()
+    camera, rng = world.camera, np.random.default_rng(10)
+    noise = dataclasses.replace(world.pixel_noise, sigma_px_at_1080p=0.7)
+    for _ in range(200):
+        point = np.array([0.04, 0.042, -0.16]) + rng.uniform(-0.04, 0.04, 3)
+        lu, lv, ru = camera.project_point_floats(point.tolist())
+        left, right = camera.project(point)
+        np.testing.assert_allclose([lu, lv, ru, lv], [*left[0], *right[0]], rtol=0, atol=1e-10)  # px: ulps of ~1000
+        seed = int(rng.integers(2**32))
+        a, b = np.random.default_rng(seed), np.random.default_rng(seed)
+        noisy = (noise.apply_floats(lu, lv, a), noise.apply_floats(ru, lv, a))
+        expected = (noise.apply(np.array([lu, lv]), b), noise.apply(np.array([ru, lv]), b))
+        assert np.array(noisy).tobytes() == np.array(expected).tobytes()
+        assert np.array(camera.triangulate_floats(*noisy)).tobytes() == camera.triangulate(*expected)[0].tobytes()
+    with pytest.raises(ValueError, match="non-positive disparity"):
+        camera.triangulate_floats((500.0, 400.0), (500.0, 401.0))
+
+
+def test_a_float_move_of_the_world_is_numpys_move_to_a_few_ulps():
+    floats, reference = DvrkWorld(), DvrkWorld()
+    rng = np.random.default_rng(11)
+    for i in range(60):
+        pose = tool_pose(np.array([0.04, 0.042, -0.155]) + rng.uniform(-0.03, 0.03, 3), float(rng.uniform(-1.5, 1.5)))
+        command = ik.inverse_kinematics_floats(pose[:3, 3].tolist(), pose[:3, :3], floats.q_cmd)
+        assert command is not None
+        seed = int(rng.integers(2**32))
+        got = floats.move_joints_floats(command, noise_rng=np.random.default_rng(seed))
+        expected = reference.move_joints(np.array(command), noise_rng=np.random.default_rng(seed))
+        assert got.q_cmd.tobytes() == expected.q_cmd.tobytes() and not got.joints_clamped.any()
+        np.testing.assert_allclose(got.q_true, expected.q_true, rtol=0, atol=ULPS_RAD)
+        assert abs(got.duration_s - expected.duration_s) <= 1e-12
+        assert floats.cable.get_state().tobytes() == reference.cable.get_state().tobytes()
+        np.testing.assert_allclose(floats.reported_pose(), reference.reported_pose(), rtol=0, atol=ULPS_M)
+        if i % 20 == 19:  # a reset keeping the cables' history, in floats and in numpy
+            floats.reset_robot(got.q_cmd, relax=False, floats=True)
+            reference.reset_robot(expected.q_cmd, relax=False)
+            np.testing.assert_allclose(floats.q_true, reference.q_true, rtol=0, atol=ULPS_RAD)
+            assert floats.cable.get_state().tobytes() == reference.cable.get_state().tobytes()

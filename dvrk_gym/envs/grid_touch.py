@@ -176,9 +176,9 @@ class GridTouchEnv(DvrkEnv[GridTouchConfig]):
         relax = relax_option(options, self._seeded_reset)
         # The physics was restored to the env's start, but the cable model is not physics:
         # its hysteresis state carries over unless the user asks for relaxed cables.
-        self.world.reset_robot(self._start_joints(relax), relax=relax)
+        self.world.reset_robot(self._start_joints(relax), relax=relax, floats=True)
         self._touched = False
-        self._achieved = self._seen_touch_point(*self.world.camera.project(self._true_touch_point()))
+        self._achieved = self._seen_touch_point(self.world.camera.project_point_floats(self._true_touch_point().tolist()))
         info = {"circle_index": self._circle, "target_yaw": self._yaw, "sim_time_s": 0.0}
         return self._observation(), info
 
@@ -202,10 +202,10 @@ class GridTouchEnv(DvrkEnv[GridTouchConfig]):
         first = self._move(above, yaw)
         touch = self._move(np.array([target[0], target[1], self._contact_height(target, yaw)]), yaw)
         tip = self._true_touch_point()
-        left, right = self.world.camera.project(tip)
-        self._achieved = self._seen_touch_point(left, right)
+        pixels = self.world.camera.project_point_floats(tip.tolist())
+        self._achieved = self._seen_touch_point(pixels)
         self._touched = True
-        info = self._touch_info(yaw, clamped, first.joints_clamped | touch.joints_clamped, tip, left[0])
+        info = self._touch_info(yaw, clamped, first.joints_clamped | touch.joints_clamped, tip, np.array(pixels[:2]))
         observation = self._observation()
         reward = float(self.compute_reward(observation["achieved_goal"], observation["desired_goal"], info))
         distance = float(np.linalg.norm(observation["achieved_goal"] - observation["desired_goal"]))
@@ -235,7 +235,7 @@ class GridTouchEnv(DvrkEnv[GridTouchConfig]):
         command = self._command_floats(position, yaw)
         if command is None:
             return self.world.move_to(tool_pose(position, yaw), noise_rng=self.np_random, clamp_to_limits=True)
-        return self.world.move_joints(np.array(command), noise_rng=self.np_random)
+        return self.world.move_joints_floats(command, noise_rng=self.np_random)
 
     def _true_touch_point(self) -> np.ndarray:
         """``world.true_touch_point()`` (m), computed in floats."""
@@ -281,14 +281,13 @@ class GridTouchEnv(DvrkEnv[GridTouchConfig]):
         return command - reported + noise
 
     # ------------------------------------------------------------------ what is seen
-    def _seen_touch_point(self, left: np.ndarray, right: np.ndarray) -> np.ndarray:
-        """The jaws' touch point as the endoscope sees it, from its exact projections ``left``
-        and ``right`` ((1, 2) px each) with pixel noise, camera frame, m."""
-        camera = self.world.camera
+    def _seen_touch_point(self, pixels: tuple[float, float, float]) -> np.ndarray:
+        """The jaws' touch point as the endoscope sees it, from its exact projection ``pixels``
+        (left u, v, right u; px) with pixel noise, camera frame, m."""
         noise = self.world.pixel_noise
-        left = noise.apply(left, self.np_random)
-        right = noise.apply(right, self.np_random)  # after left's: the draw order is part of the episode
-        return camera.triangulate(left, right)[0]
+        left = noise.apply_floats(pixels[0], pixels[1], self.np_random)
+        right = noise.apply_floats(pixels[2], pixels[1], self.np_random)  # after left's: the draw order is part of the episode
+        return np.array(self.world.camera.triangulate_floats(left, right))
 
     def _desired(self, index: int) -> np.ndarray:
         return self.world.observe_grid()[index].camera_position

@@ -115,7 +115,7 @@ class DvrkWorld:
         self.reset_robot(HOME_JOINTS)
 
     # ----------------------------------------------------------------- robot state
-    def reset_robot(self, q: np.ndarray, jaw_angle_rad: float = 0.0, relax: bool = True) -> None:
+    def reset_robot(self, q: np.ndarray, jaw_angle_rad: float = 0.0, relax: bool = True, floats: bool = False) -> None:
         """Put the robot at rest at joints ``q``, clock at zero.
 
         Args:
@@ -124,12 +124,13 @@ class DvrkWorld:
             relax: True: the cables are relaxed at ``q`` (no hysteresis gap, whatever came
                 before). False: they keep their history, and the arm reaches ``q`` through
                 them as a real arm sent home does (no repeatability noise: no random draw).
+            floats: take the cable model's float path (a few ulps from numpy's; GridTouch-v0's).
         """
         q = np.array(q, dtype=float)
         if relax:
             self.cable.reset(q)
         self.q_cmd = q.copy()
-        self.q_true = self.cable.true_joints(q)
+        self.q_true = np.array(self.cable.true_joints_floats(q.tolist())) if floats else self.cable.true_joints(q)
         self.jaw_angle = float(jaw_angle_rad)
         if self.jaw_driver is None:
             self.robot.set_joints(self.q_true, self.jaw_angle)
@@ -151,10 +152,13 @@ class DvrkWorld:
         q = np.asarray(q, dtype=float)
         key = q.tobytes()
         pose = self._nominal_poses.get(key)
-        if pose is None:
-            if len(self._nominal_poses) >= 4:
-                self._nominal_poses.clear()
-            pose = self._nominal_poses[key] = kin.forward_kinematics(q)
+        return self._remember_pose(q, kin.forward_kinematics(q)) if pose is None else pose
+
+    def _remember_pose(self, q: np.ndarray, pose: np.ndarray) -> np.ndarray:
+        """Keep ``pose`` (4x4, m) as the nominal pose of joints ``q`` (6,); return it."""
+        if len(self._nominal_poses) >= 4:
+            self._nominal_poses.clear()
+        self._nominal_poses[q.tobytes()] = pose
         return pose
 
     def true_pose(self) -> np.ndarray:
@@ -209,6 +213,17 @@ class DvrkWorld:
         move = CartesianMove.plan(self._nominal_pose(self.q_cmd), self._nominal_pose(q), self.config.motion)
         return self._finish_move(q, move.duration_s, jaw_angle_rad, noise_rng, np.zeros(6, dtype=bool))
 
+    def move_joints_floats(self, q: list[float], noise_rng: np.random.Generator | None = None) -> MoveResult:
+        """:meth:`move_joints` for joints ``q`` (6,) rad / m within the limits (as
+        :func:`~dvrk_gym.sim.robot.ik.inverse_kinematics_floats` gives them; not checked), with
+        the end pose's kinematics and the cable model in Python floats: a few ulps from it."""
+        q_target = np.array(q)
+        end = self._nominal_poses.get(q_target.tobytes())
+        if end is None:
+            end = self._remember_pose(q_target, ik.forward_kinematics_floats(q))
+        move = CartesianMove.plan(self._nominal_pose(self.q_cmd), end, self.config.motion)
+        return self._finish_move(q_target, move.duration_s, None, noise_rng, np.zeros(6, dtype=bool), floats=q)
+
     def _finish_move(
         self,
         q_target: np.ndarray,
@@ -216,13 +231,19 @@ class DvrkWorld:
         jaw_angle_rad: float | None,
         noise_rng: np.random.Generator | None,
         clamped: np.ndarray,
+        floats: list[float] | None = None,
     ) -> MoveResult:
+        """Command ``q_target`` (6,) and let the move of ``duration_s`` s settle; ``floats``: the
+        same command as floats, to take the cable model's float path."""
         jaw_time = 0.0
         if jaw_angle_rad is not None:
             jaw_time = abs(float(jaw_angle_rad) - self.jaw_angle) / JAW_SPEED_RAD_S
             self.jaw_angle = float(jaw_angle_rad)
         self.q_cmd = np.array(q_target, dtype=float)
-        self.q_true = self.cable.true_joints(self.q_cmd, noise_rng)
+        if floats is None:
+            self.q_true = self.cable.true_joints(self.q_cmd, noise_rng)
+        else:
+            self.q_true = np.array(self.cable.true_joints_floats(floats, noise_rng))
         if self.jaw_driver is None:
             self.robot.set_joints(self.q_true, self.jaw_angle)
         else:  # a free-space move: held fragments go along, nothing else is touched

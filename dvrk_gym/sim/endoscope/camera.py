@@ -16,6 +16,7 @@ matrix below compensates for both so that rendered pixels agree with
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -209,6 +210,7 @@ class StereoCamera:
         self._pose = pose
         self._pose.flags.writeable = False
         self._cam_from_world = np.linalg.inv(pose)
+        self._cam_from_world_floats = self._cam_from_world[:3].tolist()
 
     @property
     def depth_scale(self) -> float:
@@ -279,6 +281,22 @@ class StereoCamera:
         x = (left[:, 0] - k.cx) * z / k.fx
         y = (left[:, 1] - k.cy) * z / k.fy
         return np.stack([x, y, z], axis=1)
+
+    def project_point_floats(self, point: list[float]) -> tuple[float, float, float]:
+        """(left u, v, right u) px of one world point (3,) m in front of the camera (not
+        checked; the right v is the left's), in Python floats: a few ulps from :meth:`project`."""
+        (r0, r1, r2), k = self._cam_from_world_floats, self.intrinsics
+        x, y, z = (r[0] * point[0] + r[1] * point[1] + r[2] * point[2] + r[3] for r in (r0, r1, r2))
+        return k.fx * x / z + k.cx, k.fy * y / z + k.cy, k.fx * (x - self.baseline_m) / z + k.cx
+
+    def triangulate_floats(self, left: tuple[float, float], right: tuple[float, float]) -> list[float]:
+        """:meth:`triangulate` of one pair of finite pixels (u, v) (not checked), in floats:
+        the same numbers; ValueError on a non-positive disparity, as there."""
+        k, du, dv = self.intrinsics, left[0] - right[0], left[1] - right[1]
+        if du <= 0:
+            raise ValueError(f"non-positive disparity in row(s) [0]: [{du}] px")
+        z = k.fx * self.calibrated_baseline_m / math.sqrt(du * du + dv * dv)
+        return [(left[0] - k.cx) * z / k.fx, (left[1] - k.cy) * z / k.fy, z]
 
     def view_matrix(self, side: str) -> list[float]:
         """OpenGL view matrix (world -> GL eye) of ``side``, column-major list of 16 floats."""

@@ -67,6 +67,14 @@ class PixelNoise:
             return uv
         return uv + rng.normal(0.0, sigma_px, size=2)
 
+    def apply_floats(self, u: float, v: float, rng: np.random.Generator | None) -> tuple[float, float]:
+        """:meth:`apply` to one pixel (``u``, ``v``) in Python floats: the same draw, the same numbers."""
+        sigma_px = self.sigma_px
+        if rng is None or sigma_px == 0.0:
+            return u, v
+        du, dv = rng.normal(0.0, sigma_px, size=2).tolist()
+        return u + du, v + dv
+
 
 @dataclass(frozen=True)
 class DetectionNoise:

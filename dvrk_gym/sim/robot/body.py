@@ -84,6 +84,8 @@ leaves a fragment's own friction in force)."""
 
 JAW_A_INDEX = 6
 JAW_B_INDEX = 7
+_JOINT_INDICES = list(range(JAW_B_INDEX + 1))
+"""Every joint of the body: the six arm joints, then jaw A and jaw B."""
 WRIST_YAW_INDEX = 5
 
 
@@ -290,9 +292,12 @@ class PSMBody:
         half_open = max(self.jaw_angle, 0.0) / 2
         targets = list(q) + [q[5] + half_open, q[5] - half_open]
         c = self.physics.client
-        for j, value in enumerate(targets):
-            c.resetJointState(self.body_id, j, float(value))
-        self._drive_motors(c.POSITION_CONTROL, len(targets), targetPositions=[float(v) for v in targets])
+        positions = [float(v) for v in targets]
+        # One call for all joints: the state resetJointState gives joint by joint (velocities
+        # zero), in a fifth of the time. Not in drive(), between physics steps: there it moved
+        # a fragment in a debridement trial (an earlier measurement; benchmarks/bench_peers.py).
+        c.resetJointStatesMultiDof(self.body_id, _JOINT_INDICES, [[v] for v in positions])
+        self._drive_motors(c.POSITION_CONTROL, len(targets), targetPositions=positions)
         self.joints = q.copy()
 
     def drive(

@@ -38,16 +38,8 @@ import numpy as np
 from dvrk_gym.sim.robot import kinematics as kin
 from dvrk_gym.sim.robot.bias import BiasConfig, Instrument, draw_instrument
 
-__all__ = [
-    "CableModel",
-    "outer_stretch",
-    "wrist_stretch",
-    "gravity_sag",
-    "play_update",
-    "hysteresis_output",
-    "repeatability_std",
-    "play_radii",
-]
+__all__ = ["CableModel", "outer_stretch", "wrist_stretch", "gravity_sag"]
+__all__ += ["play_update", "hysteresis_output", "repeatability_std", "play_radii"]
 
 _N_JOINTS = 6
 _OUTER = slice(0, 2)  # outer yaw, outer pitch
@@ -178,15 +170,14 @@ def _gravity_sag_floats(q: list[float], config: BiasConfig) -> tuple[float, floa
     return (cy * cp * r[0] + sy * cp * r[2]) / (cp * cp), -sy * sp * r[0] - cp * r[1] + cy * sp * r[2]
 
 
-def _lag_sum(motor: float, plays: tuple[float, ...], radii: list[float]) -> float:
-    """One joint's sum, in order, of ``motor - play`` over its plays (rad or m) after
-    :func:`play_update` (np.clip's arithmetic): the floats of :func:`hysteresis_output`'s sum."""
-    total = 0.0
-    for i, (play, radius) in enumerate(zip(plays, radii)):
-        low, high = motor - radius, motor + radius
-        lag = motor - (low if play < low else high if play > high else play)
-        total = lag if i == 0 else total + lag
-    return total
+def _play_floats(motor: float, plays: tuple[float, ...], radii: list[float]) -> tuple[list[float], float]:
+    """One joint's plays (rad or m) after :func:`play_update` (np.clip's choice: the play itself
+    on a tie), and the sum, in order, of ``motor - play`` over them: :func:`hysteresis_output`'s."""
+    column = [motor - r if p < motor - r else motor + r if p > motor + r else p for p, r in zip(plays, radii)]
+    total = motor - column[0]
+    for play in column[1:]:
+        total += motor - play
+    return column, total
 
 
 def play_update(plays: np.ndarray, q_cmd: np.ndarray, radii: np.ndarray) -> np.ndarray:
@@ -282,9 +273,9 @@ class CableModel:
         # Where the motors stopped on the last move (what the encoders read): the commands
         # themselves unless the wrist settles short (``wrist_settle_lag``); NaN before the first.
         self._motors = np.full(_N_JOINTS, np.nan)
-        # The float path's constants (peek_true_joints_floats).
+        # The float path's constants (peek_true_joints_floats, true_joints_floats).
         self._radii_columns, self._n_plays = self._radii.T.tolist(), len(PLAY_FRACTIONS)
-        self._offsets = self.instrument.homing_offsets.tolist()
+        self._offsets, self._noise_std_floats = self.instrument.homing_offsets.tolist(), self._noise_std.tolist()
         self._outer_gains, self._coupling = self.instrument.outer_gains.tolist(), self.instrument.wrist_coupling.tolist()
 
     def measured_joints(self, q_cmd: np.ndarray) -> np.ndarray:
@@ -343,15 +334,30 @@ class CableModel:
         math.tanh can differ from numpy's in the last bit)."""
         if math.isnan(self._plays[0, 0]) or math.isnan(self._motors[0]):  # no history yet: the numpy path
             return self.peek_true_joints(np.array(q_cmd)).tolist()
+        return self._advance_floats(q_cmd)[2]
+
+    def true_joints_floats(self, q_cmd: list[float], noise_rng: np.random.Generator | None = None) -> list[float]:
+        """:meth:`true_joints` for a finite command (6,) rad / m (not checked), in floats as
+        :meth:`peek_true_joints_floats`, with the same random draw; the cables' state moves as there."""
+        if math.isnan(self._plays[0, 0]) or math.isnan(self._motors[0]):
+            return self.true_joints(np.array(q_cmd), noise_rng).tolist()
+        motors, columns, q_true = self._advance_floats(q_cmd)
+        self._plays, self._motors = np.array(columns).T.copy(), np.array(motors)
+        if noise_rng is not None:
+            q_true = [v + n * s for v, n, s in zip(q_true, noise_rng.normal(0.0, 1.0, _N_JOINTS).tolist(), self._noise_std_floats)]
+        return q_true
+
+    def _advance_floats(self, q_cmd: list[float]) -> tuple[list[float], list[list[float]], list[float]]:
+        """:meth:`_advance` to :meth:`_motor_joints` in floats, history present: (the motors,
+        each joint's play outputs, the noiseless true joints)."""
         motors = list(q_cmd)
         if self._settle_lag != 0.0:
             for i in (4, 5):
                 motors[i] += self._settle_lag * (float(self._motors[i]) - motors[i])
-        q = [
-            motor - _lag_sum(motor, plays, radii) / self._n_plays
-            for motor, plays, radii in zip(motors, zip(*self._plays.tolist()), self._radii_columns)
-        ]
-        return [value + offset + error for value, offset, error in zip(q, self._offsets, self._errors_floats(q))]
+        plays = [_play_floats(m, p, r) for m, p, r in zip(motors, zip(*self._plays.tolist()), self._radii_columns)]
+        q = [m - total / self._n_plays for m, (_, total) in zip(motors, plays)]
+        q_true = [value + offset + error for value, offset, error in zip(q, self._offsets, self._errors_floats(q))]
+        return motors, [column for column, _ in plays], q_true
 
     def _errors_floats(self, q: list[float]) -> list[float]:
         """The stretch and sag errors (6,) rad / m at the hysteresis output ``q``, in floats."""

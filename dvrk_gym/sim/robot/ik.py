@@ -264,6 +264,15 @@ def touch_point_floats(q: list[float], dh: tuple[DHRow, ...] = PSM_DH) -> np.nda
     return np.array([f[3], f[7], pivot_z])
 
 
+def forward_kinematics_floats(q: list[float], dh: tuple[DHRow, ...] = PSM_DH) -> np.ndarray:
+    """:func:`~dvrk_gym.sim.robot.kinematics.forward_kinematics` (4, 4) m of finite joints
+    ``q`` (6,) rad / m (not checked), the chain in floats: a few ulps from it."""
+    f = last_frame_floats(q, dh)
+    pose = np.array([f[0:4], f[4:8], f[8:12], (0.0, 0.0, 0.0, 1.0)])
+    pose[:3, :3] = pose[:3, :3] @ TOOL_TIP_ROTATION
+    return pose
+
+
 _ROTATION_X6_COS, _ROTATION_X6_SIN = float(_ROTATION_X6[1, 1]), float(_ROTATION_X6[2, 1])
 _OUTER_LINKS = PSM_DH[:3]
 
