@@ -93,6 +93,35 @@ evaluations still (7.4 a step, the correction iterating 5.3 times on average, at
 inverse kinematics 10, cables 9, touch point 6.5), the stereo view of the touch point (twice
 a step) and the reset; 2x needs most of these in floats or compiled, and the moves in floats
 would change the other envs' numbers.
+
+Moves, reset and stereo view in floats (2026-11-25, later; quiet machine, load average
+0.7): a move cost 133 us (timeit: cable model 35, the end pose's FK 19, ``set_joints`` 18
+of which eight ``resetJointState`` calls 12, the plan 7, the rest array handling) and the
+touch point's projection, noise and triangulation 67 us a step. GridTouch-v0 alone now
+takes ``DvrkWorld.move_joints_floats`` (``CableModel.true_joints_floats``,
+``ik.forward_kinematics_floats``), ``reset_robot(floats=True)`` and the camera's and pixel
+noise's float methods, so the other envs keep their numbers; ``set_joints`` sets all eight
+joints in one ``resetJointStatesMultiDof`` call (2.2 us; not in ``drive``, between physics
+steps, where the note above found it moved a fragment). The reported pose's FK stays
+numpy's: its bits reach the simulated person's correction and so the residual forests.
+Over 9,000 seeded steps and resets (three instruments, yaw 0 and random) the observations,
+rewards, successes, reported positions and corrections are the numpy path's bit for bit
+(the cables' plays are np.clip choices, reproduced exactly); tip, pixel and mm errors and
+simulated time within 8e-13. Interleaved runs of 2,000 steps and resets: 793 / 799 ->
+1,115 / 1,117 steps/s; this script, same hour: GridTouch-v0 0.82x -> 1.17x PandaReach-v3.
+What is left (cProfile): the seven touch evaluations (inverse kinematics about 12 us each,
+the chain's link products the top line), the reported pose's numpy FK after each move and
+reset (the wrist's settle lag makes it a pose of its own), the observation's Euler angles,
+the plans and Gymnasium's wrappers.
+
+Renders (same day): a TinyRenderer window costs about 1 ms for the scene's triangles plus
+0.25-0.36 us a pixel; with the printed circles drawn at alpha 0 (which TinyRenderer skips:
+2.5 us to toggle) a 140 x 140 fragment window took 4.9 ms against 6.3 ms and a 10 x 10
+marker window 0.78 ms against 1.09 ms. The fragment and marker masks ignore black, but a
+fragment's or the tape's lowest sliver can lie behind a circle printed 0.05 mm above the
+paper, so the masks would not be the same bit for bit; not taken. The paper's box drawn as
+a mesh without its bottom face was no faster and shaded differently (56,874 pixels of four
+frames), so its top face, half of a fragment window's time, is the cost itself.
 """
 
 from __future__ import annotations
