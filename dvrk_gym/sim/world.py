@@ -124,16 +124,17 @@ class DvrkWorld:
             relax: True: the cables are relaxed at ``q`` (no hysteresis gap, whatever came
                 before). False: they keep their history, and the arm reaches ``q`` through
                 them as a real arm sent home does (no repeatability noise: no random draw).
-            floats: take the cable model's float path (a few ulps from numpy's; GridTouch-v0's).
+            floats: take the cable model's float path (a few ulps from numpy's) and set the
+                body's joints in one call (no physics is stepped after it): GridTouch-v0's.
         """
-        q = np.array(q, dtype=float)
+        q = kin.finite_vector(q, 6, "q") if floats else np.array(q, dtype=float)
         if relax:
             self.cable.reset(q)
         self.q_cmd = q.copy()
         self.q_true = np.array(self.cable.true_joints_floats(q.tolist())) if floats else self.cable.true_joints(q)
         self.jaw_angle = float(jaw_angle_rad)
         if self.jaw_driver is None:
-            self.robot.set_joints(self.q_true, self.jaw_angle)
+            self.robot.set_joints(self.q_true, self.jaw_angle, batched=floats)
         else:  # nothing stays held through a reset
             self.jaw_driver.reset_tool(self.q_true, self.jaw_angle)
         self.clock.reset()
@@ -152,13 +153,10 @@ class DvrkWorld:
         q = np.asarray(q, dtype=float)
         key = q.tobytes()
         pose = self._nominal_poses.get(key)
-        return self._remember_pose(q, kin.forward_kinematics(q)) if pose is None else pose
-
-    def _remember_pose(self, q: np.ndarray, pose: np.ndarray) -> np.ndarray:
-        """Keep ``pose`` (4x4, m) as the nominal pose of joints ``q`` (6,); return it."""
-        if len(self._nominal_poses) >= 4:
-            self._nominal_poses.clear()
-        self._nominal_poses[q.tobytes()] = pose
+        if pose is None:
+            if len(self._nominal_poses) >= 4:
+                self._nominal_poses.clear()
+            pose = self._nominal_poses[key] = kin.forward_kinematics(q)
         return pose
 
     def true_pose(self) -> np.ndarray:
@@ -219,8 +217,8 @@ class DvrkWorld:
         the end pose's kinematics and the cable model in Python floats: a few ulps from it."""
         q_target = np.array(q)
         end = self._nominal_poses.get(q_target.tobytes())
-        if end is None:
-            end = self._remember_pose(q_target, ik.forward_kinematics_floats(q))
+        if end is None:  # for the plan only, not remembered: the reported pose stays numpy's
+            end = ik.forward_kinematics_floats(q)
         move = CartesianMove.plan(self._nominal_pose(self.q_cmd), end, self.config.motion)
         return self._finish_move(q_target, move.duration_s, None, noise_rng, np.zeros(6, dtype=bool), floats=q)
 
@@ -234,7 +232,8 @@ class DvrkWorld:
         floats: list[float] | None = None,
     ) -> MoveResult:
         """Command ``q_target`` (6,) and let the move of ``duration_s`` s settle; ``floats``: the
-        same command as floats, to take the cable model's float path."""
+        same command as floats, to take the cable model's float path and set the body's joints
+        in one call (GridTouch-v0's: no physics is stepped after it)."""
         jaw_time = 0.0
         if jaw_angle_rad is not None:
             jaw_time = abs(float(jaw_angle_rad) - self.jaw_angle) / JAW_SPEED_RAD_S
@@ -245,7 +244,7 @@ class DvrkWorld:
         else:
             self.q_true = np.array(self.cable.true_joints_floats(floats, noise_rng))
         if self.jaw_driver is None:
-            self.robot.set_joints(self.q_true, self.jaw_angle)
+            self.robot.set_joints(self.q_true, self.jaw_angle, batched=floats is not None)
         else:  # a free-space move: held fragments go along, nothing else is touched
             self.jaw_angle = self.jaw_driver.place_tool(self.q_true, jaw_angle_rad)
         elapsed = max(duration_s, jaw_time) + self.config.motion.settle_time_s

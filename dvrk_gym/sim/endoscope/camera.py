@@ -283,10 +283,13 @@ class StereoCamera:
         return np.stack([x, y, z], axis=1)
 
     def project_point_floats(self, point: list[float]) -> tuple[float, float, float]:
-        """(left u, v, right u) px of one world point (3,) m in front of the camera (not
-        checked; the right v is the left's), in Python floats: a few ulps from :meth:`project`."""
+        """(left u, v, right u) px of one finite world point (3,) m (not checked; the right v is
+        the left's), in Python floats: a few ulps from :meth:`project`; ValueError, as there,
+        if the point is not in front of the camera."""
         (r0, r1, r2), k = self._cam_from_world_floats, self.intrinsics
         x, y, z = (r[0] * point[0] + r[1] * point[1] + r[2] * point[2] + r[3] for r in (r0, r1, r2))
+        if z <= 0:
+            raise ValueError("points_cam row(s) [0] are not in front of the camera (z <= 0)")
         return k.fx * x / z + k.cx, k.fy * y / z + k.cy, k.fx * (x - self.baseline_m) / z + k.cx
 
     def triangulate_floats(self, left: tuple[float, float], right: tuple[float, float]) -> list[float]:

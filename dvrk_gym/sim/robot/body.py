@@ -279,11 +279,15 @@ class PSMBody:
             useMaximalCoordinates=False,
         )
 
-    def set_joints(self, q: np.ndarray, jaw_angle_rad: float | None = None) -> None:
+    def set_joints(self, q: np.ndarray, jaw_angle_rad: float | None = None, batched: bool = False) -> None:
         """Place the tool at joints ``q`` (rad, insertion in m) and the given jaw opening.
 
         The joints are set exactly (a kinematic teleport) and the motors are told to hold
-        them, so that stepping the physics does not let the arm sag.
+        them, so that stepping the physics does not let the arm sag. ``batched``: set all
+        joints in one PyBullet call, a fifth of the time of one call per joint; the same
+        joint state, but physics stepped afterwards can differ (PyBullet's collision
+        bookkeeping sees the joints set in another order: a debridement pick moved a
+        fragment by 0.04 mm), so only for a world whose physics is never stepped.
         """
         q = np.asarray(q, dtype=float)
         if jaw_angle_rad is not None:
@@ -293,10 +297,11 @@ class PSMBody:
         targets = list(q) + [q[5] + half_open, q[5] - half_open]
         c = self.physics.client
         positions = [float(v) for v in targets]
-        # One call for all joints: the state resetJointState gives joint by joint (velocities
-        # zero), in a fifth of the time. Not in drive(), between physics steps: there it moved
-        # a fragment in a debridement trial (an earlier measurement; benchmarks/bench_peers.py).
-        c.resetJointStatesMultiDof(self.body_id, _JOINT_INDICES, [[v] for v in positions])
+        if batched:
+            c.resetJointStatesMultiDof(self.body_id, _JOINT_INDICES, [[v] for v in positions])
+        else:
+            for j, value in enumerate(positions):
+                c.resetJointState(self.body_id, j, value)
         self._drive_motors(c.POSITION_CONTROL, len(targets), targetPositions=positions)
         self.joints = q.copy()
 

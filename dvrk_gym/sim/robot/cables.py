@@ -171,8 +171,8 @@ def _gravity_sag_floats(q: list[float], config: BiasConfig) -> tuple[float, floa
 
 
 def _play_floats(motor: float, plays: tuple[float, ...], radii: list[float]) -> tuple[list[float], float]:
-    """One joint's plays (rad or m) after :func:`play_update` (np.clip's choice: the play itself
-    on a tie), and the sum, in order, of ``motor - play`` over them: :func:`hysteresis_output`'s."""
+    """One joint's plays (rad or m) after :func:`play_update` (np.clip's values; only a zero's
+    sign can differ), and the sum, in order, of ``motor - play`` over them: :func:`hysteresis_output`'s."""
     column = [motor - r if p < motor - r else motor + r if p > motor + r else p for p, r in zip(plays, radii)]
     total = motor - column[0]
     for play in column[1:]:
