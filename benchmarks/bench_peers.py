@@ -100,9 +100,11 @@ of which eight ``resetJointState`` calls 12, the plan 7, the rest array handling
 touch point's projection, noise and triangulation 67 us a step. GridTouch-v0 alone now
 takes ``DvrkWorld.move_joints_floats`` (``CableModel.true_joints_floats``,
 ``ik.forward_kinematics_floats``), ``reset_robot(floats=True)`` and the camera's and pixel
-noise's float methods, so the other envs keep their numbers; ``set_joints`` sets all eight
-joints in one ``resetJointStatesMultiDof`` call (2.2 us; not in ``drive``, between physics
-steps, where the note above found it moved a fragment). The reported pose's FK stays
+noise's float methods, so the other envs keep their numbers; on that path ``set_joints``
+sets all eight joints in one ``resetJointStatesMultiDof`` call (2.2 us). Not elsewhere: as
+the note above found for ``drive``, a review found the batched call in the world's reset
+moved a fragment once a debridement pick stepped physics (0.04 mm after four oracle picks;
+the joint state is the same, PyBullet's collision bookkeeping is not). The reported pose's FK stays
 numpy's: its bits reach the simulated person's correction and so the residual forests.
 Over 9,000 seeded steps and resets (three instruments, yaw 0 and random) the observations,
 rewards, successes, reported positions and corrections are the numpy path's bit for bit
