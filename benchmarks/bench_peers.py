@@ -102,15 +102,16 @@ takes ``DvrkWorld.move_joints_floats`` (``CableModel.true_joints_floats``,
 ``ik.forward_kinematics_floats``), ``reset_robot(floats=True)`` and the camera's and pixel
 noise's float methods, so the other envs keep their numbers; on that path ``set_joints``
 sets all eight joints in one ``resetJointStatesMultiDof`` call (2.2 us). Not elsewhere: as
-the note above found for ``drive``, a review found the batched call in the world's reset
+the note above found for ``set_joints`` then, a review found the batched call in the world's reset
 moved a fragment once a debridement pick stepped physics (0.04 mm after four oracle picks;
 the joint state is the same, PyBullet's collision bookkeeping is not). The reported pose's FK stays
 numpy's: its bits reach the simulated person's correction and so the residual forests.
 Over 9,000 seeded steps and resets (three instruments, yaw 0 and random) the observations,
 rewards, successes, reported positions and corrections are the numpy path's bit for bit
-(the cables' plays are np.clip choices, reproduced exactly); tip, pixel and mm errors and
+(the cables' plays are np.clip's values, reproduced exactly); tip, pixel and mm errors and
 simulated time within 8e-13. Interleaved runs of 2,000 steps and resets: 793 / 799 ->
-1,115 / 1,117 steps/s; this script, same hour: GridTouch-v0 0.82x -> 1.17x PandaReach-v3.
+1,115 / 1,117 steps/s; this script, same hour: GridTouch-v0 0.82x -> 1.17x PandaReach-v3
+(1.15x after the review's mends, which leave the reported pose's FK to numpy).
 What is left (cProfile): the seven touch evaluations (inverse kinematics about 12 us each,
 the chain's link products the top line), the reported pose's numpy FK after each move and
 reset (the wrist's settle lag makes it a pose of its own), the observation's Euler angles,

@@ -1,4 +1,5 @@
-"""The float paths of issue 18 (GridTouch's touch evaluations in Python floats) against numpy's.
+"""The float paths of issue 18 (GridTouch's touch evaluations, moves, resets and stereo view in
+Python floats) against numpy's.
 
 Unlike tests/test_fast_paths.py these are not bit for bit: numpy's 3x3 / 4x4 products (BLAS)
 fuse multiply-adds, the gravity sag's least squares is solved in closed form, and math's
