@@ -193,8 +193,7 @@ class GridTouchEnv(DvrkEnv[GridTouchConfig]):
             return world.q_cmd.copy()
         lifted = world.reported_pose()
         lifted[2, 3] += self.config.approach_height_m
-        command = ik.inverse_kinematics_floats(lifted[:3, 3].tolist(), lifted[:3, :3], world.q_cmd)
-        return ik.inverse_kinematics_clamped(lifted, q_ref=world.q_cmd)[0] if command is None else np.array(command)
+        return np.array(ik.inverse_kinematics_clamped_floats(lifted[:3, 3].tolist(), lifted[:3, :3], world.q_cmd))
 
     def _step_episode(self, action: np.ndarray, clamped: np.ndarray):
         target, yaw = action[:3], float(action[3])
@@ -244,9 +243,8 @@ class GridTouchEnv(DvrkEnv[GridTouchConfig]):
     def _true_tip_for(self, position: np.ndarray, yaw: float) -> np.ndarray:
         """Where the jaws would truly be if commanded to ``position`` now (state untouched)."""
         cable = self.world.cable
-        command = self._command_floats(position, yaw)
-        if command is None:  # a clamped or singular pose: the numpy path
-            command = ik.inverse_kinematics_clamped(tool_pose(position, yaw), q_ref=self.world.q_cmd)[0].tolist()
+        point = kin.finite_vector(position, 3, "position").tolist()
+        command = ik.inverse_kinematics_clamped_floats(point, _tool_rotation(yaw), self.world.q_cmd)
         return ik.touch_point_floats(cable.peek_true_joints_floats(command), cable.true_dh)
 
     def _contact_height(self, target: np.ndarray, yaw: float) -> float:

@@ -341,23 +341,23 @@ class CableModel:
         :meth:`peek_true_joints_floats`, with the same random draw; the cables' state moves as there."""
         if math.isnan(self._plays[0, 0]) or math.isnan(self._motors[0]):
             return self.true_joints(np.array(q_cmd), noise_rng).tolist()
-        motors, columns, q_true = self._advance_floats(q_cmd)
-        self._plays, self._motors = np.array(columns).T.copy(), np.array(motors)
+        motors, plays, q_true = self._advance_floats(q_cmd)
+        self._plays, self._motors = np.array([column for column, _ in plays]).T.copy(), np.array(motors)
         if noise_rng is not None:
             q_true = [v + n * s for v, n, s in zip(q_true, noise_rng.normal(0.0, 1.0, _N_JOINTS).tolist(), self._noise_std_floats)]
         return q_true
 
-    def _advance_floats(self, q_cmd: list[float]) -> tuple[list[float], list[list[float]], list[float]]:
+    def _advance_floats(self, q_cmd: list[float]) -> tuple[list[float], list[tuple[list[float], float]], list[float]]:
         """:meth:`_advance` to :meth:`_motor_joints` in floats, history present: (the motors,
-        each joint's play outputs, the noiseless true joints)."""
+        each joint's :func:`_play_floats`, the noiseless true joints)."""
         motors = list(q_cmd)
         if self._settle_lag != 0.0:
-            for i in (4, 5):
+            for i in range(_WRIST_BENDING.start, _WRIST_BENDING.stop):
                 motors[i] += self._settle_lag * (float(self._motors[i]) - motors[i])
         plays = [_play_floats(m, p, r) for m, p, r in zip(motors, zip(*self._plays.tolist()), self._radii_columns)]
         q = [m - total / self._n_plays for m, (_, total) in zip(motors, plays)]
         q_true = [value + offset + error for value, offset, error in zip(q, self._offsets, self._errors_floats(q))]
-        return motors, [column for column, _ in plays], q_true
+        return motors, plays, q_true
 
     def _errors_floats(self, q: list[float]) -> list[float]:
         """The stretch and sag errors (6,) rad / m at the hysteresis output ``q``, in floats."""

@@ -334,3 +334,15 @@ def inverse_kinematics_floats(position: list[float], rotation: np.ndarray, q_ref
     if all(lo <= v <= hi for lo, v, hi in zip(_LOWER_FLOATS, q, _UPPER_FLOATS)):
         return q
     return None
+
+
+def inverse_kinematics_clamped_floats(position: list[float], rotation: np.ndarray, q_ref: np.ndarray) -> list[float]:
+    """The joints (6,) rad / m of :func:`inverse_kinematics_clamped` for the pose (``rotation``
+    (3, 3), ``position`` (3,) m): :func:`inverse_kinematics_floats`'s where it solves the pose,
+    else numpy's clamped solution (the 4x4 pose is built only then)."""
+    q = inverse_kinematics_floats(position, rotation, q_ref)
+    if q is not None:
+        return q
+    pose = np.eye(4)
+    pose[:3, :3], pose[:3, 3] = rotation, position
+    return inverse_kinematics_clamped(pose, q_ref=q_ref)[0].tolist()
