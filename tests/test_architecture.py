@@ -32,6 +32,7 @@ LAYER_RANKS = {
     "dvrk_gym.sim.physics": 1,
     "dvrk_gym.sim.identified": 1,
     "dvrk_gym.sim.robot": 2,
+    "dvrk_gym.sim.compiled": 2,
     "dvrk_gym.sim.endoscope": 3,
     "dvrk_gym.sim.world": 4,
     "dvrk_gym.sim.world_config": 4,

@@ -16,6 +16,7 @@ episode, as HER's relabelling and stable-baselines3's GoalEnv check require. The
 from __future__ import annotations
 
 import numbers
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -24,6 +25,7 @@ from gymnasium import spaces
 from dvrk_gym.envs.base import DvrkEnv, config_arguments, relax_option
 from dvrk_gym.envs.configs import GridTouchConfig
 from dvrk_gym.envs.exploration import CAMERA_BOX_HIGH_M, CAMERA_BOX_LOW_M, encode_reported
+from dvrk_gym.sim.compiled import touch
 from dvrk_gym.sim.physics.scene import GRID_COLUMNS, GRID_ROWS, WORKSPACE_CENTER_M, grid_circle_centers
 from dvrk_gym.sim.robot import ik
 from dvrk_gym.sim.robot import kinematics as kin
@@ -154,6 +156,7 @@ class GridTouchEnv(DvrkEnv[GridTouchConfig]):
         self._yaw = 0.0
         self._achieved = np.zeros(3)
         self._touched = False  # whether the arm touched the paper since the last reset
+        self._touch_constants: touch.TouchConstants | None = None  # the compiled probe's, made on first use
 
     # ------------------------------------------------------------------ episode
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
@@ -240,11 +243,31 @@ class GridTouchEnv(DvrkEnv[GridTouchConfig]):
         """``world.true_touch_point()`` (m), computed in floats."""
         return ik.touch_point_floats(self.world.q_true.tolist(), self.world.cable.true_dh)
 
-    def _true_tip_for(self, position: np.ndarray, yaw: float) -> np.ndarray:
-        """Where the jaws would truly be if commanded to ``position`` now (state untouched)."""
+    def _tip_probe(self, yaw: float) -> Callable[[np.ndarray], np.ndarray]:
+        """A function from a commanded position (3,) m to where the jaws would truly be (3,) m
+        if the tool were commanded there now at ``yaw`` rad, the cables' state untouched: for
+        one search, during which the command and the cables' state stay as they are. Compiled
+        (:mod:`dvrk_gym.sim.compiled.touch`) once the cables have a history."""
+        world = self.world
+        rotation, state = _tool_rotation(yaw), world.cable.get_state()
+        if not np.isfinite(state).all():  # no history yet: the Python float path takes the numpy one
+            return lambda position: self._true_tip_floats(position, rotation)
+        if self._touch_constants is None:
+            self._touch_constants = touch.TouchConstants(world.cable)
+        constants, r6, roll = self._touch_constants, (rotation @ kin.TOOL_TIP_ROTATION.T).ravel(), float(world.q_cmd[3])
+
+        def probe(position: np.ndarray) -> np.ndarray:
+            point = kin.finite_vector(position, 3, "position")
+            return touch.true_tip(
+                point, r6, roll, state, constants, lambda: ik.inverse_kinematics_clamped_floats(point.tolist(), rotation, world.q_cmd)
+            )
+
+        return probe
+
+    def _true_tip_floats(self, position: np.ndarray, rotation: np.ndarray) -> np.ndarray:
+        """The probe's value (m) in Python floats, at the tool ``rotation`` (3, 3)."""
         cable = self.world.cable
-        point = kin.finite_vector(position, 3, "position").tolist()
-        command = ik.inverse_kinematics_clamped_floats(point, _tool_rotation(yaw), self.world.q_cmd)
+        command = ik.inverse_kinematics_clamped_floats(kin.finite_vector(position, 3, "position").tolist(), rotation, self.world.q_cmd)
         return ik.touch_point_floats(cable.peek_true_joints_floats(command), cable.true_dh)
 
     def _contact_height(self, target: np.ndarray, yaw: float) -> float:
@@ -253,13 +276,13 @@ class GridTouchEnv(DvrkEnv[GridTouchConfig]):
         The true tip height moves one for one with the commanded height, so a fixed-point
         iteration finds where the jaws meet the paper in a few steps.
         """
-        z = float(target[2])
-        tip_z = self._true_tip_for(target, yaw)[2]
+        z, true_tip = float(target[2]), self._tip_probe(yaw)
+        tip_z = true_tip(target)[2]
         if tip_z >= SURFACE_Z_M:
             return z
         for i in range(8):
             if i > 0:  # the first iteration's point is the target, just measured
-                tip_z = self._true_tip_for(np.array([target[0], target[1], z]), yaw)[2]
+                tip_z = true_tip(np.array([target[0], target[1], z]))[2]
             gap = tip_z - SURFACE_Z_M
             if abs(gap) < CONTACT_TOLERANCE_M:
                 break
@@ -269,9 +292,9 @@ class GridTouchEnv(DvrkEnv[GridTouchConfig]):
     def _human_correction(self, circle: np.ndarray, yaw: float) -> np.ndarray:
         """The change in reported position after a person pushes the jaws onto ``circle``."""
         reported = self.world.reported_pose()[:3, 3]
-        command = reported.copy()
+        command, true_tip = reported.copy(), self._tip_probe(yaw)
         for _ in range(8):
-            error = circle - self._true_tip_for(command, yaw)
+            error = circle - true_tip(command)
             command = command + error
             if np.linalg.norm(error) < CONTACT_TOLERANCE_M:
                 break

@@ -1,0 +1,113 @@
+"""The compiled touch evaluation (dvrk_gym.sim.compiled.touch) is the Python float path's, bit for bit.
+
+GridTouch-v0's contact search and simulated person call it about seven times a step; its
+results reach the Phase II corrections and so the residual forests, where a last bit that
+moves moves a split. So these tests ask for equal bytes, not closeness.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+from dvrk_gym.envs.grid_touch import _tool_rotation
+from dvrk_gym.sim.compiled import touch
+from dvrk_gym.sim.robot import cables, ik
+from dvrk_gym.sim.robot import kinematics as kin
+from dvrk_gym.sim.robot.bias import resolve_bias
+
+
+def _python_tip(model: cables.CableModel, position: np.ndarray, rotation: np.ndarray, q_ref: np.ndarray) -> np.ndarray:
+    command = ik.inverse_kinematics_clamped_floats(position.tolist(), rotation, q_ref)
+    return ik.touch_point_floats(model.peek_true_joints_floats(command), model.true_dh)
+
+
+@pytest.mark.parametrize(("preset", "settle_lag"), [("none", None), ("paper", None), ("paper", 0.0), ("severe", None)])
+def test_the_compiled_true_tip_is_the_python_float_paths_bit_for_bit(preset, settle_lag):
+    config = resolve_bias(preset)
+    if settle_lag is not None:
+        config = dataclasses.replace(config, wrist_settle_lag=settle_lag)
+    rng = np.random.default_rng(7)
+    model = cables.CableModel(config, bias_seed=3)
+    model.reset(np.array([0.3, -0.2, 0.15, 0.1, 0.2, -0.1]))
+    constants = touch.TouchConstants(model)
+    compiled_ik = fallbacks = 0
+    for i in range(1500):
+        q = rng.uniform(kin.JOINT_LOWER * 0.8, kin.JOINT_UPPER * 0.8)
+        q[2] = rng.uniform(0.06, 0.22)
+        if i % 3 == 0:  # move, so that the plays and motors take many states
+            model.true_joints(q, rng)
+        position = kin.touch_point(q) + rng.normal(0.0, 0.02, 3)  # some of these need clamped joints
+        rotation = _tool_rotation(float(rng.uniform(-np.pi / 2, np.pi / 2)))
+        q_ref = rng.uniform(-4.0, 4.0, 6)
+        state = model.get_state()
+        r6 = (rotation @ kin.TOOL_TIP_ROTATION.T).ravel()
+        handed_over = []
+
+        def fallback(position=position, rotation=rotation, q_ref=q_ref, handed_over=handed_over):
+            handed_over.append(True)
+            return ik.inverse_kinematics_clamped_floats(position.tolist(), rotation, q_ref)
+
+        got = touch.true_tip(position, r6, float(q_ref[3]), state, constants, fallback)
+        assert got.tobytes() == _python_tip(model, position, rotation, q_ref).tobytes()
+        assert model.get_state().tobytes() == state.tobytes()  # a peek moves nothing
+        python_solved = ik.inverse_kinematics_floats(position.tolist(), rotation, q_ref) is not None
+        assert bool(handed_over) == (not python_solved)  # hands over exactly where the Python path does
+        compiled_ik += python_solved
+        fallbacks += not python_solved
+    assert compiled_ik > 1000 and fallbacks > 20  # both branches were taken
+
+
+def test_the_compiled_hypot_is_pythons():
+    rng = np.random.default_rng(0)
+    pairs = [(0.0, 0.0), (0.0, -2.5), (3.0, 4.0), (-1e-3, 1e-3), (1.0, 1e-300), (5e-324, 0.0)]
+    for scale in (1.0, 1e-2, 1e-4):
+        pairs += list(zip(rng.normal(0.0, scale, 20000).tolist(), (rng.normal(0.0, scale, 20000) * rng.uniform(0, 3, 20000)).tolist()))
+    mismatches = [(a, b) for a, b in pairs if touch._hypot(a, b) != math.hypot(a, b)]
+    assert mismatches == []
+
+
+def test_the_compiled_squares_are_the_c_librarys_pow_not_a_product():
+    """LLVM turns pow(x, 2.0) with a constant 2 into x * x, which is not Python's x ** 2: the
+    inverse kinematics' norms, sqrt(x**2 + y**2 + z**2), would differ in the last bit."""
+    rng = np.random.default_rng(1)
+    values = rng.normal(0.0, 0.1, 20000).tolist()
+    assert sum(v**2 != v * v for v in values) > 5  # the distinction is real on this machine's C library
+    assert [v for v in values if touch._square(v, 2.0) != v**2] == []
+    assert touch.TouchConstants(cables.CableModel(resolve_bias("paper"))).model[touch.MODEL_FIELDS.index("two")] == 2.0
+    out, rotation = np.empty(6), _tool_rotation(0.3)
+    r6 = (rotation @ kin.TOOL_TIP_ROTATION.T).ravel()
+    solved = 0
+    for _ in range(20000):
+        position = np.array([rng.uniform(-0.02, 0.1), rng.uniform(-0.02, 0.1), rng.uniform(-0.19, -0.1)])
+        expected = ik.inverse_kinematics_floats(position.tolist(), rotation, np.zeros(6))
+        if touch._inverse_kinematics(position, r6, 0.0, 2.0, out):
+            assert expected is not None and out.tobytes() == np.array(expected).tobytes()
+            solved += 1
+        else:
+            assert expected is None
+    assert solved > 15000
+
+
+def test_grid_touch_probe_is_the_python_float_paths_and_falls_back_without_history(make_env):
+    env = make_env("dvrk_gym/GridTouch-v0", bias="severe")
+    env.reset(seed=4)
+    env.action_space.seed(4)
+    grid = env.unwrapped
+    rng = np.random.default_rng(4)
+    for _ in range(20):
+        env.step(env.action_space.sample())
+        env.reset()
+        yaw = float(rng.uniform(-1.5, 1.5))
+        probe = grid._tip_probe(yaw)
+        for _ in range(5):
+            position = np.array([rng.uniform(0.0, 0.08), rng.uniform(0.0, 0.085), rng.uniform(-0.18, -0.12)])
+            assert probe(position).tobytes() == grid._true_tip_floats(position, _tool_rotation(yaw)).tobytes()
+    grid.world.cable.set_state(np.full_like(grid.world.cable.get_state(), np.nan))  # no history: the numpy path
+    position = np.array([0.04, 0.04, -0.15])
+    np.testing.assert_array_equal(grid._tip_probe(0.0)(position), grid._true_tip_floats(position, _tool_rotation(0.0)))
+    with pytest.raises(ValueError, match="position"):
+        grid._tip_probe(0.0)(np.array([np.nan, 0.0, -0.15]))
