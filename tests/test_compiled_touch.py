@@ -111,3 +111,25 @@ def test_grid_touch_probe_is_the_python_float_paths_and_falls_back_without_histo
     np.testing.assert_array_equal(grid._tip_probe(0.0)(position), grid._true_tip_floats(position, _tool_rotation(0.0)))
     with pytest.raises(ValueError, match="position"):
         grid._tip_probe(0.0)(np.array([np.nan, 0.0, -0.15]))
+
+
+def test_the_compiled_inverse_kinematics_for_moves_is_the_python_float_paths():
+    rng = np.random.default_rng(9)
+    solved = clamped = 0
+    for _ in range(600):
+        q = rng.uniform(kin.JOINT_LOWER * 1.1, kin.JOINT_UPPER * 1.1)  # some poses need joints past their limits
+        q[2] = rng.uniform(0.05, 0.23)
+        pose = kin.forward_kinematics(q)  # pose[:3, 3] is a strided view: the wrapper copies it
+        q_ref = rng.uniform(-4.0, 4.0, 6)
+        expected = ik.inverse_kinematics_floats(pose[:3, 3].tolist(), pose[:3, :3], q_ref)
+        got = touch.inverse_kinematics(pose[:3, 3], pose[:3, :3], q_ref)
+        assert (got is None) == (expected is None)
+        if got is not None:
+            assert np.array(got).tobytes() == np.array(expected).tobytes()
+        expected_clamped = ik.inverse_kinematics_clamped_floats(pose[:3, 3].tolist(), pose[:3, :3], q_ref)
+        assert (
+            np.array(touch.inverse_kinematics_clamped(pose[:3, 3], pose[:3, :3], q_ref)).tobytes() == np.array(expected_clamped).tobytes()
+        )
+        solved += got is not None
+        clamped += got is None
+    assert solved > 200 and clamped > 50

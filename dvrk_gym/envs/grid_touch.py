@@ -196,7 +196,7 @@ class GridTouchEnv(DvrkEnv[GridTouchConfig]):
             return world.q_cmd.copy()
         lifted = world.reported_pose()
         lifted[2, 3] += self.config.approach_height_m
-        return np.array(ik.inverse_kinematics_clamped_floats(lifted[:3, 3].tolist(), lifted[:3, :3], world.q_cmd))
+        return np.array(touch.inverse_kinematics_clamped(lifted[:3, 3], lifted[:3, :3], world.q_cmd))
 
     def _step_episode(self, action: np.ndarray, clamped: np.ndarray):
         target, yaw = action[:3], float(action[3])
@@ -228,8 +228,8 @@ class GridTouchEnv(DvrkEnv[GridTouchConfig]):
     # ------------------------------------------------------------------ physics of a touch
     def _command_floats(self, position: np.ndarray, yaw: float) -> list[float] | None:
         """The joint command (6,) rad / m for the tool at ``position`` (m) and ``yaw`` (rad), by
-        the inverse kinematics in floats; None if it needs the numpy path (clamped or singular)."""
-        return ik.inverse_kinematics_floats(kin.finite_vector(position, 3, "position").tolist(), _tool_rotation(yaw), self.world.q_cmd)
+        the compiled inverse kinematics; None if it needs the numpy path (clamped or singular)."""
+        return touch.inverse_kinematics(kin.finite_vector(position, 3, "position"), _tool_rotation(yaw), self.world.q_cmd)
 
     def _move(self, position: np.ndarray, yaw: float) -> MoveResult:
         """Move the tool to ``position`` (m) at ``yaw`` (rad), with noise; joints clamped into their

@@ -41,27 +41,12 @@ from dvrk_gym.sim.robot import cables, ik
 from dvrk_gym.sim.robot import kinematics as kin
 from dvrk_gym.sim.robot.kinematics import DHRow
 
-__all__ = ["MODEL_FIELDS", "TouchConstants", "link_table", "true_tip"]
+__all__ = ["MODEL_FIELDS", "TouchConstants", "inverse_kinematics", "inverse_kinematics_clamped", "link_table", "true_tip"]
 
-MODEL_FIELDS = (
-    "settle_lag",
-    "outer_gain_yaw",
-    "outer_gain_pitch",
-    "outer_stretch_rad",
-    "sag_m",
-    "wrist_stretch",
-    "offset_0",
-    "offset_1",
-    "offset_2",
-    "offset_3",
-    "offset_4",
-    "offset_5",
-    "outer_unloaded_yaw_rad",
-    "outer_unloaded_pitch_rad",
-    "outer_scale_rad",
-    "wrist_scale_rad",
-    "two",  # the exponent of the squares, read at run time (see above)
-)
+# "two" is the exponent of the squares, read at run time (see above).
+MODEL_FIELDS = ("settle_lag", "outer_gain_yaw", "outer_gain_pitch", "outer_stretch_rad", "sag_m", "wrist_stretch")
+MODEL_FIELDS += tuple(f"offset_{i}" for i in range(6))
+MODEL_FIELDS += ("outer_unloaded_yaw_rad", "outer_unloaded_pitch_rad", "outer_scale_rad", "wrist_scale_rad", "two")
 """The order of the ``model`` vector's entries."""
 
 
@@ -383,3 +368,19 @@ def true_tip(
             out,
         )
     return out
+
+
+def inverse_kinematics(position: np.ndarray, rotation: np.ndarray, q_ref: np.ndarray) -> list[float] | None:
+    """:func:`~dvrk_gym.sim.robot.ik.inverse_kinematics_floats` compiled, its numbers bit for bit:
+    the joints (6,) rad / m of the tool pose (``rotation`` (3, 3), finite ``position`` (3,) m,
+    float64), roll nearest ``q_ref[3]``; None where that path gives None (then clamp)."""
+    r6 = (rotation @ kin.TOOL_TIP_ROTATION.T).ravel()  # a signed permutation: exact
+    out, position = np.empty(6), np.ascontiguousarray(position, dtype=np.float64)
+    return out.tolist() if _inverse_kinematics(position, r6, float(q_ref[3]), 2.0, out) else None
+
+
+def inverse_kinematics_clamped(position: np.ndarray, rotation: np.ndarray, q_ref: np.ndarray) -> list[float]:
+    """:func:`~dvrk_gym.sim.robot.ik.inverse_kinematics_clamped_floats` with the compiled
+    :func:`inverse_kinematics`: its joints where it solves the pose, else numpy's clamped ones."""
+    q = inverse_kinematics(position, rotation, q_ref)
+    return ik.inverse_kinematics_clamped_floats(position.tolist(), rotation, q_ref) if q is None else q

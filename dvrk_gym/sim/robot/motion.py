@@ -42,15 +42,23 @@ _ANGLE_BOUND_MARGIN_RAD = 1e-9
 """Added to :func:`rotation_angle_bound`: more than the round-off of the bound and of scipy's angle."""
 
 
-def rotation_angle_bound(rotation: np.ndarray) -> float:
-    """An upper bound, rad, on the angle of a rotation matrix (3, 3), without finding the angle.
+_TIGHT_BOUND_MAX_SINE = math.sin(1.5)
+"""Up to this sin(angle / 2) (angles to 3 rad) the bound is the angle itself: the arcsine's
+slope, at most 1 / cos(1.5) = 14, keeps its round-off near 1e-14 rad."""
 
-    ``|R - I|_F = 2 sqrt(2) sin(angle / 2)``, and ``sin(x / 2) >= x / pi`` on [0, pi], so the
-    angle is at most ``pi |R - I|_F / (2 sqrt(2))`` (exact at pi, about 1.57 times the
-    angle when it is small), plus a margin for round-off.
+
+def rotation_angle_bound(rotation: np.ndarray) -> float:
+    """An upper bound, rad, on the angle of a rotation matrix (3, 3), without scipy.
+
+    ``|R - I|_F = 2 sqrt(2) sin(angle / 2)``: up to 3 rad the bound is the angle that gives,
+    ``2 asin(|R - I|_F / (2 sqrt(2)))``; beyond, where the arcsine is steep, it is
+    ``pi |R - I|_F / (2 sqrt(2))`` (``sin(x / 2) >= x / pi`` on [0, pi]; exact at pi). Plus
+    a margin for round-off, of this formula and of scipy's angle.
     """
-    chord = math.sqrt(float(np.square(rotation - _EYE3).sum()))
-    return math.pi * chord / (2.0 * math.sqrt(2.0)) + _ANGLE_BOUND_MARGIN_RAD
+    half_chord = math.sqrt(float(np.square(rotation - _EYE3).sum())) / (2.0 * math.sqrt(2.0))
+    if half_chord <= _TIGHT_BOUND_MAX_SINE:
+        return 2.0 * math.asin(half_chord) + _ANGLE_BOUND_MARGIN_RAD
+    return math.pi * half_chord + _ANGLE_BOUND_MARGIN_RAD
 
 
 def trapezoid_progress(t: float, duration: float, ramp: float) -> float:
