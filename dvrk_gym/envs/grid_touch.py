@@ -25,7 +25,7 @@ from gymnasium import spaces
 from dvrk_gym.envs.base import DvrkEnv, config_arguments, relax_option
 from dvrk_gym.envs.configs import GridTouchConfig
 from dvrk_gym.envs.exploration import CAMERA_BOX_HIGH_M, CAMERA_BOX_LOW_M, encode_reported
-from dvrk_gym.sim.compiled import touch
+from dvrk_gym.sim.compiled import float_paths
 from dvrk_gym.sim.physics.scene import GRID_COLUMNS, GRID_ROWS, WORKSPACE_CENTER_M, grid_circle_centers
 from dvrk_gym.sim.robot import ik
 from dvrk_gym.sim.robot import kinematics as kin
@@ -156,7 +156,6 @@ class GridTouchEnv(DvrkEnv[GridTouchConfig]):
         self._yaw = 0.0
         self._achieved = np.zeros(3)
         self._touched = False  # whether the arm touched the paper since the last reset
-        self._touch_constants: touch.TouchConstants | None = None  # the compiled probe's, made on first use
 
     # ------------------------------------------------------------------ episode
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
@@ -196,7 +195,7 @@ class GridTouchEnv(DvrkEnv[GridTouchConfig]):
             return world.q_cmd.copy()
         lifted = world.reported_pose()
         lifted[2, 3] += self.config.approach_height_m
-        return np.array(touch.inverse_kinematics_clamped(lifted[:3, 3], lifted[:3, :3], world.q_cmd))
+        return np.array(float_paths.inverse_kinematics_clamped(lifted[:3, 3], lifted[:3, :3], world.q_cmd))
 
     def _step_episode(self, action: np.ndarray, clamped: np.ndarray):
         target, yaw = action[:3], float(action[3])
@@ -229,7 +228,7 @@ class GridTouchEnv(DvrkEnv[GridTouchConfig]):
     def _command_floats(self, position: np.ndarray, yaw: float) -> list[float] | None:
         """The joint command (6,) rad / m for the tool at ``position`` (m) and ``yaw`` (rad), by
         the compiled inverse kinematics; None if it needs the numpy path (clamped or singular)."""
-        return touch.inverse_kinematics(kin.finite_vector(position, 3, "position"), _tool_rotation(yaw), self.world.q_cmd)
+        return float_paths.inverse_kinematics(kin.finite_vector(position, 3, "position"), _tool_rotation(yaw), self.world.q_cmd)
 
     def _move(self, position: np.ndarray, yaw: float) -> MoveResult:
         """Move the tool to ``position`` (m) at ``yaw`` (rad), with noise; joints clamped into their
@@ -247,18 +246,16 @@ class GridTouchEnv(DvrkEnv[GridTouchConfig]):
         """A function from a commanded position (3,) m to where the jaws would truly be (3,) m
         if the tool were commanded there now at ``yaw`` rad, the cables' state untouched: for
         one search, during which the command and the cables' state stay as they are. Compiled
-        (:mod:`dvrk_gym.sim.compiled.touch`) once the cables have a history."""
+        (:func:`dvrk_gym.sim.compiled.float_paths.true_tip`) once the cables have a history."""
         world = self.world
         rotation, state = _tool_rotation(yaw), world.cable.get_state()
         if not np.isfinite(state).all():  # no history yet: the Python float path takes the numpy one
             return lambda position: self._true_tip_floats(position, rotation)
-        if self._touch_constants is None:
-            self._touch_constants = touch.TouchConstants(world.cable)
-        constants, r6, roll = self._touch_constants, (rotation @ kin.TOOL_TIP_ROTATION.T).ravel(), float(world.q_cmd[3])
+        constants, r6, roll = world.cable_constants, (rotation @ kin.TOOL_TIP_ROTATION.T).ravel(), float(world.q_cmd[3])
 
         def probe(position: np.ndarray) -> np.ndarray:
             point = kin.finite_vector(position, 3, "position")
-            return touch.true_tip(
+            return float_paths.true_tip(
                 point, r6, roll, state, constants, lambda: ik.inverse_kinematics_clamped_floats(point.tolist(), rotation, world.q_cmd)
             )
 

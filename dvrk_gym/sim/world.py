@@ -22,6 +22,7 @@ from typing import Protocol
 
 import numpy as np
 
+from dvrk_gym.sim.compiled import float_paths
 from dvrk_gym.sim.endoscope.camera import (
     PAPER_BASELINE_M,
     PAPER_INTRINSICS,
@@ -112,6 +113,7 @@ class DvrkWorld:
         self.jaw_driver: JawDriver | None = None
         self._grid_cache: tuple[StereoDetection, ...] | None = None
         self._nominal_poses: dict[bytes, np.ndarray] = {}
+        self._cable_constants: float_paths.CableConstants | None = None
         self.reset_robot(HOME_JOINTS)
 
     # ----------------------------------------------------------------- robot state
@@ -131,13 +133,22 @@ class DvrkWorld:
         if relax:
             self.cable.reset(q)
         self.q_cmd = q.copy()
-        self.q_true = np.array(self.cable.true_joints_floats(q.tolist())) if floats else self.cable.true_joints(q)
+        self.q_true = (
+            np.array(float_paths.true_joints(self.cable, self.cable_constants, q.tolist(), None)) if floats else self.cable.true_joints(q)
+        )
         self.jaw_angle = float(jaw_angle_rad)
         if self.jaw_driver is None:
             self.robot.set_joints(self.q_true, self.jaw_angle, batched=floats)
         else:  # nothing stays held through a reset
             self.jaw_driver.reset_tool(self.q_true, self.jaw_angle)
         self.clock.reset()
+
+    @property
+    def cable_constants(self) -> float_paths.CableConstants:
+        """The cable model's constants for the compiled float paths, packed on first use."""
+        if self._cable_constants is None:
+            self._cable_constants = float_paths.CableConstants(self.cable)
+        return self._cable_constants
 
     def reported_pose(self) -> np.ndarray:
         """The pose the robot reports: nominal FK of its encoders (4x4, base frame, m).
@@ -218,7 +229,7 @@ class DvrkWorld:
         q_target = np.array(q)
         end = self._nominal_poses.get(q_target.tobytes())
         if end is None:  # for the plan only, not remembered: the reported pose stays numpy's
-            end = ik.forward_kinematics_floats(q)
+            end = float_paths.forward_kinematics(q)
         move = CartesianMove.plan(self._nominal_pose(self.q_cmd), end, self.config.motion)
         return self._finish_move(q_target, move.duration_s, None, noise_rng, np.zeros(6, dtype=bool), floats=q)
 
@@ -242,7 +253,7 @@ class DvrkWorld:
         if floats is None:
             self.q_true = self.cable.true_joints(self.q_cmd, noise_rng)
         else:
-            self.q_true = np.array(self.cable.true_joints_floats(floats, noise_rng))
+            self.q_true = np.array(float_paths.true_joints(self.cable, self.cable_constants, floats, noise_rng))
         if self.jaw_driver is None:
             self.robot.set_joints(self.q_true, self.jaw_angle, batched=floats is not None)
         else:  # a free-space move: held fragments go along, nothing else is touched

@@ -1,4 +1,4 @@
-"""The compiled touch evaluation (dvrk_gym.sim.compiled.touch) is the Python float path's, bit for bit.
+"""The compiled float paths (dvrk_gym.sim.compiled) are the Python float paths', bit for bit.
 
 GridTouch-v0's contact search and simulated person call it about seven times a step; its
 results reach the Phase II corrections and so the residual forests, where a last bit that
@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from dvrk_gym.envs.grid_touch import _tool_rotation
-from dvrk_gym.sim.compiled import touch
+from dvrk_gym.sim.compiled import float_paths, kernels
 from dvrk_gym.sim.robot import cables, ik
 from dvrk_gym.sim.robot import kinematics as kin
 from dvrk_gym.sim.robot.bias import resolve_bias
@@ -33,7 +33,7 @@ def test_the_compiled_true_tip_is_the_python_float_paths_bit_for_bit(preset, set
     rng = np.random.default_rng(7)
     model = cables.CableModel(config, bias_seed=3)
     model.reset(np.array([0.3, -0.2, 0.15, 0.1, 0.2, -0.1]))
-    constants = touch.TouchConstants(model)
+    constants = float_paths.CableConstants(model)
     compiled_ik = fallbacks = 0
     for i in range(1500):
         q = rng.uniform(kin.JOINT_LOWER * 0.8, kin.JOINT_UPPER * 0.8)
@@ -51,7 +51,7 @@ def test_the_compiled_true_tip_is_the_python_float_paths_bit_for_bit(preset, set
             handed_over.append(True)
             return ik.inverse_kinematics_clamped_floats(position.tolist(), rotation, q_ref)
 
-        got = touch.true_tip(position, r6, float(q_ref[3]), state, constants, fallback)
+        got = float_paths.true_tip(position, r6, float(q_ref[3]), state, constants, fallback)
         assert got.tobytes() == _python_tip(model, position, rotation, q_ref).tobytes()
         assert model.get_state().tobytes() == state.tobytes()  # a peek moves nothing
         python_solved = ik.inverse_kinematics_floats(position.tolist(), rotation, q_ref) is not None
@@ -66,7 +66,7 @@ def test_the_compiled_hypot_is_pythons():
     pairs = [(0.0, 0.0), (0.0, -2.5), (3.0, 4.0), (-1e-3, 1e-3), (1.0, 1e-300), (5e-324, 0.0)]
     for scale in (1.0, 1e-2, 1e-4):
         pairs += list(zip(rng.normal(0.0, scale, 20000).tolist(), (rng.normal(0.0, scale, 20000) * rng.uniform(0, 3, 20000)).tolist()))
-    mismatches = [(a, b) for a, b in pairs if touch._hypot(a, b) != math.hypot(a, b)]
+    mismatches = [(a, b) for a, b in pairs if kernels._hypot(a, b) != math.hypot(a, b)]
     assert mismatches == []
 
 
@@ -76,15 +76,15 @@ def test_the_compiled_squares_are_the_c_librarys_pow_not_a_product():
     rng = np.random.default_rng(1)
     values = rng.normal(0.0, 0.1, 20000).tolist()
     assert sum(v**2 != v * v for v in values) > 5  # the distinction is real on this machine's C library
-    assert [v for v in values if touch._square(v, 2.0) != v**2] == []
-    assert touch.TouchConstants(cables.CableModel(resolve_bias("paper"))).model[touch.MODEL_FIELDS.index("two")] == 2.0
+    assert [v for v in values if kernels._square(v, 2.0) != v**2] == []
+    assert float_paths.ARM[kernels.TWO] == 2.0
     out, rotation = np.empty(6), _tool_rotation(0.3)
     r6 = (rotation @ kin.TOOL_TIP_ROTATION.T).ravel()
     solved = 0
     for _ in range(20000):
         position = np.array([rng.uniform(-0.02, 0.1), rng.uniform(-0.02, 0.1), rng.uniform(-0.19, -0.1)])
         expected = ik.inverse_kinematics_floats(position.tolist(), rotation, np.zeros(6))
-        if touch._inverse_kinematics(position, r6, 0.0, 2.0, out):
+        if kernels.inverse_kinematics(position, r6, 0.0, float_paths.ARM, float_paths._OUTER_LINKS, out):
             assert expected is not None and out.tobytes() == np.array(expected).tobytes()
             solved += 1
         else:
@@ -122,14 +122,41 @@ def test_the_compiled_inverse_kinematics_for_moves_is_the_python_float_paths():
         pose = kin.forward_kinematics(q)  # pose[:3, 3] is a strided view: the wrapper copies it
         q_ref = rng.uniform(-4.0, 4.0, 6)
         expected = ik.inverse_kinematics_floats(pose[:3, 3].tolist(), pose[:3, :3], q_ref)
-        got = touch.inverse_kinematics(pose[:3, 3], pose[:3, :3], q_ref)
+        got = float_paths.inverse_kinematics(pose[:3, 3], pose[:3, :3], q_ref)
         assert (got is None) == (expected is None)
         if got is not None:
             assert np.array(got).tobytes() == np.array(expected).tobytes()
         expected_clamped = ik.inverse_kinematics_clamped_floats(pose[:3, 3].tolist(), pose[:3, :3], q_ref)
         assert (
-            np.array(touch.inverse_kinematics_clamped(pose[:3, 3], pose[:3, :3], q_ref)).tobytes() == np.array(expected_clamped).tobytes()
+            np.array(float_paths.inverse_kinematics_clamped(pose[:3, 3], pose[:3, :3], q_ref)).tobytes()
+            == np.array(expected_clamped).tobytes()
         )
         solved += got is not None
         clamped += got is None
     assert solved > 200 and clamped > 50
+
+
+@pytest.mark.parametrize(("preset", "settle_lag"), [("none", None), ("paper", None), ("paper", 0.0), ("severe", None)])
+def test_the_compiled_cable_move_is_the_python_float_paths_state_draw_and_joints(preset, settle_lag):
+    config = resolve_bias(preset)
+    if settle_lag is not None:
+        config = dataclasses.replace(config, wrist_settle_lag=settle_lag)
+    compiled, python = (cables.CableModel(config, bias_seed=2) for _ in range(2))
+    constants = float_paths.CableConstants(compiled)
+    rngs = [np.random.default_rng(5), np.random.default_rng(5)]
+    rng = np.random.default_rng(6)
+    for i in range(400):
+        q = rng.uniform(kin.JOINT_LOWER * 0.8, kin.JOINT_UPPER * 0.8).tolist()
+        noisy = i % 2 == 0
+        got = float_paths.true_joints(compiled, constants, q, rngs[0] if noisy else None)  # the first: no history, the Python path
+        expected = python.true_joints_floats(q, rngs[1] if noisy else None)
+        assert np.array(got).tobytes() == np.array(expected).tobytes()
+        assert compiled.get_state().tobytes() == python.get_state().tobytes()
+    assert rngs[0].random() == rngs[1].random()  # the same draws
+
+
+def test_the_compiled_forward_kinematics_is_the_python_float_paths():
+    rng = np.random.default_rng(8)
+    for _ in range(500):
+        q = rng.uniform(kin.JOINT_LOWER, kin.JOINT_UPPER).tolist()
+        assert float_paths.forward_kinematics(q).tobytes() == ik.forward_kinematics_floats(q).tobytes()

@@ -1,30 +1,27 @@
-"""GridTouch-v0's touch evaluation compiled with numba: where the jaws would truly be if the
-tool were commanded to a position now, the cables' state untouched.
+"""The numba kernels of the float paths (:mod:`dvrk_gym.sim.compiled.float_paths` calls them).
 
-The Python float path it replaces on the hot loop
-(:func:`~dvrk_gym.sim.robot.ik.inverse_kinematics_floats`,
-:meth:`~dvrk_gym.sim.robot.cables.CableModel.peek_true_joints_floats`,
-:func:`~dvrk_gym.sim.robot.ik.touch_point_floats`), operation for operation and in the same
-order, so the results are that path's bit for bit (tests/test_compiled_touch.py):
+Each is its Python float path's arithmetic, operation for operation and in the same order,
+so the results are that path's bit for bit (tests/test_compiled_paths.py):
 
 - compiled without fast-math, LLVM neither fuses multiply-adds nor reorders sums;
 - ``cos``, ``sin``, ``atan2``, ``tanh``, ``sqrt`` and ``pow`` are the C library's, as in
-  Python's :mod:`math` and ``**``. ``x ** 2`` takes its exponent from the ``model`` vector
-  at run time: with a constant 2 LLVM would make it ``x * x``, which differs from the C
+  Python's :mod:`math` and ``**``. ``x ** 2`` takes its exponent from the ``arm`` vector at
+  run time: with a constant 2 LLVM would make it ``x * x``, which differs from the C
   library's ``pow(x, 2)`` in the last bit about once in a thousand;
 - Python's ``math.hypot`` is not the C library's (they differ about once in 200):
   :func:`_hypot` rounds correctly, as Python's does but in rare cases (no difference in
   6 million pairs, measured).
 
-A GridTouch step evaluates the touch point about seven times (the contact search and the
-simulated person's correction): about 30 us each in Python floats, 3 us compiled, call
-included. Numba caches the machine code beside this file (or in the user's cache folder
-where that is read-only), so only the first process compiles it (about 3 s).
+Every constant comes in as an argument (packed by ``float_paths``), none is read from another
+module: numba's cache (machine code kept beside this file, or in the user's cache folder
+where that is read-only) is renewed when this file changes, not when the modules its
+constants come from do. For the same reason every kernel that calls another lives here.
 
-Packed inputs (:class:`TouchConstants` builds the constant ones once per cable model):
+Packed inputs:
 
 - ``links``: (n, 6) per modified-DH row: cos alpha, sin alpha, a m, theta offset rad, d offset m, 1.0 if prismatic;
-- ``model``: (17,) the cable model's scalars, see :data:`MODEL_FIELDS`;
+- ``arm``: the arm's constants, indexed by the names below;
+- ``model``: the cable model's scalars, in the order of :data:`MODEL_FIELDS`;
 - ``coupling``: (3, 2) the wrist coupling; ``radii``: (n_plays, 6) the play half-widths (rad / m);
 - ``state``: (n_plays + 1, 6) the cables' state as :meth:`CableModel.get_state` gives it (finite).
 """
@@ -32,81 +29,19 @@ Packed inputs (:class:`TouchConstants` builds the constant ones once per cable m
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
 
 import numba
 import numpy as np
 
-from dvrk_gym.sim.robot import cables, ik
-from dvrk_gym.sim.robot import kinematics as kin
-from dvrk_gym.sim.robot.kinematics import DHRow
-
-__all__ = ["MODEL_FIELDS", "TouchConstants", "inverse_kinematics", "inverse_kinematics_clamped", "link_table", "true_tip"]
-
-# "two" is the exponent of the squares, read at run time (see above).
+# Indices into ``arm``.
+SINGULAR_TOL, WRIST_OFFSET, INSERTION_TO_WRIST, ALPHA5_SIGN, ROTATION_X6_COS, ROTATION_X6_SIN = 0, 1, 2, 3, 4, 5
+WRIST_PITCH_OFFSET, WRIST_YAW_OFFSET, ROLL_LOWER, ROLL_UPPER, JAW_LENGTH, INSERTION_MAX, TWO = 6, 7, 8, 9, 10, 11, 12
+ROLL_BRANCHES, LOWER, UPPER = 13, 18, 24  # 5, 6 and 6 entries
+ARM_SIZE = 30
+# The order of the ``model`` vector's entries.
 MODEL_FIELDS = ("settle_lag", "outer_gain_yaw", "outer_gain_pitch", "outer_stretch_rad", "sag_m", "wrist_stretch")
 MODEL_FIELDS += tuple(f"offset_{i}" for i in range(6))
-MODEL_FIELDS += ("outer_unloaded_yaw_rad", "outer_unloaded_pitch_rad", "outer_scale_rad", "wrist_scale_rad", "two")
-"""The order of the ``model`` vector's entries."""
-
-
-def link_table(dh: tuple[DHRow, ...]) -> np.ndarray:
-    """The packed (n, 6) ``links`` of a DH table (see the module's docstring)."""
-    rows = [(math.cos(r.alpha_rad), math.sin(r.alpha_rad), r.a_m, r.theta_offset_rad, r.d_offset_m, float(r.prismatic)) for r in dh]
-    return np.array(rows, dtype=np.float64)
-
-
-class TouchConstants:
-    """The constant inputs of :func:`true_tip` for one cable model, packed once.
-
-    Args:
-        model: the cable model whose instrument and configuration they describe.
-    """
-
-    def __init__(self, model: cables.CableModel) -> None:
-        config, instrument = model.config, model.instrument
-        values = {
-            "settle_lag": config.wrist_settle_lag,
-            "outer_gain_yaw": instrument.outer_gains[0],
-            "outer_gain_pitch": instrument.outer_gains[1],
-            "outer_stretch_rad": config.outer_stretch_rad,
-            "sag_m": config.sag_m,
-            "wrist_stretch": config.wrist_stretch,
-            "outer_unloaded_yaw_rad": cables.OUTER_UNLOADED_RAD[0],
-            "outer_unloaded_pitch_rad": cables.OUTER_UNLOADED_RAD[1],
-            "outer_scale_rad": cables.OUTER_STRETCH_SCALE_RAD,
-            "wrist_scale_rad": cables.WRIST_STRETCH_SCALE_RAD,
-            "two": 2.0,
-        }
-        values.update({f"offset_{i}": instrument.homing_offsets[i] for i in range(6)})
-        self.model = np.array([float(values[name]) for name in MODEL_FIELDS])
-        self.true_links = link_table(model.true_dh)
-        self.coupling = np.array(instrument.wrist_coupling, dtype=np.float64)
-        self.radii = np.ascontiguousarray(cables.play_radii(config), dtype=np.float64)
-
-
-_NOMINAL_LINKS = link_table(kin.PSM_DH)
-_OUTER_LINKS = link_table(kin.PSM_DH[:3])
-# The inverse kinematics' constants, in the order of _IK's entries.
-_IK = np.array(
-    [
-        ik._SINGULAR_TOL_M,
-        ik._WRIST_OFFSET_M,
-        ik._INSERTION_TO_WRIST_M,
-        ik._ALPHA5_SIGN,
-        ik._ROTATION_X6_COS,
-        ik._ROTATION_X6_SIN,
-        kin.PSM_DH[4].theta_offset_rad,
-        kin.PSM_DH[5].theta_offset_rad,
-        ik._ROLL_LOWER_RAD,
-        ik._ROLL_UPPER_RAD,
-        kin.JAW_LENGTH_M,
-        cables.INSERTION_MAX_M,
-    ]
-)
-_ROLL_BRANCHES = np.array(ik._ROLL_BRANCHES_RAD)
-_LOWER = np.array(ik._LOWER_FLOATS)
-_UPPER = np.array(ik._UPPER_FLOATS)
+MODEL_FIELDS += ("outer_unloaded_yaw_rad", "outer_unloaded_pitch_rad", "outer_scale_rad", "wrist_scale_rad")
 
 _jit = numba.njit(cache=True, fastmath=False, nogil=True)
 
@@ -138,7 +73,7 @@ def _then_link(f, link, q):  # type: ignore[no-untyped-def]
 
 
 @_jit
-def _last_frame(q, links):  # type: ignore[no-untyped-def]
+def last_frame(q, links):  # type: ignore[no-untyped-def]
     """ik.last_frame_floats: the chain's last frame (row-major 3x4) for joints ``q`` (n,)."""
     first = links[0]
     ca, sa, a, theta_offset, d_offset = first[0], first[1], first[2], first[3], first[4]
@@ -213,30 +148,32 @@ def _wrap(angle):  # type: ignore[no-untyped-def]
 
 
 @_jit
-def _inverse_kinematics(p, r6, q_ref_roll, two, out):  # type: ignore[no-untyped-def]
-    """ik.inverse_kinematics_floats into ``out`` (6,); False where it gives None."""
+def inverse_kinematics(p, r6, q_ref_roll, arm, outer_links, out):  # type: ignore[no-untyped-def]
+    """ik.inverse_kinematics_floats into ``out`` (6,); False where it gives None. ``p`` (3,) m,
+    ``r6`` (9,) the wrist-yaw frame's rotation, row-major."""
+    two = arm[TWO]
     n0, n1, n2 = r6[2], r6[5], r6[8]
     along = p[0] * n0 + p[1] * n1 + p[2] * n2
     r0, r1, r2 = p[0] - along * n0, p[1] - along * n1, p[2] - along * n2
     radial_norm = math.sqrt(_square(r0, two) + _square(r1, two) + _square(r2, two))
-    if radial_norm < _IK[0]:
+    if radial_norm < arm[SINGULAR_TOL]:
         return False
     x0, x1, x2 = r0 / radial_norm, r1 / radial_norm, r2 / radial_norm
-    w = _IK[1]
+    w = arm[WRIST_OFFSET]
     p50, p51, p52 = p[0] - w * x0, p[1] - w * x1, p[2] - w * x2
     shaft_length = math.sqrt(_square(p50, two) + _square(p51, two) + _square(p52, two))
-    if shaft_length < _IK[0]:
+    if shaft_length < arm[SINGULAR_TOL]:
         return False
     s0, s1, s2 = p50 / shaft_length, p51 / shaft_length, p52 / shaft_length
     yaw, pitch = math.atan2(s0, -s2), -math.atan2(s1, _hypot(s0, s2))
-    insertion = _IK[2] + shaft_length
+    insertion = arm[INSERTION_TO_WRIST] + shaft_length
     z50, z51, z52 = x1 * n2 - x2 * n1, x2 * n0 - x0 * n2, x0 * n1 - x1 * n0
     r5 = (x0, n0, z50, x1, n1, z51, x2, n2, z52)
     outer = np.empty(3)
     outer[0], outer[1], outer[2] = yaw, pitch, insertion
-    f3 = _last_frame(outer, _OUTER_LINKS)
+    f3 = last_frame(outer, outer_links)
     r3 = (f3[0], f3[1], f3[2], f3[4], f3[5], f3[6], f3[8], f3[9], f3[10])
-    s = _IK[3]
+    s = arm[ALPHA5_SIGN]
     m02 = r3[0] * r5[2] + r3[3] * r5[5] + r3[6] * r5[8]
     m12 = r3[1] * r5[2] + r3[4] * r5[5] + r3[7] * r5[8]
     m20 = r3[2] * r5[0] + r3[5] * r5[3] + r3[8] * r5[6]
@@ -245,36 +182,38 @@ def _inverse_kinematics(p, r6, q_ref_roll, two, out):  # type: ignore[no-untyped
     n00 = r5[0] * r6[0] + r5[3] * r6[3] + r5[6] * r6[6]
     n10 = r5[1] * r6[0] + r5[4] * r6[3] + r5[7] * r6[6]
     n20 = r5[2] * r6[0] + r5[5] * r6[3] + r5[8] * r6[6]
-    wrist_yaw = math.atan2(_IK[4] * n10 + _IK[5] * n20, n00) - _IK[7]
-    wrist_pitch -= _IK[6]
+    wrist_yaw = math.atan2(arm[ROTATION_X6_COS] * n10 + arm[ROTATION_X6_SIN] * n20, n00) - arm[WRIST_YAW_OFFSET]
+    wrist_pitch -= arm[WRIST_PITCH_OFFSET]
     roll = _wrap(roll)
     out[0], out[1], out[2], out[4], out[5] = yaw, pitch, insertion, _wrap(wrist_pitch), _wrap(wrist_yaw)
     # The roll branch nearest the reference, among those within roll's limits if any (the first of equals).
     any_within = False
-    for offset in _ROLL_BRANCHES:
-        branch = roll + offset
-        if _IK[8] <= branch <= _IK[9]:
+    for k in range(ROLL_BRANCHES, ROLL_BRANCHES + 5):
+        branch = roll + arm[k]
+        if arm[ROLL_LOWER] <= branch <= arm[ROLL_UPPER]:
             any_within = True
     best, best_distance = 0.0, math.inf
-    for offset in _ROLL_BRANCHES:
-        branch = roll + offset
-        if (not any_within or _IK[8] <= branch <= _IK[9]) and abs(branch - q_ref_roll) < best_distance:
+    for k in range(ROLL_BRANCHES, ROLL_BRANCHES + 5):
+        branch = roll + arm[k]
+        if (not any_within or arm[ROLL_LOWER] <= branch <= arm[ROLL_UPPER]) and abs(branch - q_ref_roll) < best_distance:
             best, best_distance = branch, abs(branch - q_ref_roll)
     out[3] = best
     for i in range(6):  # noqa: SIM110 (numba compiles no generator expressions)
-        if not _LOWER[i] <= out[i] <= _UPPER[i]:
+        if not arm[LOWER + i] <= out[i] <= arm[UPPER + i]:
             return False
     return True
 
 
 @_jit
-def _peek_true_joints(q_cmd, state, model, coupling, radii, out):  # type: ignore[no-untyped-def]
-    """CableModel._advance_floats' noiseless true joints for the command ``q_cmd`` (6,) into ``out``."""
+def advance(q_cmd, state, model, coupling, radii, arm, new_state, out):  # type: ignore[no-untyped-def]
+    """CableModel._advance_floats for the command ``q_cmd`` (6,): the cables' state after the move
+    into ``new_state`` (as ``state``: the plays, then the motors), its noiseless true joints into ``out``."""
     n_plays = state.shape[0] - 1
     motors = q_cmd.copy()
     if model[0] != 0.0:
         for i in range(4, 6):
             motors[i] += model[0] * (state[n_plays, i] - motors[i])
+    new_state[n_plays] = motors
     q = np.empty(6)
     for j in range(6):
         m = motors[j]
@@ -285,9 +224,10 @@ def _peek_true_joints(q_cmd, state, model, coupling, radii, out):  # type: ignor
                 play = m - r
             elif play > m + r:
                 play = m + r
+            new_state[k, j] = play
             total = m - play if k == 0 else total + (m - play)
         q[j] = m - total / n_plays
-    # _errors_floats: outer stretch, gravity sag, wrist stretch through the coupling.
+    # _errors_floats: outer stretch, gravity sag, wrist stretch through the coupling (model: MODEL_FIELDS' order).
     scale = model[14]
     stretch0 = model[1] * model[3] * math.tanh((q[0] - model[12]) / scale)
     stretch1 = model[2] * model[3] * math.tanh((q[1] - model[13]) / scale)
@@ -296,7 +236,7 @@ def _peek_true_joints(q_cmd, state, model, coupling, radii, out):  # type: ignor
     shaft0, shaft1, shaft2 = sy * cp, -sp, -cy * cp
     along = -shaft2
     down0, down1, down2 = -along * shaft0, -along * shaft1, -1.0 - along * shaft2
-    factor = model[4] / _IK[11] * _square(insertion / _IK[11], model[16])
+    factor = model[4] / arm[INSERTION_MAX] * _square(insertion / arm[INSERTION_MAX], arm[TWO])
     rot0, rot1, rot2 = factor * down0, factor * down1, factor * down2
     sag0 = (cy * cp * rot0 + sy * cp * rot2) / (cp * cp)
     sag1 = -sy * sp * rot0 - cp * rot1 + cy * sp * rot2
@@ -311,9 +251,10 @@ def _peek_true_joints(q_cmd, state, model, coupling, radii, out):  # type: ignor
 
 
 @_jit
-def _touch_point(q, links, jaw_length, out):  # type: ignore[no-untyped-def]
-    """ik.touch_point_floats into ``out`` (3,)."""
-    f = _last_frame(q, links)
+def touch_point(q, links, arm, out):  # type: ignore[no-untyped-def]
+    """ik.touch_point_floats into ``out`` (3,) m for joints ``q`` (6,) of the chain ``links``."""
+    jaw_length = arm[JAW_LENGTH]
+    f = last_frame(q, links)
     pivot_z, tip_z = f[11], f[11] + jaw_length * f[9]
     if tip_z <= pivot_z:
         out[0], out[1], out[2] = f[3] + jaw_length * f[1], f[7] + jaw_length * f[5], tip_z
@@ -322,65 +263,20 @@ def _touch_point(q, links, jaw_length, out):  # type: ignore[no-untyped-def]
 
 
 @_jit
-def _true_tip(position, r6, q_ref_roll, state, model, true_links, coupling, radii, command, out):  # type: ignore[no-untyped-def]
-    """Compiled body of :func:`true_tip`; False (nothing written to ``out``) where the inverse kinematics hands over."""
-    if not _inverse_kinematics(position, r6, q_ref_roll, model[16], command):
+def true_tip(position, r6, q_ref_roll, state, model, true_links, coupling, radii, arm, outer_links, out):  # type: ignore[no-untyped-def]
+    """Where the jaws would truly be (``out``, (3,) m) if commanded to ``position`` (3,) m at the
+    wrist-yaw rotation ``r6`` now, the cables in ``state`` (not changed); False (``out``
+    untouched) where the inverse kinematics hands over."""
+    command = np.empty(6)
+    if not inverse_kinematics(position, r6, q_ref_roll, arm, outer_links, command):
         return False
-    q_true = np.empty(6)
-    _peek_true_joints(command, state, model, coupling, radii, q_true)
-    _touch_point(q_true, true_links, _IK[10], out)
+    peek_tip(command, state, model, true_links, coupling, radii, arm, out)
     return True
 
 
 @_jit
-def _peek_tip(command, state, model, true_links, coupling, radii, out):  # type: ignore[no-untyped-def]
+def peek_tip(command, state, model, true_links, coupling, radii, arm, out):  # type: ignore[no-untyped-def]
+    """Where the jaws would truly be (``out``, (3,) m) after a noiseless move to ``command`` (6,), the cables in ``state`` (not changed)."""
     q_true = np.empty(6)
-    _peek_true_joints(command, state, model, coupling, radii, q_true)
-    _touch_point(q_true, true_links, _IK[10], out)
-
-
-def true_tip(
-    position: np.ndarray,
-    r6: np.ndarray,
-    q_ref_roll: float,
-    state: np.ndarray,
-    constants: TouchConstants,
-    fallback_command: Callable[[], Sequence[float]],
-) -> np.ndarray:
-    """Where the jaws' lowest point would truly be (3,) m, base frame, if the tool were
-    commanded to ``position`` (3,) m with the tool-tip-to-wrist-yaw rotation ``r6`` (9,)
-    row-major, the roll nearest ``q_ref_roll`` rad, the cables in ``state`` (finite).
-
-    ``fallback_command`` () -> (6,) gives the command where the compiled inverse kinematics
-    hands over (a pose to clamp, or singular); the cables and the touch point stay compiled.
-    """
-    command, out = np.empty(6), np.empty(3)
-    if not _true_tip(
-        position, r6, q_ref_roll, state, constants.model, constants.true_links, constants.coupling, constants.radii, command, out
-    ):
-        _peek_tip(
-            np.asarray(fallback_command(), dtype=np.float64),
-            state,
-            constants.model,
-            constants.true_links,
-            constants.coupling,
-            constants.radii,
-            out,
-        )
-    return out
-
-
-def inverse_kinematics(position: np.ndarray, rotation: np.ndarray, q_ref: np.ndarray) -> list[float] | None:
-    """:func:`~dvrk_gym.sim.robot.ik.inverse_kinematics_floats` compiled, its numbers bit for bit:
-    the joints (6,) rad / m of the tool pose (``rotation`` (3, 3), finite ``position`` (3,) m,
-    float64), roll nearest ``q_ref[3]``; None where that path gives None (then clamp)."""
-    r6 = (rotation @ kin.TOOL_TIP_ROTATION.T).ravel()  # a signed permutation: exact
-    out, position = np.empty(6), np.ascontiguousarray(position, dtype=np.float64)
-    return out.tolist() if _inverse_kinematics(position, r6, float(q_ref[3]), 2.0, out) else None
-
-
-def inverse_kinematics_clamped(position: np.ndarray, rotation: np.ndarray, q_ref: np.ndarray) -> list[float]:
-    """:func:`~dvrk_gym.sim.robot.ik.inverse_kinematics_clamped_floats` with the compiled
-    :func:`inverse_kinematics`: its joints where it solves the pose, else numpy's clamped ones."""
-    q = inverse_kinematics(position, rotation, q_ref)
-    return ik.inverse_kinematics_clamped_floats(position.tolist(), rotation, q_ref) if q is None else q
+    advance(command, state, model, coupling, radii, arm, np.empty_like(state), q_true)
+    touch_point(q_true, true_links, arm, out)
