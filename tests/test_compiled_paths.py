@@ -160,3 +160,12 @@ def test_the_compiled_forward_kinematics_is_the_python_float_paths():
     for _ in range(500):
         q = rng.uniform(kin.JOINT_LOWER, kin.JOINT_UPPER).tolist()
         assert float_paths.forward_kinematics(q).tobytes() == ik.forward_kinematics_floats(q).tobytes()
+
+
+def test_the_compiled_touch_point_is_the_python_float_paths():
+    rng = np.random.default_rng(10)
+    model = cables.CableModel(resolve_bias("severe"), bias_seed=4)
+    constants = float_paths.CableConstants(model)
+    for _ in range(500):
+        q = rng.uniform(kin.JOINT_LOWER, kin.JOINT_UPPER)
+        assert float_paths.touch_point(q, constants).tobytes() == ik.touch_point_floats(q.tolist(), model.true_dh).tobytes()

@@ -15,6 +15,7 @@ episode, as HER's relabelling and stable-baselines3's GoalEnv check require. The
 
 from __future__ import annotations
 
+import math
 import numbers
 from collections.abc import Callable
 from typing import Any
@@ -239,8 +240,8 @@ class GridTouchEnv(DvrkEnv[GridTouchConfig]):
         return self.world.move_joints_floats(command, noise_rng=self.np_random)
 
     def _true_touch_point(self) -> np.ndarray:
-        """``world.true_touch_point()`` (m), computed in floats."""
-        return ik.touch_point_floats(self.world.q_true.tolist(), self.world.cable.true_dh)
+        """``world.true_touch_point()`` (m), compiled (``ik.touch_point_floats``'s numbers)."""
+        return float_paths.touch_point(self.world.q_true, self.world.cable_constants)
 
     def _tip_probe(self, yaw: float) -> Callable[[np.ndarray], np.ndarray]:
         """A function from a commanded position (3,) m to where the jaws would truly be (3,) m
@@ -293,7 +294,7 @@ class GridTouchEnv(DvrkEnv[GridTouchConfig]):
         for _ in range(8):
             error = circle - true_tip(command)
             command = command + error
-            if np.linalg.norm(error) < CONTACT_TOLERANCE_M:
+            if math.sqrt(error.dot(error)) < CONTACT_TOLERANCE_M:  # np.linalg.norm's own formula, without its checks
                 break
         noise = self.np_random.normal(0.0, self.config.correction_noise_m, size=3)
         return command - reported + noise
@@ -326,12 +327,13 @@ class GridTouchEnv(DvrkEnv[GridTouchConfig]):
         index = self._circle
         circle = self.circle_centers[index]
         circle_px = self.world.observe_grid()[index].left_uv
+        pixel_offset, offset_m = tip_px - circle_px, (tip - circle)[:2]  # norms as np.linalg.norm's formula
         return {
             "circle_index": index,
             "target_yaw": self._yaw,
             "commanded_yaw": yaw,
-            "pixel_error": float(np.linalg.norm(tip_px - circle_px)),
-            "mm_error": float(1e3 * np.linalg.norm((tip - circle)[:2])),
+            "pixel_error": math.sqrt(pixel_offset.dot(pixel_offset)),
+            "mm_error": 1e3 * math.sqrt(offset_m.dot(offset_m)),
             "true_tip_position": tip,
             "true_circle_position": circle.copy(),
             "reported_position": self.world.reported_pose()[:3, 3].copy(),

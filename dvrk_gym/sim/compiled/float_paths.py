@@ -21,7 +21,15 @@ from dvrk_gym.sim.robot import cables, ik
 from dvrk_gym.sim.robot import kinematics as kin
 from dvrk_gym.sim.robot.kinematics import DHRow
 
-__all__ = ["CableConstants", "forward_kinematics", "inverse_kinematics", "inverse_kinematics_clamped", "true_joints", "true_tip"]
+__all__ = [
+    "CableConstants",
+    "forward_kinematics",
+    "inverse_kinematics",
+    "inverse_kinematics_clamped",
+    "touch_point",
+    "true_joints",
+    "true_tip",
+]
 
 
 def link_table(dh: tuple[DHRow, ...]) -> np.ndarray:
@@ -124,6 +132,14 @@ def forward_kinematics(q: list[float]) -> np.ndarray:
     pose = np.array([f[0:4], f[4:8], f[8:12], (0.0, 0.0, 0.0, 1.0)])
     pose[:3, :3] = pose[:3, :3] @ kin.TOOL_TIP_ROTATION
     return pose
+
+
+def touch_point(q_true: np.ndarray, constants: CableConstants) -> np.ndarray:
+    """:func:`~dvrk_gym.sim.robot.ik.touch_point_floats` (3,) m of the instrument whose
+    ``constants`` these are at its finite true joints ``q_true`` (6,) rad / m, bit for bit."""
+    out = np.empty(3)
+    kernels.touch_point(np.ascontiguousarray(q_true, dtype=np.float64), constants.true_links, ARM, out)
+    return out
 
 
 def true_joints(

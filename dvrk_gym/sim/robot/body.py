@@ -294,15 +294,15 @@ class PSMBody:
             self.jaw_angle = float(jaw_angle_rad)
         # Geometry cannot squeeze past closed; a negative jaw angle only adds grip force.
         half_open = max(self.jaw_angle, 0.0) / 2
-        targets = list(q) + [q[5] + half_open, q[5] - half_open]
+        joints = q.tolist()
+        positions = joints + [joints[5] + half_open, joints[5] - half_open]
         c = self.physics.client
-        positions = [float(v) for v in targets]
         if batched:
             c.resetJointStatesMultiDof(self.body_id, _JOINT_INDICES, [[v] for v in positions])
         else:
             for j, value in enumerate(positions):
                 c.resetJointState(self.body_id, j, value)
-        self._drive_motors(c.POSITION_CONTROL, len(targets), targetPositions=positions)
+        self._drive_motors(c.POSITION_CONTROL, len(positions), targetPositions=positions)
         self.joints = q.copy()
 
     def drive(

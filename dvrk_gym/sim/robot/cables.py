@@ -385,7 +385,7 @@ class CableModel:
     def get_state(self) -> np.ndarray:
         """A copy of the cables' history, (n_plays + 1, 6): the play outputs, then where the
         motors stopped; NaN before the first move."""
-        return np.vstack([self._plays, self._motors])
+        return np.concatenate((self._plays, self._motors[np.newaxis]))
 
     def set_state(self, state: np.ndarray) -> None:
         """Restore a state from get_state (all finite, or all NaN for 'no history')."""
