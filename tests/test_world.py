@@ -143,3 +143,29 @@ def test_noisy_detections_are_whole_pixels_and_their_depth_follows_the_disparity
         depth = world.camera.intrinsics.fx * world.camera.calibrated_baseline_m / disparity
         assert detection.camera_position[2] == pytest.approx(depth)
     assert seen >= 5
+
+
+def test_a_float_path_move_sets_the_body_when_the_body_or_physics_is_next_asked_for():
+    world = DvrkWorld(WorldConfig(bias="paper", camera_resolution=(320, 180)))
+    rng = np.random.default_rng(3)
+    try:
+        wrist = world.robot.wrist_yaw_frame()
+        for i in range(6):
+            q = ik.inverse_kinematics(kin.pose_from_euler(np.array([0.03, 0.04, -0.14 - 0.005 * i]), 0.2 * i, 0.1, -3.0))
+            world.move_joints_floats(q.tolist(), noise_rng=rng)
+            assert world._body_behind  # not set yet: a GridTouch step sets it once, if at all
+            moved = world.robot.wrist_yaw_frame()  # asking for the body sets it first
+            assert not world._body_behind
+            np.testing.assert_allclose(moved[:3, 3], kin.last_frame(world.q_true, world.cable.true_dh)[:3, 3], atol=1e-6)
+            assert not np.allclose(moved, wrist)
+            wrist = moved
+        world.move_joints_floats(q.tolist(), noise_rng=rng)
+        image = world.render("left")  # through the physics: the body is set before the render
+        world.robot.set_joints(world.q_true, world.jaw_angle)  # set now, the eager way
+        assert np.array_equal(image, world.render("left"))
+        world.reset_robot(q, floats=True)
+        assert world._body_behind
+        world.rebuild()  # a rebuilt body starts where rebuild puts it, with nothing pending
+        assert not world._body_behind
+    finally:
+        world.close()

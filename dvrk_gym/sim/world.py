@@ -18,7 +18,6 @@ hold (:class:`dvrk_gym.sim.table.table.DebridementTable`) installs itself as the
 from __future__ import annotations
 
 import math
-from typing import Protocol
 
 import numpy as np
 
@@ -43,7 +42,7 @@ from dvrk_gym.sim.robot.body import PSMBody, marker_corners, marker_face_samples
 from dvrk_gym.sim.robot.cables import CableModel
 from dvrk_gym.sim.robot.motion import CartesianMove, SimClock
 from dvrk_gym.sim.robot.motion_limits import MotionLimits
-from dvrk_gym.sim.world_config import MoveResult, WorldConfig
+from dvrk_gym.sim.world_config import JawDriver, MoveResult, WorldConfig
 
 HOME_JOINTS = np.array([0.0, 0.0, 0.05, 0.0, 0.0, 0.0])
 """A retracted configuration: the tool is 34 mm below the RCM, far outside the camera's view."""
@@ -55,27 +54,6 @@ MARKER_WINDOW_MARGIN_PX = 2
 """Pixels added around the marker's projected bounding box when rendering its window."""
 MARKER_RAY_STANDOFF_M = 0.00005
 """Visibility rays stop this far in front of the marker's face, metres."""
-
-
-class JawDriver(Protocol):
-    """Drives the tool body through the physics once something on the paper can be held.
-
-    A world without one (``DvrkWorld.jaw_driver is None``) sets the tool body's joints
-    itself; once a table (:class:`dvrk_gym.sim.table.table.DebridementTable`) installs
-    one, the world calls it there instead, so what the jaws hold goes along with
-    free-space moves and is let go of at a reset.
-    """
-
-    def place_tool(self, q_true: np.ndarray, jaw_angle_rad: float | None) -> float:
-        """Teleport the tool to the true joints ``q_true`` (rad / m) without stepping physics,
-        what it holds going along, and command the jaws to ``jaw_angle_rad`` (None: as
-        they are); returns the jaws' opening now, rad."""
-
-    def reset_tool(self, q_true: np.ndarray, jaw_angle_rad: float) -> None:
-        """Let go of everything and put the tool at ``q_true`` with the jaws at ``jaw_angle_rad``."""
-
-    def detach(self) -> None:
-        """Let go of everything: the world is about to empty its physics server."""
 
 
 class DvrkWorld:
@@ -103,9 +81,10 @@ class DvrkWorld:
         )
         self.pixel_noise = PixelNoise(self.config.pixel_noise_px, self.camera.intrinsics.width)
         """The detection noise of every pixel the endoscope reports (scaled to this resolution)."""
-        self.physics = Physics(gui=self.config.gui)
-        self.scene: SceneBodies = build_scene(self.physics)
-        self.robot = PSMBody(self.physics, dh=self.cable.true_dh)
+        self._physics = Physics(gui=self.config.gui)
+        self.scene: SceneBodies = build_scene(self._physics)
+        self._robot = PSMBody(self._physics, dh=self.cable.true_dh)
+        self._body_behind = False  # the body's joints wait for q_true: see the robot property
         self.clock = SimClock()
         self.q_cmd = HOME_JOINTS.copy()
         self.q_true = HOME_JOINTS.copy()
@@ -138,10 +117,39 @@ class DvrkWorld:
         )
         self.jaw_angle = float(jaw_angle_rad)
         if self.jaw_driver is None:
-            self.robot.set_joints(self.q_true, self.jaw_angle, batched=floats)
+            self._place_body(floats)
         else:  # nothing stays held through a reset
             self.jaw_driver.reset_tool(self.q_true, self.jaw_angle)
         self.clock.reset()
+
+    @property
+    def robot(self) -> PSMBody:
+        """The arm's PyBullet body, its joints brought to ``q_true`` first if a float-path move
+        left them behind."""
+        if self._body_behind:
+            self._sync_body()
+        return self._robot
+
+    @property
+    def physics(self) -> Physics:
+        """The physics server, the arm's joints brought to ``q_true`` first (as :attr:`robot`)."""
+        if self._body_behind:
+            self._sync_body()
+        return self._physics
+
+    def _place_body(self, floats: bool) -> None:
+        """Set the body's joints to ``q_true`` and the jaw angle: now, or (``floats``: GridTouch-v0's
+        path, whose physics is never stepped) when the body or the physics is next asked for.
+        Nothing reads the body in between, so renders and contacts see what they saw before; a
+        GridTouch step and reset then set the joints once instead of three times."""
+        if floats:
+            self._body_behind = True
+        else:
+            self._robot.set_joints(self.q_true, self.jaw_angle)
+
+    def _sync_body(self) -> None:
+        self._body_behind = False
+        self._robot.set_joints(self.q_true, self.jaw_angle, batched=True)
 
     @property
     def cable_constants(self) -> float_paths.CableConstants:
@@ -255,7 +263,7 @@ class DvrkWorld:
         else:
             self.q_true = np.array(float_paths.true_joints(self.cable, self.cable_constants, floats, noise_rng))
         if self.jaw_driver is None:
-            self.robot.set_joints(self.q_true, self.jaw_angle, batched=floats is not None)
+            self._place_body(floats is not None)
         else:  # a free-space move: held fragments go along, nothing else is touched
             self.jaw_angle = self.jaw_driver.place_tool(self.q_true, jaw_angle_rad)
         elapsed = max(duration_s, jaw_time) + self.config.motion.settle_time_s
@@ -371,14 +379,15 @@ class DvrkWorld:
         if self.jaw_driver is not None:
             self.jaw_driver.detach()
             self.jaw_driver = None
-        self.physics.reset()
-        self.scene = build_scene(self.physics)
-        self.robot = PSMBody(self.physics, dh=self.cable.true_dh)
+        self._body_behind = False  # the body is rebuilt
+        self._physics.reset()
+        self.scene = build_scene(self._physics)
+        self._robot = PSMBody(self._physics, dh=self.cable.true_dh)
         self.reset_robot(HOME_JOINTS)
 
     def close(self) -> None:
         """Free the physics server; safe to call more than once."""
-        self.physics.close()
+        self._physics.close()
 
 
 def _blob_or_none(uv: np.ndarray) -> Blob | None:

@@ -1,11 +1,13 @@
-"""How to build a world (:class:`WorldConfig`) and what one commanded move did (:class:`MoveResult`).
+"""How to build a world (:class:`WorldConfig`), what one commanded move did (:class:`MoveResult`),
+and what drives the tool once something can be held (:class:`JawDriver`).
 
-Both are re-exported by :mod:`dvrk_gym.sim.world`, which builds and runs the world.
+All three are re-exported by :mod:`dvrk_gym.sim.world`, which builds and runs the world.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Protocol
 
 import numpy as np
 
@@ -15,7 +17,7 @@ from dvrk_gym.sim.robot.bias import BiasConfig
 from dvrk_gym.sim.robot.motion_limits import MotionLimits
 from dvrk_gym.utils.checks import check_bool, check_float_fields, check_int_fields, check_resolution
 
-__all__ = ["MoveResult", "WorldConfig"]
+__all__ = ["JawDriver", "MoveResult", "WorldConfig"]
 
 
 @dataclass(frozen=True)
@@ -77,3 +79,24 @@ class MoveResult:
     q_cmd: np.ndarray
     q_true: np.ndarray
     joints_clamped: np.ndarray
+
+
+class JawDriver(Protocol):
+    """Drives the tool body through the physics once something on the paper can be held.
+
+    A world without one (``DvrkWorld.jaw_driver is None``) sets the tool body's joints
+    itself; once a table (:class:`dvrk_gym.sim.table.table.DebridementTable`) installs
+    one, the world calls it there instead, so what the jaws hold goes along with
+    free-space moves and is let go of at a reset.
+    """
+
+    def place_tool(self, q_true: np.ndarray, jaw_angle_rad: float | None) -> float:
+        """Teleport the tool to the true joints ``q_true`` (rad / m) without stepping physics,
+        what it holds going along, and command the jaws to ``jaw_angle_rad`` (None: as
+        they are); returns the jaws' opening now, rad."""
+
+    def reset_tool(self, q_true: np.ndarray, jaw_angle_rad: float) -> None:
+        """Let go of everything and put the tool at ``q_true`` with the jaws at ``jaw_angle_rad``."""
+
+    def detach(self) -> None:
+        """Let go of everything: the world is about to empty its physics server."""
