@@ -167,3 +167,17 @@ def test_no_bias_has_no_history(make_env):
     fresh = _touch_after(make_env("dvrk_gym/GridTouch-v0", bias="none"), [])
     carried = _touch_after(make_env("dvrk_gym/GridTouch-v0", bias="none"), [(0, -np.pi / 2), (34, np.pi / 2)])
     assert np.array_equal(carried, fresh)
+
+
+def test_the_arm_body_shows_the_true_joints_whenever_it_is_asked_for(make_env):
+    env = make_env("dvrk_gym/GridTouch-v0", camera_resolution=(320, 180))
+    env.reset(seed=1)
+    env.action_space.seed(1)
+    world = env.unwrapped.world
+    for i in range(8):
+        if i % 2:
+            env.reset()
+        else:
+            env.step(env.action_space.sample())
+        frame = world.robot.wrist_yaw_frame()  # the body is set when asked for, not at every move
+        np.testing.assert_allclose(frame[:3, 3], kin.last_frame(world.q_true, world.cable.true_dh)[:3, 3], atol=1e-6)

@@ -163,8 +163,13 @@ def test_a_float_path_move_sets_the_body_when_the_body_or_physics_is_next_asked_
         image = world.render("left")  # through the physics: the body is set before the render
         world.robot.set_joints(world.q_true, world.jaw_angle)  # set now, the eager way
         assert np.array_equal(image, world.render("left"))
+        saved = world.physics.client.saveState()
         world.reset_robot(q, floats=True)
         assert world._body_behind
+        world.restore_physics(saved)  # an env's reset: the saved joints, then its own
+        assert world._body_behind  # still pending: q_true did not change
+        frame = world.robot.wrist_yaw_frame()
+        np.testing.assert_allclose(frame[:3, 3], kin.last_frame(world.q_true, world.cable.true_dh)[:3, 3], atol=1e-6)
         world.rebuild()  # a rebuilt body starts where rebuild puts it, with nothing pending
         assert not world._body_behind
     finally:

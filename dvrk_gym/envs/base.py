@@ -222,7 +222,7 @@ class DvrkEnv(gym.Env, Generic[ConfigT]):
     def _restore_initial_state(self) -> None:
         """Put the physics back as it was when the env was made (an env that rebuilds its
         world on reset overrides this)."""
-        self.world.physics.client.restoreState(self._initial_physics_state)
+        self.world.restore_physics(self._initial_physics_state)
 
     def _reset_episode(self, options: dict[str, Any]) -> tuple[Any, dict[str, Any]]:
         raise NotImplementedError

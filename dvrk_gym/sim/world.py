@@ -147,6 +147,12 @@ class DvrkWorld:
         else:
             self._robot.set_joints(self.q_true, self.jaw_angle)
 
+    def restore_physics(self, state_id: int) -> None:
+        """Restore the physics to a state saved with ``physics.client.saveState()``. A body update
+        left pending stays pending (``q_true`` has not changed): the reset that follows sets
+        the body once, to its own joints, not first to the last episode's."""
+        self._physics.client.restoreState(state_id)
+
     def _sync_body(self) -> None:
         self._body_behind = False
         self._robot.set_joints(self.q_true, self.jaw_angle, batched=True)
