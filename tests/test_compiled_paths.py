@@ -106,11 +106,14 @@ def test_grid_touch_probe_is_the_python_float_paths_and_falls_back_without_histo
         for _ in range(5):
             position = np.array([rng.uniform(0.0, 0.08), rng.uniform(0.0, 0.085), rng.uniform(-0.18, -0.12)])
             assert probe(position).tobytes() == grid._true_tip_floats(position, _tool_rotation(yaw)).tobytes()
-    grid.world.cable.set_state(np.full_like(grid.world.cable.get_state(), np.nan))  # no history: the numpy path
-    position = np.array([0.04, 0.04, -0.15])
-    np.testing.assert_array_equal(grid._tip_probe(0.0)(position), grid._true_tip_floats(position, _tool_rotation(0.0)))
-    with pytest.raises(ValueError, match="position"):
-        grid._tip_probe(0.0)(np.array([np.nan, 0.0, -0.15]))
+    for history in (True, False):
+        if not history:  # no history: the Python float path, which takes numpy's
+            grid.world.cable.set_state(np.full_like(grid.world.cable.get_state(), np.nan))
+        position = np.array([0.04, 0.04, -0.15])
+        np.testing.assert_array_equal(grid._tip_probe(0.0)(position), grid._true_tip_floats(position, _tool_rotation(0.0)))
+        for value in (np.nan, np.inf, -np.inf):  # compiled: the inverse kinematics hands over to numpy's, which says so
+            with pytest.raises(ValueError, match="finite"):
+                grid._tip_probe(0.0)(np.array([value, 0.0, -0.15]))
 
 
 def test_the_compiled_inverse_kinematics_for_moves_is_the_python_float_paths():

@@ -250,12 +250,12 @@ class GridTouchEnv(DvrkEnv[GridTouchConfig]):
         (:func:`dvrk_gym.sim.compiled.float_paths.true_tip`) once the cables have a history."""
         world = self.world
         rotation, state = _tool_rotation(yaw), world.cable.get_state()
-        if not np.isfinite(state).all():  # no history yet: the Python float path takes the numpy one
+        if math.isnan(state[0, 0]):  # no history yet (all NaN; else all finite): the Python float path takes numpy's
             return lambda position: self._true_tip_floats(position, rotation)
         constants, r6, roll = world.cable_constants, (rotation @ kin.TOOL_TIP_ROTATION.T).ravel(), float(world.q_cmd[3])
 
-        def probe(position: np.ndarray) -> np.ndarray:
-            point = kin.finite_vector(position, 3, "position")
+        def probe(position: np.ndarray) -> np.ndarray:  # a position not finite ends in numpy's "pose must be finite"
+            point = np.ascontiguousarray(position, dtype=np.float64)
             return float_paths.true_tip(
                 point, r6, roll, state, constants, lambda: ik.inverse_kinematics_clamped_floats(point.tolist(), rotation, world.q_cmd)
             )

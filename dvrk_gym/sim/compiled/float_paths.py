@@ -149,7 +149,7 @@ def true_joints(
     bit for bit, with the same random draw: move ``cable`` (whose ``constants`` these are) to the
     finite command ``q_cmd`` (6,) rad / m; its true joints (6,) rad / m."""
     state = cable.get_state()
-    if not np.isfinite(state).all():  # no history yet: the Python path sets the cables at rest there
+    if math.isnan(state[0, 0]):  # no history yet (all NaN; else all finite): the Python path sets the cables at rest
         return cable.true_joints_floats(q_cmd, noise_rng)
     new_state, out, c = np.empty_like(state), np.empty(6), constants
     kernels.advance(np.array(q_cmd), state, c.model, c.coupling, c.radii, ARM, new_state, out)
