@@ -174,3 +174,44 @@ def test_a_float_path_move_sets_the_body_when_the_body_or_physics_is_next_asked_
         assert not world._body_behind
     finally:
         world.close()
+
+
+def test_the_marker_seen_without_the_printed_circles_is_the_marker_seen_with_them(full_hd_world, monkeypatch):
+    """Above the circles' plane nothing can lie behind them, so leaving them out of the render
+    (cheaper) gives the same detections; below it, they stay in."""
+    from dvrk_gym.sim import world as world_module
+    from dvrk_gym.sim.physics import scene
+
+    world = full_hd_world
+    hidden_renders = []
+    real_hidden = scene.printed_circles_hidden
+
+    def counting(physics, grid):
+        hidden_renders.append(grid)
+        return real_hidden(physics, grid)
+
+    monkeypatch.setattr(world_module, "printed_circles_hidden", counting)
+    low = ik.inverse_kinematics(kin.pose_from_euler(np.array([0.04, 0.042, scene.PRINT_TOP_Z_M - 0.004]), 0.0, 0.0, -3.0))
+    for i, pose in enumerate(_paper_poses(40, seed=5)):
+        if i == 20:
+            world.move_joints(low)  # the tape at or below the paper: the circles stay in
+            before = len(hidden_renders)
+            world.observe_marker()
+            assert len(hidden_renders) == before
+            continue
+        world.move_to(pose)
+        before = len(hidden_renders)
+        got = world.observe_marker()
+        assert len(hidden_renders) == before + 1  # the paper's poses hold the tape well above the paper
+        with monkeypatch.context() as m:
+            m.setattr(world_module, "MARKER_CIRCLE_CLEARANCE_M", np.inf)  # never hidden
+            expected = world.observe_marker()
+        assert np.array_equal(got.left_uv, expected.left_uv, equal_nan=True)
+        assert np.array_equal(got.right_uv, expected.right_uv, equal_nan=True)
+    # The circles are printed again afterwards, and hiding them does take them out of a render.
+    window = world.camera.window_around(world.camera.project(grid_circle_centers()[:1])[0][0], 12)
+    shown = world.camera.render(world.physics.client, "left", window)
+    with real_hidden(world.physics, world.scene.grid):
+        hidden = world.camera.render(world.physics.client, "left", window)
+    assert shown.min() < 40 <= hidden.min()  # a black disc, then white paper only
+    assert np.array_equal(shown, world.camera.render(world.physics.client, "left", window))

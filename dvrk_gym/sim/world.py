@@ -18,6 +18,7 @@ hold (:class:`dvrk_gym.sim.table.table.DebridementTable`) installs itself as the
 from __future__ import annotations
 
 import math
+from contextlib import nullcontext
 
 import numpy as np
 
@@ -34,7 +35,7 @@ from dvrk_gym.sim.endoscope.detection import Blob, detect_circles, detect_marker
 from dvrk_gym.sim.endoscope.noise import PixelNoise, whole_pixels
 from dvrk_gym.sim.endoscope.stereo import StereoDetection, stereo_detection
 from dvrk_gym.sim.physics.client import Physics
-from dvrk_gym.sim.physics.scene import CIRCLE_RADIUS_M, SceneBodies, build_scene, grid_circle_centers
+from dvrk_gym.sim.physics.scene import CIRCLE_RADIUS_M, PRINT_TOP_Z_M, SceneBodies, build_scene, grid_circle_centers, printed_circles_hidden
 from dvrk_gym.sim.robot import ik
 from dvrk_gym.sim.robot import kinematics as kin
 from dvrk_gym.sim.robot.bias import resolve_bias
@@ -54,6 +55,8 @@ MARKER_WINDOW_MARGIN_PX = 2
 """Pixels added around the marker's projected bounding box when rendering its window."""
 MARKER_RAY_STANDOFF_M = 0.00005
 """Visibility rays stop this far in front of the marker's face, metres."""
+MARKER_CIRCLE_CLEARANCE_M = 0.0005
+"""How far above the printed circles' plane the marker must be for them to be left out of its render, m."""
 
 
 class DvrkWorld:
@@ -124,15 +127,14 @@ class DvrkWorld:
 
     @property
     def robot(self) -> PSMBody:
-        """The arm's PyBullet body, its joints brought to ``q_true`` first if a float-path move
-        left them behind."""
+        """The arm's PyBullet body, its joints set to ``q_true`` first if a float-path move left them."""
         if self._body_behind:
             self._sync_body()
         return self._robot
 
     @property
     def physics(self) -> Physics:
-        """The physics server, the arm's joints brought to ``q_true`` first (as :attr:`robot`)."""
+        """The physics server, the arm's joints set to ``q_true`` first (as :attr:`robot`)."""
         if self._body_behind:
             self._sync_body()
         return self._physics
@@ -140,17 +142,14 @@ class DvrkWorld:
     def _place_body(self, floats: bool) -> None:
         """Set the body's joints to ``q_true`` and the jaw angle: now, or (``floats``: GridTouch-v0's
         path, whose physics is never stepped) when the body or the physics is next asked for.
-        Nothing reads the body in between, so renders and contacts see what they saw before; a
-        GridTouch step and reset then set the joints once instead of three times."""
-        if floats:
-            self._body_behind = True
-        else:
+        Nothing reads the body in between, so renders and contacts see what they saw before."""
+        self._body_behind = floats
+        if not floats:
             self._robot.set_joints(self.q_true, self.jaw_angle)
 
     def restore_physics(self, state_id: int) -> None:
-        """Restore the physics to a state saved with ``physics.client.saveState()``. A body update
-        left pending stays pending (``q_true`` has not changed): the reset that follows sets
-        the body once, to its own joints, not first to the last episode's."""
+        """Restore the physics to a ``physics.client.saveState()``, leaving a pending body update
+        pending (``q_true`` is unchanged): the reset that follows sets the body only once."""
         self._physics.client.restoreState(state_id)
 
     def _sync_body(self) -> None:
@@ -293,20 +292,21 @@ class DvrkWorld:
         appear gets rendered: the bounding box of its corners' projections plus a margin,
         so every red pixel of a full-frame render lies inside it and the pixels there are
         the full frame's. The marker is the only red thing in the scene, so the result is
-        that of a full-frame search, at a fraction of the cost.
+        that of a full-frame search, at a fraction of the cost. When the marker and the
+        camera are above the printed circles, the circles cannot hide any of it and are
+        left out of the render (the red pixels are the same; the render is cheaper).
         """
-        left_uv, right_uv = self.camera.project(marker_corners(self.q_true, self.cable.true_dh))
-        left = self._detect_in_window("left", left_uv)
-        right = self._detect_in_window("right", right_uv)
+        corners = marker_corners(self.q_true, self.cable.true_dh)
+        left_uv, right_uv = self.camera.project(corners)
+        above = min(corners[:, 2].min(), self.camera.pose[2, 3]) > PRINT_TOP_Z_M + MARKER_CIRCLE_CLEARANCE_M
+        with printed_circles_hidden(self.physics, self.scene.grid) if above else nullcontext():
+            left, right = self._detect_in_window("left", left_uv), self._detect_in_window("right", right_uv)
         return stereo_detection(self.camera, self._as_detected(left, noise_rng), self._as_detected(right, noise_rng))
 
     def _as_detected(self, blob: Blob | None, noise_rng: np.random.Generator | None) -> Blob | None:
-        """``blob`` as a real detector reports it; ``blob`` itself without a generator.
-
-        With a generator: the tape detector's own misses and error (``config.marker_noise``,
-        drawn per camera), then the configured extra pixel noise, then whole pixels of the
-        paper's 1080p grid (the authors' detector truncated its centroids).
-        """
+        """``blob`` as a real detector reports it (``blob`` itself without a generator): the tape
+        detector's own misses and error (``config.marker_noise``, drawn per camera), the
+        configured extra pixel noise, then whole pixels of the paper's 1080p grid."""
         if blob is None or noise_rng is None or self.config.marker_noise.misses(noise_rng):
             return None if noise_rng is not None else blob
         width = self.camera.intrinsics.width
@@ -315,13 +315,10 @@ class DvrkWorld:
         return Blob(centroid, blob.area_px, blob.touches_border)
 
     def marker_visible_fraction(self, side: str) -> float:
-        """Geometric visibility of the marker from one camera, without rendering.
-
-        Rays from the camera's optical centre to a grid of points on the marker faces
-        that face it; the fraction that meet nothing on the way (0: hidden, 1: seen whole).
-        This is the fast geometric check; :meth:`observe_marker` is the pixel path, and
-        the tests measure how the two agree.
-        """
+        """Geometric visibility of the marker from one camera, without rendering: the fraction
+        of rays from the camera's optical centre to a grid of points on the marker's faces
+        towards it that meet nothing on the way (0: hidden, 1: seen whole). The fast check;
+        :meth:`observe_marker` is the pixel path, and the tests measure how the two agree."""
         origin = self.camera.pose[:3, 3] + (self.camera.baseline_m * self.camera.pose[:3, 0] if side == "right" else 0.0)
         points, normals = marker_face_samples(self.q_true, origin, self.cable.true_dh)
         if len(points) == 0:
