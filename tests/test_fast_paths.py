@@ -135,6 +135,19 @@ def test_the_angle_bound_never_falls_below_scipys_angle(axis, angle, scale):
     assert rotation_angle_bound(rotation) >= float(Rotation.from_matrix(rotation).magnitude())
 
 
+@settings(max_examples=300, deadline=None)
+@given(
+    st.lists(st.floats(-1.0, 1.0), min_size=3, max_size=3),
+    st.sampled_from([1e-6, 1e-3, 0.5, 2.9, 3.0, 3.1, np.pi - 1e-6, np.pi]),
+    st.integers(0, 2**32 - 1),
+)
+def test_the_angle_bound_holds_for_matrices_off_orthonormal_as_far_as_ik_accepts(axis, angle, seed):
+    axis_array = np.array(axis) + [1e-3, 0.0, 0.0]
+    rotation = Rotation.from_rotvec(axis_array / np.linalg.norm(axis_array) * angle).as_matrix()
+    rotation += np.random.default_rng(seed).uniform(-3e-7, 3e-7, (3, 3))  # off orthonormal by under 1e-6
+    assert rotation_angle_bound(rotation) >= float(Rotation.from_matrix(rotation).magnitude())
+
+
 def test_a_planned_move_lasts_as_long_as_with_scipys_angle_for_every_move():
     rng = np.random.default_rng(4)
     limits = [MotionLimits(), MotionLimits(max_speed_m_s=0.065, max_accel_m_s2=0.65), MotionLimits(max_speed_m_s=0.03, max_accel_m_s2=0.3)]

@@ -215,3 +215,20 @@ def test_the_marker_seen_without_the_printed_circles_is_the_marker_seen_with_the
         hidden = world.camera.render(world.physics.client, "left", window)
     assert shown.min() < 40 <= hidden.min()  # a black disc, then white paper only
     assert np.array_equal(shown, world.camera.render(world.physics.client, "left", window))
+
+
+def test_with_the_gui_a_float_path_move_sets_the_body_at_once_and_a_closed_world_stays_readable():
+    with pytest.warns(RuntimeWarning, match="DISPLAY"):  # no display here: the GUI falls back to no window
+        gui = DvrkWorld(WorldConfig(gui=True, camera_resolution=(320, 180)))
+    plain = DvrkWorld(WorldConfig(camera_resolution=(320, 180)))
+    q = ik.inverse_kinematics(kin.pose_from_euler(np.array([0.03, 0.04, -0.15]), 0.3, 0.1, -3.0))
+    try:
+        for world in (gui, plain):
+            world.move_joints_floats(q.tolist(), noise_rng=np.random.default_rng(0))
+        assert not gui._body_behind and plain._body_behind  # the GUI shows the body: it is set at once
+        client, body = gui._physics.client, gui._robot.body_id
+        np.testing.assert_allclose([client.getJointState(body, j)[0] for j in range(6)], gui.q_true, atol=1e-12)
+    finally:
+        gui.close()
+        plain.close()
+    assert plain.physics is not None and plain.robot is not None  # nothing left to set on a closed server

@@ -250,7 +250,7 @@ class GridTouchEnv(DvrkEnv[GridTouchConfig]):
         (:func:`dvrk_gym.sim.compiled.float_paths.true_tip`) once the cables have a history."""
         world = self.world
         rotation, state = _tool_rotation(yaw), world.cable.get_state()
-        if math.isnan(state[0, 0]):  # no history yet (all NaN; else all finite): the Python float path takes numpy's
+        if math.isnan(state[0, 0]) or math.isnan(state[-1, 0]):  # no history yet: the Python float path takes numpy's
             return lambda position: self._true_tip_floats(position, rotation)
         constants, r6, roll = world.cable_constants, (rotation @ kin.TOOL_TIP_ROTATION.T).ravel(), float(world.q_cmd[3])
 

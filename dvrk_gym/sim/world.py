@@ -141,11 +141,11 @@ class DvrkWorld:
 
     def _place_body(self, floats: bool) -> None:
         """Set the body's joints to ``q_true`` and the jaw angle: now, or (``floats``: GridTouch-v0's
-        path, whose physics is never stepped) when the body or the physics is next asked for.
-        Nothing reads the body in between, so renders and contacts see what they saw before."""
-        self._body_behind = floats
-        if not floats:
-            self._robot.set_joints(self.q_true, self.jaw_angle)
+        path, whose physics is never stepped; not with the GUI, which shows the body) when the
+        body or the physics is next asked for: renders and contacts see what they saw before."""
+        self._body_behind = floats and not self.config.gui
+        if not self._body_behind:
+            self._robot.set_joints(self.q_true, self.jaw_angle, batched=floats)
 
     def restore_physics(self, state_id: int) -> None:
         """Restore the physics to a ``physics.client.saveState()``, leaving a pending body update
@@ -390,6 +390,7 @@ class DvrkWorld:
 
     def close(self) -> None:
         """Free the physics server; safe to call more than once."""
+        self._body_behind = False  # nothing left to set
         self._physics.close()
 
 

@@ -102,7 +102,7 @@ def true_tip(
     ``fallback_command`` () -> (6,) gives the command where the compiled inverse kinematics
     hands over (a pose to clamp, or singular); the cables and the touch point stay compiled.
     """
-    out, c = np.empty(3), constants
+    out, c, position = np.empty(3), constants, np.ascontiguousarray(position, dtype=np.float64)
     if not kernels.true_tip(position, r6, q_ref_roll, state, c.model, c.true_links, c.coupling, c.radii, ARM, _OUTER_LINKS, out):
         command = np.asarray(fallback_command(), dtype=np.float64)
         kernels.peek_tip(command, state, c.model, c.true_links, c.coupling, c.radii, ARM, out)
@@ -128,7 +128,7 @@ def inverse_kinematics_clamped(position: np.ndarray, rotation: np.ndarray, q_ref
 def forward_kinematics(q: list[float]) -> np.ndarray:
     """:func:`~dvrk_gym.sim.robot.ik.forward_kinematics_floats` (4, 4) m of the nominal arm at
     finite joints ``q`` (6,) rad / m, bit for bit."""
-    f = kernels.last_frame(np.array(q), _NOMINAL_LINKS)
+    f = kernels.last_frame(np.array(q, dtype=np.float64), _NOMINAL_LINKS)
     pose = np.array([f[0:4], f[4:8], f[8:12], (0.0, 0.0, 0.0, 1.0)])
     pose[:3, :3] = pose[:3, :3] @ kin.TOOL_TIP_ROTATION
     return pose
@@ -149,10 +149,10 @@ def true_joints(
     bit for bit, with the same random draw: move ``cable`` (whose ``constants`` these are) to the
     finite command ``q_cmd`` (6,) rad / m; its true joints (6,) rad / m."""
     state = cable.get_state()
-    if math.isnan(state[0, 0]):  # no history yet (all NaN; else all finite): the Python path sets the cables at rest
+    if math.isnan(state[0, 0]) or math.isnan(state[-1, 0]):  # no history yet: the Python path sets the cables at rest
         return cable.true_joints_floats(q_cmd, noise_rng)
     new_state, out, c = np.empty_like(state), np.empty(6), constants
-    kernels.advance(np.array(q_cmd), state, c.model, c.coupling, c.radii, ARM, new_state, out)
+    kernels.advance(np.array(q_cmd, dtype=np.float64), state, c.model, c.coupling, c.radii, ARM, new_state, out)
     cable.set_state(new_state)
     q_true = out.tolist()
     if noise_rng is not None:

@@ -6,7 +6,7 @@ the fragments, the :class:`~dvrk_gym.sim.table.grasp.Gripper` that lets the jaws
 grasp and pierce them, and the moves that step physics all the way
 (:meth:`~DebridementTable.move_stepped`, :meth:`~DebridementTable.actuate_jaws`,
 :meth:`~DebridementTable.dwell`). Once it has laid fragments it is the world's
-:class:`~dvrk_gym.sim.world.JawDriver`: the world's own moves and resets then drive the
+:class:`~dvrk_gym.sim.world_config.JawDriver`: the world's own moves and resets then drive the
 tool through the gripper, so held fragments go along. :meth:`DvrkWorld.rebuild
 <dvrk_gym.sim.world.DvrkWorld.rebuild>` empties the table (:meth:`~DebridementTable.detach`).
 """
@@ -44,7 +44,7 @@ class DebridementTable:
 
     Args:
         world: the arm, its cables, the cameras and the clock; the table drives its tool
-            once it has fragments (see :class:`~dvrk_gym.sim.world.JawDriver`).
+            once it has fragments (see :class:`~dvrk_gym.sim.world_config.JawDriver`).
         gripper_config: grip force, jaw speed, friction and contact thresholds of the
             gripper each :meth:`add_fragments` makes (None: the defaults).
 
@@ -233,19 +233,19 @@ class DebridementTable:
 
     # ----------------------------------------------------------------- the world's jaw driver
     def place_tool(self, q_true: np.ndarray, jaw_angle_rad: float | None) -> float:
-        """:class:`~dvrk_gym.sim.world.JawDriver`: teleport the tool (held fragments go along)."""
+        """:class:`~dvrk_gym.sim.world_config.JawDriver`: teleport the tool (held fragments go along)."""
         gripper = self._require_gripper()
         gripper.place(q_true, jaw_angle_rad)
         return gripper.jaw_angle
 
     def reset_tool(self, q_true: np.ndarray, jaw_angle_rad: float) -> None:
-        """:class:`~dvrk_gym.sim.world.JawDriver`: nothing stays held through a reset."""
+        """:class:`~dvrk_gym.sim.world_config.JawDriver`: nothing stays held through a reset."""
         gripper = self._require_gripper()
         gripper.release_all()
         gripper.place(q_true, jaw_angle_rad)
 
     def detach(self) -> None:
-        """:class:`~dvrk_gym.sim.world.JawDriver`: let go of everything and forget the
+        """:class:`~dvrk_gym.sim.world_config.JawDriver`: let go of everything and forget the
         fragments and the gripper (the world is about to empty its physics server)."""
         if self.gripper is not None:
             self.gripper.release_all()
