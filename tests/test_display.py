@@ -4,7 +4,6 @@
 from __future__ import annotations
 
 import ctypes.util
-import gc
 import logging
 import os
 import shutil
@@ -330,22 +329,29 @@ def test_closing_an_env_frees_its_mirror_client_files_and_processes(tmp_path):
     assert {child.pid for child in psutil.Process().children(recursive=True)} <= before_children
 
 
+_MEMORY_SCRIPT = """
+import gc, psutil, gymnasium as gym, dvrk_gym
+process = psutil.Process()
+env = gym.make("dvrk_gym/Debridement-v0", camera_resolution=(320, 180), render_mode="rgb_array")
+for seed in range(15):  # warm up: allocator pools, the renderer's buffers
+    env.reset(seed=seed)
+    env.render()
+gc.collect()
+start = process.memory_info().rss
+for seed in range(60):  # each reset rebuilds the world, and so the mirror
+    env.reset(seed=seed)
+    env.render()
+gc.collect()
+print((process.memory_info().rss - start) / 1e6)
+env.close()
+"""
+
+
 @pytest.mark.slow
 @needs_egl
 def test_memory_stays_flat_over_repeated_renders_and_resets():
-    process = psutil.Process()
-    env = gym.make("dvrk_gym/Debridement-v0", camera_resolution=(320, 180), render_mode="rgb_array")
-    try:
-        for seed in range(15):  # warm up: allocator pools, the renderer's buffers
-            env.reset(seed=seed)
-            env.render()
-        gc.collect()
-        start = process.memory_info().rss
-        for seed in range(60):  # each reset rebuilds the world, and so the mirror
-            env.reset(seed=seed)
-            env.render()
-        gc.collect()
-        grown_mb = (process.memory_info().rss - start) / 1e6
-    finally:
-        env.close()
+    """In a process of its own: a test worker's resident size also moves with what the tests
+    before it left in its allocator (6.2 MB once in CI, 0.1-0.3 MB in a fresh process)."""
+    result = subprocess.run([sys.executable, "-c", _MEMORY_SCRIPT], capture_output=True, text=True, timeout=600, check=True)
+    grown_mb = float(result.stdout.strip().splitlines()[-1])
     assert grown_mb < 5.0, f"{grown_mb:.1f} MB over 60 resets with a frame each (0.6 MB a reset before the fixes)"
