@@ -252,12 +252,16 @@ class GridTouchEnv(DvrkEnv[GridTouchConfig]):
         rotation, state = _tool_rotation(yaw), world.cable.get_state()
         if math.isnan(state[0, 0]) or math.isnan(state[-1, 0]):  # no history yet: the Python float path takes numpy's
             return lambda position: self._true_tip_floats(position, rotation)
-        constants, r6, roll = world.cable_constants, (rotation @ kin.TOOL_TIP_ROTATION.T).ravel(), float(world.q_cmd[3])
+        constants, r6, roll = world.cable_constants, float_paths.wrist_yaw_rows(rotation), float(world.q_cmd[3])
 
         def probe(position: np.ndarray) -> np.ndarray:  # a position not finite ends in numpy's "pose must be finite"
-            point = np.ascontiguousarray(position, dtype=np.float64)
             return float_paths.true_tip(
-                point, r6, roll, state, constants, lambda: ik.inverse_kinematics_clamped_floats(point.tolist(), rotation, world.q_cmd)
+                position,
+                r6,
+                roll,
+                state,
+                constants,
+                lambda: ik.inverse_kinematics_clamped_floats(np.asarray(position, dtype=float).tolist(), rotation, world.q_cmd),
             )
 
         return probe

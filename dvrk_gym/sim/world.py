@@ -108,8 +108,8 @@ class DvrkWorld:
             relax: True: the cables are relaxed at ``q`` (no hysteresis gap, whatever came
                 before). False: they keep their history, and the arm reaches ``q`` through
                 them as a real arm sent home does (no repeatability noise: no random draw).
-            floats: take the cable model's float path (a few ulps from numpy's) and set the
-                body's joints in one call (no physics is stepped after it): GridTouch-v0's.
+            floats: take the cables' float path (compiled: a few ulps from numpy's) and leave
+                the body's joints to be set when asked for (no physics is stepped): GridTouch-v0's.
         """
         q = kin.finite_vector(q, 6, "q") if floats else np.array(q, dtype=float)
         if relax:
@@ -238,7 +238,7 @@ class DvrkWorld:
     def move_joints_floats(self, q: list[float], noise_rng: np.random.Generator | None = None) -> MoveResult:
         """:meth:`move_joints` for joints ``q`` (6,) rad / m within the limits (as
         :func:`~dvrk_gym.sim.robot.ik.inverse_kinematics_floats` gives them; not checked), with
-        the end pose's kinematics and the cable model in Python floats: a few ulps from it."""
+        the end pose's kinematics and the cable model on the compiled float paths: a few ulps from it."""
         q_target = np.array(q)
         end = self._nominal_poses.get(q_target.tobytes())
         if end is None:  # for the plan only, not remembered: the reported pose stays numpy's
@@ -256,8 +256,8 @@ class DvrkWorld:
         floats: list[float] | None = None,
     ) -> MoveResult:
         """Command ``q_target`` (6,) and let the move of ``duration_s`` s settle; ``floats``: the
-        same command as floats, to take the cable model's float path and set the body's joints
-        in one call (GridTouch-v0's: no physics is stepped after it)."""
+        same command as floats, to take the cables' float path and leave the body's joints to be
+        set when asked for (GridTouch-v0's: no physics is stepped after it)."""
         jaw_time = 0.0
         if jaw_angle_rad is not None:
             jaw_time = abs(float(jaw_angle_rad) - self.jaw_angle) / JAW_SPEED_RAD_S

@@ -85,6 +85,12 @@ class CableConstants:
         self.noise_std = cables.repeatability_std(config).tolist()
 
 
+def wrist_yaw_rows(rotation: np.ndarray) -> np.ndarray:
+    """The wrist-yaw frame's rotation (9,), row-major, of the tool rotation (3, 3): the kernels'
+    ``r6`` (``rotation @ TOOL_TIP_ROTATION.T``, a signed permutation: exact)."""
+    return (rotation @ kin.TOOL_TIP_ROTATION.T).ravel()
+
+
 def true_tip(
     position: np.ndarray,
     r6: np.ndarray,
@@ -113,9 +119,8 @@ def inverse_kinematics(position: np.ndarray, rotation: np.ndarray, q_ref: np.nda
     """:func:`~dvrk_gym.sim.robot.ik.inverse_kinematics_floats`, bit for bit: the joints (6,)
     rad / m of the tool pose (``rotation`` (3, 3), finite ``position`` (3,) m), roll nearest
     ``q_ref[3]``; None where that gives None (then clamp)."""
-    r6 = (rotation @ kin.TOOL_TIP_ROTATION.T).ravel()  # a signed permutation: exact
     out, position = np.empty(6), np.ascontiguousarray(position, dtype=np.float64)
-    return out.tolist() if kernels.inverse_kinematics(position, r6, float(q_ref[3]), ARM, _OUTER_LINKS, out) else None
+    return out.tolist() if kernels.inverse_kinematics(position, wrist_yaw_rows(rotation), float(q_ref[3]), ARM, _OUTER_LINKS, out) else None
 
 
 def inverse_kinematics_clamped(position: np.ndarray, rotation: np.ndarray, q_ref: np.ndarray) -> list[float]:

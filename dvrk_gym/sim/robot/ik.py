@@ -192,7 +192,8 @@ def inverse_kinematics_clamped(pose: np.ndarray, q_ref: np.ndarray | None = None
 # cost. These do the same arithmetic in Python floats, except that numpy's 3x3 / 4x4
 # products (BLAS) use fused multiply-adds and math.atan2 / math.hypot can differ from
 # numpy's in the last bit: results agree to a few ulps, not bit for bit
-# (tests/test_float_paths.py bounds the difference).
+# (tests/test_float_paths.py bounds the difference). GridTouch-v0 runs them compiled
+# (dvrk_gym/sim/compiled, the same numbers bit for bit); these stay as their reference.
 
 Frame = tuple[float, ...]
 """The top three rows of a homogeneous transform, row-major: (r00, r01, r02, x, r10, ..., z)."""
