@@ -17,6 +17,7 @@ hold (:class:`dvrk_gym.sim.table.table.DebridementTable`) installs itself as the
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from contextlib import nullcontext
 
@@ -31,11 +32,12 @@ from dvrk_gym.sim.endoscope.camera import (
     StereoCamera,
     default_camera_pose,
 )
-from dvrk_gym.sim.endoscope.detection import Blob, detect_circles, detect_marker, match_to_expected, median_kernel_px
+from dvrk_gym.sim.endoscope.detection import Blob, detect_marker, median_kernel_px
 from dvrk_gym.sim.endoscope.noise import PixelNoise, whole_pixels
+from dvrk_gym.sim.endoscope.printed_grid import observe_printed_grid
 from dvrk_gym.sim.endoscope.stereo import StereoDetection, stereo_detection
 from dvrk_gym.sim.physics.client import Physics
-from dvrk_gym.sim.physics.scene import CIRCLE_RADIUS_M, PRINT_TOP_Z_M, SceneBodies, build_scene, grid_circle_centers, printed_circles_hidden
+from dvrk_gym.sim.physics.scene import PRINT_TOP_Z_M, SceneBodies, build_scene, printed_circles_hidden
 from dvrk_gym.sim.robot import ik
 from dvrk_gym.sim.robot import kinematics as kin
 from dvrk_gym.sim.robot.bias import resolve_bias
@@ -47,6 +49,8 @@ from dvrk_gym.sim.world_config import JawDriver, MoveResult, WorldConfig
 
 HOME_JOINTS = np.array([0.0, 0.0, 0.05, 0.0, 0.0, 0.0])
 """A retracted configuration: the tool is 34 mm below the RCM, far outside the camera's view."""
+_OWN_BODIES = {field.name for field in dataclasses.fields(SceneBodies)} | {"psm"}
+"""The bodies a world builds, by name (the scene registers each under its field's name)."""
 
 JAW_SPEED_RAD_S = math.radians(150.0)
 """How fast the jaws open or close, rad/s."""
@@ -347,28 +351,28 @@ class DvrkWorld:
     def observe_grid(self) -> tuple[StereoDetection, ...]:
         """Detect the 35 printed circles in both images, in grid order (row-major).
 
-        Computed once per world with the tool retracted out of view (the grid does not
-        move) from two full-frame renders, then cached. Each detection is assigned to the
-        circle it belongs to by where that circle should appear, as a person reading the
-        grid would; a circle that was not found gets NaN.
+        From two full-frame renders with the tool retracted out of view (the grid does not
+        move), once per world, and once per process for worlds of the same scene and
+        camera (:mod:`~dvrk_gym.sim.endoscope.printed_grid`; the arrays are read-only).
         """
         if self._grid_cache is None:
-            self._grid_cache = self._detect_grid()
+            self._grid_cache = observe_printed_grid(self.camera, self._grid_scene_key(), self._render_retracted)
         return self._grid_cache
 
-    def _detect_grid(self) -> tuple[StereoDetection, ...]:
+    def _grid_scene_key(self) -> tuple | None:
+        """What the grid's renders depend on besides the camera: the arm's kinematics (its
+        body is built from them) and the bodies' names, when they are the world's own;
+        None (not cacheable) when anything else was added (a table's fragments)."""
+        if set(self.physics.body_names) != _OWN_BODIES:
+            return None
+        return (self.physics.body_names, tuple(dataclasses.astuple(row) for row in self.cable.true_dh))
+
+    def _render_retracted(self) -> tuple[np.ndarray, np.ndarray]:
         saved_q, saved_jaw = self.q_true.copy(), self.jaw_angle
         self.robot.set_joints(HOME_JOINTS, 0.0)
-        k = self.camera.intrinsics
-        radius_px = CIRCLE_RADIUS_M * k.fx / 0.19
-        area = math.pi * radius_px**2
-        expected_left, expected_right = self.camera.project(grid_circle_centers())
-        found = []
-        for side, expected in (("left", expected_left), ("right", expected_right)):
-            detected = detect_circles(self.render(side), min_area_px=0.4 * area, max_area_px=2.0 * area)
-            found.append(match_to_expected(detected, expected, max_distance_px=radius_px))
+        images = (self.render("left"), self.render("right"))
         self.robot.set_joints(saved_q, saved_jaw)
-        return tuple(stereo_detection(self.camera, _blob_or_none(left_uv), _blob_or_none(right_uv)) for left_uv, right_uv in zip(*found))
+        return images
 
     # ----------------------------------------------------------------- lifetime
     def rebuild(self) -> None:
@@ -392,7 +396,3 @@ class DvrkWorld:
         """Free the physics server; safe to call more than once."""
         self._body_behind = False  # nothing left to set
         self._physics.close()
-
-
-def _blob_or_none(uv: np.ndarray) -> Blob | None:
-    return None if not np.isfinite(uv).all() else Blob(uv, 0.0, False)
