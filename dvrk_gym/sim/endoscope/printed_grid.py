@@ -21,6 +21,7 @@ no faster at 1920 x 1080 when large enough to hold every circle.
 from __future__ import annotations
 
 import math
+import threading
 from collections import OrderedDict
 from collections.abc import Callable, Hashable
 
@@ -39,6 +40,7 @@ NOMINAL_DEPTH_M = 0.19
 """The depth at which a circle's expected radius in pixels is taken, metres."""
 
 _CACHE: OrderedDict[Hashable, tuple[StereoDetection, ...]] = OrderedDict()
+_LOCK = threading.Lock()  # worlds in several threads: the cache's reads and writes, not the renders
 
 
 def detect_printed_grid(camera: StereoCamera, left: np.ndarray, right: np.ndarray) -> tuple[StereoDetection, ...]:
@@ -77,20 +79,25 @@ def observe_printed_grid(
         every world with the same key.
     """
     key = None if scene_key is None else (_camera_key(camera), scene_key)
-    if key is not None and key in _CACHE:
-        _CACHE.move_to_end(key)
-        return _CACHE[key]
+    if key is not None:
+        with _LOCK:
+            cached = _CACHE.get(key)
+            if cached is not None:
+                _CACHE.move_to_end(key)
+                return cached
     detections = tuple(_read_only(d) for d in detect_printed_grid(camera, *render_both()))
     if key is not None:
-        _CACHE[key] = detections
-        while len(_CACHE) > CACHE_SIZE:
-            _CACHE.popitem(last=False)
+        with _LOCK:
+            _CACHE[key] = detections
+            while len(_CACHE) > CACHE_SIZE:
+                _CACHE.popitem(last=False)
     return detections
 
 
 def clear_cache() -> None:
     """Forget every scene's detections (the next observation of each renders again)."""
-    _CACHE.clear()
+    with _LOCK:
+        _CACHE.clear()
 
 
 def _camera_key(camera: StereoCamera) -> tuple:
