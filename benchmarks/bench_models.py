@@ -4,6 +4,7 @@ Run: python benchmarks/bench_models.py            (chosen net, linear, forest; ~
      python benchmarks/bench_models.py --search   (the paper's full model search + figure)
      python benchmarks/bench_models.py --quick    (smoke run: few epochs, 3 folds)
      python benchmarks/bench_models.py --split contiguous   (the authors' folds; default shuffled)
+     python benchmarks/bench_models.py --throughput  (the chosen net's epoch against one plain product, GFLOP/s)
 
 Prints the 10-fold CV table (mean squared L2 error, mm^2; the paper: chosen 3 x 300 ReLU net
 2.06, the authors' code on these rows about 1.74, linear 3.76, forest 5.03) and the wall and
@@ -42,6 +43,35 @@ def _time_training(X, y, epochs: int) -> tuple[float, float]:
     return time.perf_counter() - wall, time.process_time() - cpu
 
 
+def _throughput(X, y, epochs: int) -> None:
+    """Print the chosen net's full-batch epoch (forward and backward) in GFLOP/s beside one plain
+    (rows x units) @ (units x units) float32 product's, on torch's current threads: how far the
+    training is from the core's matrix-product speed."""
+    model = DNNCalibrator(epochs=epochs, progress=False)
+    start = time.perf_counter()
+    model.fit(X, y)
+    epoch_s = (time.perf_counter() - start) / epochs
+    linears = [layer for layer in model.network_ if isinstance(layer, torch.nn.Linear)]
+    rows = X.shape[0]
+    macs = rows * sum(layer.in_features * layer.out_features for layer in linears)
+    first = rows * linears[0].in_features * linears[0].out_features
+    flops = 2 * (3 * macs - first)  # forward, weight gradients, and input gradients but the first layer's
+    units = model.units
+    a, b = torch.randn(rows, units), torch.randn(units, units)
+    for _ in range(20):
+        a @ b
+    repeats = 300
+    start = time.perf_counter()
+    for _ in range(repeats):
+        a @ b
+    product_s = (time.perf_counter() - start) / repeats
+    product_rate = 2 * rows * units * units / product_s / 1e9
+    epoch_rate = flops / epoch_s / 1e9
+    print(f"DNN {CHOSEN_NET} epoch, {rows} rows, full batch: {1e3 * epoch_s:.1f} ms, {epoch_rate:.1f} GFLOP/s")
+    print(f"one {rows} x {units} x {units} float32 product: {1e3 * product_s:.2f} ms, {product_rate:.1f} GFLOP/s")
+    print(f"the epoch at the product's speed: {epoch_rate / product_rate:.2f} of it; {epochs} epochs {epoch_s * epochs:.1f} s")
+
+
 def _search_specs(args: argparse.Namespace) -> list[ModelSpec]:
     print(f"model search: every net batch {SWEEP_BATCH_SIZE}, lr {DEFAULT_LEARNING_RATE:g}")
     return paper_models(epochs=args.epochs, sweep_folds=args.sweep_folds or None, quick=args.quick)
@@ -70,6 +100,7 @@ def main() -> None:
     parser.add_argument("--search", action="store_true", help="run the paper's full model search")
     parser.add_argument("--plot", default="model_search.png", help="figure path with --search")
     parser.add_argument("--quick", action="store_true", help="smoke run (few epochs and folds)")
+    parser.add_argument("--throughput", action="store_true", help="only time an epoch against a plain matrix product (300 epochs)")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument(
         "--split",
@@ -82,6 +113,9 @@ def main() -> None:
     torch.set_num_threads(args.threads)
     X, y = load_paper_phase1()
     print(f"authors' Phase I data: {X.shape[0]} rows; torch {torch.__version__}, {torch.get_num_threads()} thread(s)")
+    if args.throughput:
+        _throughput(X, y, epochs=300)
+        return
 
     specs = _search_specs(args) if args.search else _chosen_specs(args)
     wall, cpu = time.perf_counter(), time.process_time()

@@ -42,3 +42,18 @@ def test_it_times_all_five_envs_and_prints_their_ratio_to_panda_reach():
     assert rows["PandaReach-v3"][1] == "1.00"
     for name, (rate, ratio, real_time_factor) in rows.items():
         assert float(rate) > 0.0 and float(ratio) > 0.0 and float(real_time_factor) > 0.0, name
+
+
+def test_the_pick_parts_benchmark_times_every_part_of_a_pick():
+    """benchmarks/bench_pick_parts.py: every part it names was called and timed (a renamed method fails here)."""
+    script = ROOT / "benchmarks" / "bench_pick_parts.py"
+    arguments = ["--trials", "1", "--resolution", "320", "180"]
+    result = subprocess.run([sys.executable, str(script), *arguments], cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert result.returncode == 0, result.stderr[-2000:]
+    lines = result.stdout.splitlines()
+    header = next(i for i, line in enumerate(lines) if line.startswith("part (indented"))
+    rows = {line.split()[0]: line.split()[1:] for line in lines[header + 1 :]}
+    assert len(rows) == 14 and rows["DebridementEnv._step_episode"][2] == "100%"
+    for name, (ms, calls, share) in rows.items():
+        assert float(ms) > 0.0 and int(calls) > 0 and share.endswith("%"), name
+    assert int(rows["Physics.step"][1]) > 100 * int(rows["DebridementEnv._step_episode"][1])  # hundreds of steps a pick

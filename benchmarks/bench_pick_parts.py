@@ -1,0 +1,110 @@
+"""Where a Debridement-v0 pick's wall time goes: timers around its parts, without a profiler.
+
+Run: python benchmarks/bench_pick_parts.py  [--trials 4] [--resolution 1920 1080] [--fragment pumpkin_seed]
+
+Steps ``--trials`` trials of eight seeded random picks (after one pick to warm up) with a
+``time.perf_counter`` timer around each part below, and prints each part's milliseconds per
+pick, its calls and its share of the picks' wall time (the resets' observations left out). cProfile's per-call overhead swells
+the small Python functions of the physics loop about threefold; these timers add a few
+microseconds a call. The parts nest (indented: inside the one above), so the shares do not
+add up. Issue 18's target is 10 picks/s, 100 ms a pick.
+"""
+
+from __future__ import annotations
+
+import argparse
+import collections
+import time
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+import dvrk_gym  # noqa: F401
+from dvrk_gym.envs.debridement import DebridementEnv
+from dvrk_gym.envs.picks import PickPrimitive
+from dvrk_gym.sim.endoscope.camera import StereoCamera
+from dvrk_gym.sim.endoscope.fragment_detection import FragmentObserver
+from dvrk_gym.sim.physics.client import Physics
+from dvrk_gym.sim.robot.body import PSMBody
+from dvrk_gym.sim.table.grasp import Gripper
+from dvrk_gym.sim.table.table import DebridementTable
+
+PARTS: tuple[tuple[int, type, str], ...] = (
+    (0, DebridementEnv, "_step_episode"),
+    (1, PickPrimitive, "run"),
+    (2, DebridementTable, "move_stepped"),
+    (3, DebridementTable, "_joint_path"),
+    (3, Gripper, "follow"),
+    (2, DebridementTable, "actuate_jaws"),
+    (2, PickPrimitive, "drop_command"),
+    (1, FragmentObserver, "observe"),
+    (2, FragmentObserver, "_coarse_blobs"),
+    (2, FragmentObserver, "_fine_blob"),
+    (3, StereoCamera, "render"),
+    (0, Gripper, "step"),
+    (1, Physics, "step"),
+    (1, PSMBody, "drive"),
+)
+"""(depth, class, method) of each timed part, in the order printed."""
+
+
+def timed(seconds: dict[str, float], calls: collections.Counter, cls: type, name: str) -> None:
+    """Replace ``cls.name`` with a wrapper that adds its wall time to ``seconds`` (this process only)."""
+    original = getattr(cls, name)
+    label = f"{cls.__name__}.{name}"
+
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        start = time.perf_counter()
+        try:
+            return original(*args, **kwargs)
+        finally:
+            seconds[label] += time.perf_counter() - start
+            calls[label] += 1
+
+    setattr(cls, name, wrapper)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--trials", type=int, default=4, help="trials of eight random picks (default: %(default)s)")
+    parser.add_argument("--resolution", type=int, nargs=2, default=(1920, 1080), metavar=("W", "H"))
+    parser.add_argument("--fragment", default="pumpkin_seed", help="pumpkin_seed or raisin (default: %(default)s)")
+    args = parser.parse_args()
+    seconds: dict[str, float] = collections.defaultdict(float)
+    calls: collections.Counter = collections.Counter()
+    for _, cls, name in PARTS:
+        timed(seconds, calls, cls, name)
+    env = gym.make("dvrk_gym/Debridement-v0", fragment=args.fragment, max_picks=8, camera_resolution=tuple(args.resolution))
+    env.reset(seed=1000)
+    env.step(env.action_space.sample())  # warm-up: the first pick loads what later ones reuse
+    env.action_space.seed(0)
+    seconds.clear()
+    calls.clear()
+    picks, wall = 0, 0.0
+    for trial in range(args.trials):
+        before_seconds, before_calls = dict(seconds), calls.copy()
+        env.reset(seed=trial)  # its observation is not a pick's: take it back out
+        for label in list(seconds):
+            seconds[label] = before_seconds.get(label, 0.0)
+        calls.clear()
+        calls.update(before_calls)
+        start = time.perf_counter()
+        for _ in range(8):
+            _, _, terminated, truncated, _ = env.step(env.action_space.sample())
+            picks += 1
+            if terminated or truncated:
+                break
+        wall += time.perf_counter() - start
+    env.close()
+    steps = seconds["DebridementEnv._step_episode"]
+    print(f"{picks} picks at {args.resolution[0]} x {args.resolution[1]}: {picks / wall:.2f} picks/s, {1e3 * wall / picks:.0f} ms a pick")
+    print(f"{'part (indented: inside the one above)':<44} {'ms/pick':>8} {'calls':>7} {'share':>6}")
+    for depth, cls, name in PARTS:
+        label = f"{cls.__name__}.{name}"
+        share = seconds[label] / steps if steps else np.nan
+        print(f"{'  ' * depth + label:<44} {1e3 * seconds[label] / picks:>8.1f} {calls[label]:>7d} {share:>6.0%}")
+
+
+if __name__ == "__main__":
+    main()
