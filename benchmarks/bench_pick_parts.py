@@ -4,10 +4,12 @@ Run: python benchmarks/bench_pick_parts.py  [--trials 4] [--resolution 1920 1080
 
 Steps ``--trials`` trials of eight seeded random picks (after one pick to warm up) with a
 ``time.perf_counter`` timer around each part below, and prints each part's milliseconds per
-pick, its calls and its share of the picks' wall time (the resets' observations left out). cProfile's per-call overhead swells
-the small Python functions of the physics loop about threefold; these timers add a few
-microseconds a call. The parts nest (indented: inside the one above), so the shares do not
-add up. Issue 18's target is 10 picks/s, 100 ms a pick.
+pick, its calls and its share of the picks' time in ``DebridementEnv._step_episode`` (the
+resets' observations left out). The renders are both passes' (coarse and fine); the joints
+are also set outside a physics step (``Gripper.place``: the free-space moves). cProfile's
+per-call overhead swells the small Python functions of the physics loop about threefold;
+these timers add a few microseconds a call. The parts nest (indented: inside the last part
+one level up), so the shares do not add up. Issue 18's target is 10 picks/s, 100 ms a pick.
 """
 
 from __future__ import annotations
@@ -41,10 +43,10 @@ PARTS: tuple[tuple[int, type, str], ...] = (
     (1, FragmentObserver, "observe"),
     (2, FragmentObserver, "_coarse_blobs"),
     (2, FragmentObserver, "_fine_blob"),
-    (3, StereoCamera, "render"),
+    (2, StereoCamera, "render"),
     (0, Gripper, "step"),
     (1, Physics, "step"),
-    (1, PSMBody, "drive"),
+    (0, PSMBody, "drive"),
 )
 """(depth, class, method) of each timed part, in the order printed."""
 
@@ -99,7 +101,7 @@ def main() -> None:
     env.close()
     steps = seconds["DebridementEnv._step_episode"]
     print(f"{picks} picks at {args.resolution[0]} x {args.resolution[1]}: {picks / wall:.2f} picks/s, {1e3 * wall / picks:.0f} ms a pick")
-    print(f"{'part (indented: inside the one above)':<44} {'ms/pick':>8} {'calls':>7} {'share':>6}")
+    print(f"{'part (indented: inside the one above it)':<44} {'ms/pick':>8} {'calls':>7} {'share':>6}")
     for depth, cls, name in PARTS:
         label = f"{cls.__name__}.{name}"
         share = seconds[label] / steps if steps else np.nan

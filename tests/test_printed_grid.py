@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from dvrk_gym.sim.endoscope import printed_grid
+from dvrk_gym.sim.endoscope.camera import StereoCamera
 from dvrk_gym.sim.endoscope.printed_grid import detect_printed_grid
 from dvrk_gym.sim.world import HOME_JOINTS, DvrkWorld, WorldConfig
 
@@ -78,6 +79,24 @@ def test_another_camera_is_detected_afresh(counted_renders):
         base.close()
         for world in others:
             world.close()
+
+
+def test_a_camera_that_triangulates_with_another_baseline_is_not_served_the_cached_positions(counted_renders):
+    """The renders do not depend on the baseline the triangulation assumes, the positions do."""
+    world = DvrkWorld(WorldConfig(camera_resolution=RESOLUTION))
+    try:
+        camera = world.camera
+        other = StereoCamera(
+            camera.intrinsics, baseline_m=camera.baseline_m, pose=camera.pose, calibrated_baseline_m=1.1 * camera.calibrated_baseline_m
+        )
+        render_both = world._render_retracted
+        first = printed_grid.observe_printed_grid(camera, "scene", render_both)
+        second = printed_grid.observe_printed_grid(other, "scene", render_both)
+        assert len(counted_renders) == 4 and second is not first
+        assert second[0].camera_position[2] == pytest.approx(1.1 * first[0].camera_position[2], rel=1e-9)
+        assert printed_grid.observe_printed_grid(camera, "scene", render_both) is first
+    finally:
+        world.close()
 
 
 def test_instruments_share_the_detections_while_their_links_are_the_same(counted_renders):

@@ -5,17 +5,18 @@ only on what is in the scene and on the camera. Every GridTouch env, Phase I col
 and demo reads it, and detecting it takes two full-frame renders (1.1 s at 1920 x 1080 on
 one core, measured; a ``dvrk-gym reproduce --quick`` did it seven times in its two worker
 processes). :func:`observe_printed_grid` therefore keeps the detections of every scene it
-has seen, in this process, under a key that holds everything the renders depend on: both
-view matrices, the projection, the image size, and a description of the scene from its
-owner (the world: its bodies' names and the DH table its arm's body is built from; the
-presets' instruments differ in their cables, not their links, so they share it). Same
-key, same pixels (TinyRenderer is deterministic), same detections, bit for bit. A scene
-that cannot be described that way (key None) is detected afresh every time.
+has seen, in this process, under a key that holds everything the detections depend on:
+both view matrices, the projection, the image size, the baseline the triangulation
+assumes, and a description of the scene from its owner (the world: its bodies' names and
+the DH table its arm's body is built from; the presets' instruments differ in their
+cables, not their links, so they share it). Same key, same pixels (TinyRenderer is
+deterministic), same detections, bit for bit. A scene that cannot be described that way
+(key None) is detected afresh every time.
 
 Windows around each expected circle are not used instead: measured on 90 instruments and
 resolutions, they gave centroids that differed from the full frame's in their last bits
-(the window's offset added back) and once by 0.011 px (a pixel shaded differently), and
-no faster at 1920 x 1080 when large enough to hold every circle.
+(the window's offset added back), at 1920 x 1080 one of them by 0.011 px (a pixel shaded
+differently), and they were no faster at 1920 x 1080 when large enough to hold every circle.
 """
 
 from __future__ import annotations
@@ -101,9 +102,11 @@ def clear_cache() -> None:
 
 
 def _camera_key(camera: StereoCamera) -> tuple:
-    """What of the camera decides the full-frame renders: image size, projection, both views."""
+    """What of the camera decides the detections: the renders' image size, projection and
+    both views, and the baseline the triangulation assumes."""
     k = camera.intrinsics
-    return (k.width, k.height, tuple(camera.projection_matrix()), tuple(camera.view_matrix("left")), tuple(camera.view_matrix("right")))
+    views = (tuple(camera.view_matrix("left")), tuple(camera.view_matrix("right")))
+    return (k.width, k.height, tuple(camera.projection_matrix()), views, camera.calibrated_baseline_m)
 
 
 def _read_only(detection: StereoDetection) -> StereoDetection:
