@@ -360,12 +360,13 @@ class DvrkWorld:
         return self._grid_cache
 
     def _grid_scene_key(self) -> tuple | None:
-        """What the grid's renders depend on besides the camera: the arm's kinematics (its
-        body is built from them) and the bodies' names, when they are the world's own;
-        None (not cacheable) when anything else was added (a table's fragments)."""
-        if set(self.physics.body_names) != _OWN_BODIES:
+        """What the grid's renders depend on besides the camera, when the physics holds only
+        the world's own bodies: the DH table the arm's body is built from; None (not
+        cacheable) when anything else was added (a table's fragments). Reads the server's
+        names without setting a pending body (a cached answer renders nothing)."""
+        if set(self._physics.body_names) != _OWN_BODIES:
             return None
-        return (self.physics.body_names, tuple(dataclasses.astuple(row) for row in self.cable.true_dh))
+        return tuple(dataclasses.astuple(row) for row in self.cable.true_dh)
 
     def _render_retracted(self) -> tuple[np.ndarray, np.ndarray]:
         saved_q, saved_jaw = self.q_true.copy(), self.jaw_angle

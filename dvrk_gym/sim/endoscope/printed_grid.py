@@ -7,9 +7,9 @@ one core, measured; a ``dvrk-gym reproduce --quick`` did it seven times in its t
 processes). :func:`observe_printed_grid` therefore keeps the detections of every scene it
 has seen, in this process, under a key that holds everything the detections depend on:
 both view matrices, the projection, the image size, the baseline the triangulation
-assumes, and a description of the scene from its owner (the world: its bodies' names and
-the DH table its arm's body is built from; the presets' instruments differ in their
-cables, not their links, so they share it). Same key, same pixels (TinyRenderer is
+assumes, and a description of the scene from its owner (the world: the DH table its arm's
+body is built from, given only while its physics holds nothing but its own bodies; the
+presets' instruments differ in their cables, not their links, so they share it). Same key, same pixels (TinyRenderer is
 deterministic), same detections, bit for bit. A scene that cannot be described that way
 (key None) is detected afresh every time.
 
