@@ -55,6 +55,7 @@ __all__ = [
     "split",
     "start_camera_pose",
     "fit_parameters",
+    "refit",
     "residual_rms",
     "bootstrap_sd",
     "model_jitter_mm",
@@ -127,7 +128,9 @@ def _residuals(free_values: np.ndarray, fit: InstrumentFit, commands: np.ndarray
     return np.concatenate([scaled, np.asarray(priors, dtype=float)])
 
 
-def _least_squares(fit: InstrumentFit, commands: np.ndarray, pixels: np.ndarray) -> InstrumentFit:
+def refit(fit: InstrumentFit, commands: np.ndarray, pixels: np.ndarray) -> InstrumentFit:
+    """MAP fit of the parameters ``fit.free`` to rows (commands (N, 6) rad / m, pixels (N, 3)
+    px), starting from ``fit.theta`` with its residual scales; the others keep their values."""
     start = fit.theta[list(fit.free)]
     result = least_squares(
         _residuals, start, args=(fit, commands, pixels), x_scale="jac", diff_step=1e-5, loss="huber", f_scale=HUBER_SCALE
@@ -146,9 +149,9 @@ def fit_parameters(commands: np.ndarray, pixels: np.ndarray, free: tuple[int, ..
     ``free`` (default: all) from there.
     """
     free = tuple(range(len(PARAMETERS))) if free is None else tuple(free)
-    first = _least_squares(InstrumentFit(initial_vector(start_camera_pose()), np.ones(3), CAMERA_AND_TAPE), commands, pixels)
+    first = refit(InstrumentFit(initial_vector(start_camera_pose()), np.ones(3), CAMERA_AND_TAPE), commands, pixels)
     scales = residual_rms(first.theta, commands, pixels)
-    return _least_squares(InstrumentFit(first.theta, scales, free), commands, pixels)
+    return refit(InstrumentFit(first.theta, scales, free), commands, pixels)
 
 
 def residual_rms(theta: np.ndarray, commands: np.ndarray, pixels: np.ndarray) -> np.ndarray:
@@ -178,7 +181,7 @@ def bootstrap_sd(
     estimates = []
     for k, row_starts in enumerate(starts):
         rows = (row_starts[:, None] + np.arange(block)).ravel()
-        estimates.append(_least_squares(fit, commands[rows], pixels[rows]).theta)
+        estimates.append(refit(fit, commands[rows], pixels[rows]).theta)
         logger.info("bootstrap replicate %d of %d done", k + 1, replicates)
     return np.std(np.array(estimates), axis=0, ddof=1)
 
