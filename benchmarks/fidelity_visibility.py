@@ -27,11 +27,13 @@ This script measures the chain between the two:
    The identification (:func:`dvrk_gym.fidelity.identify.fit_parameters`) on its training
    rows, then again with the camera's position held at each orbit of 10 or 20 degrees and
    every other parameter (the camera's rotation too) fitted afresh: the pixel residuals
-   (u, v, disparity RMS) on the training and held-out rows.
+   (u, v, disparity RMS) on the training and held-out rows, and where the fit puts the tape.
+   The same with the roll or wrist-pitch homing offset held at 15 to 30 degrees: the
+   pixels pin the roll, but a wrist-pitch offset trades with the tape's height on the jaws.
 
     python benchmarks/fidelity_visibility.py                        # about 3 min
     python benchmarks/fidelity_visibility.py --calibration DIR      # 10 s more
-    python benchmarks/fidelity_visibility.py --camera-fit           # about 5 min more
+    python benchmarks/fidelity_visibility.py --camera-fit           # about 6 min more
 """
 
 from __future__ import annotations
@@ -208,34 +210,47 @@ def dnn_against_touch_pitch(folder: str) -> None:
 
 
 def camera_fit_along_orbits() -> None:
-    """Part 5: the identification's pixel residuals with the camera held at orbited positions."""
+    """Part 5: the identification's pixel residuals with the camera held at orbited positions,
+    and with the roll or wrist-pitch homing offset held far from its fitted value."""
     from dvrk_gym.fidelity import identify
-    from dvrk_gym.fidelity.instrument_model import PARAMETERS, real_commands, real_pixels
+    from dvrk_gym.fidelity.instrument_model import PARAMETER_NAMES, PARAMETERS, real_commands, real_pixels
 
     X, y = load_paper_phase1()
     commands, pixels = real_commands(X, y), real_pixels(X)
     train, held = identify.split(len(X))
     fit = identify.fit_parameters(commands[train], pixels[train])
-    position = tuple(i for i, p in enumerate(PARAMETERS) if p.name in ("camera_x", "camera_y", "camera_z"))
-    free = tuple(i for i in range(len(PARAMETERS)) if i not in position)
+    tape = [PARAMETER_NAMES.index(name) for name in ("marker_x", "marker_y", "marker_z")]
+    position = tuple(PARAMETER_NAMES.index(name) for name in ("camera_x", "camera_y", "camera_z"))
     centre = np.asarray(WORKSPACE_CENTER_M)
 
-    def rms(theta: np.ndarray) -> str:
+    def report(label: str, theta: np.ndarray) -> None:
         train_rms = identify.residual_rms(theta, commands[train], pixels[train])
         held_rms = identify.residual_rms(theta, commands[held], pixels[held])
-        return f"{_fmt(train_rms, '5.2f')} | {_fmt(held_rms, '5.2f')}"
+        print(f"{label:42s} {_fmt(train_rms, '5.2f')} | {_fmt(held_rms, '5.2f')} | {_fmt(theta[tape] * 1e3, '5.2f')}", flush=True)
 
-    print("\n5. The identification's pixel residuals, px RMS (u, v, disparity), training | held-out rows")
-    print(f"{'as identified (camera free)':40s} {rms(fit.theta)}")
+    def refit_holding(theta: np.ndarray, held_indices: tuple[int, ...]) -> np.ndarray:
+        free = tuple(i for i in range(len(PARAMETERS)) if i not in held_indices)
+        return identify.refit(identify.InstrumentFit(theta, fit.scales, free), commands[train], pixels[train]).theta
+
+    print("\n5. The identification's pixel residuals, px RMS (u, v, disparity), training | held-out rows | its tape point (x, y, z)")
+    print("   in the wrist-yaw frame, mm (the jaws' faces are at x = +-1.1 mm and z = +-1.3 mm; they run along y)")
+    report("as identified (camera free)", fit.theta)
     for axis_name, axis in (("x", (1.0, 0.0, 0.0)), ("y", (0.0, 1.0, 0.0))):
         for angle in (-20.0, -10.0, 10.0, 20.0):
             turn = Rotation.from_rotvec(np.deg2rad(angle) * np.asarray(axis)).as_matrix()
             theta = fit.theta.copy()
             theta[0:3] = (Rotation.from_matrix(turn) * Rotation.from_rotvec(theta[0:3])).as_rotvec()
             theta[3:6] = centre + turn @ (theta[3:6] - centre)
-            moved = identify.InstrumentFit(theta, fit.scales, free)
-            refit = identify.refit(moved, commands[train], pixels[train])
-            print(f"{f'camera held orbited {angle:+.0f} deg about base {axis_name}':40s} {rms(refit.theta)}", flush=True)
+            report(f"camera held orbited {angle:+.0f} deg about base {axis_name}", refit_holding(theta, position))
+    for name, label, degrees in (
+        ("homing_wrist_pitch", "wrist-pitch", -15.0),
+        ("homing_wrist_pitch", "wrist-pitch", -30.0),
+        ("homing_roll", "roll", 15.0),
+        ("homing_roll", "roll", -20.0),
+    ):
+        theta = fit.theta.copy()
+        theta[PARAMETER_NAMES.index(name)] = np.deg2rad(degrees)
+        report(f"{label} homing offset held at {degrees:+.0f} deg", refit_holding(theta, (PARAMETER_NAMES.index(name),)))
 
 
 def _fmt(values: np.ndarray, spec: str) -> str:

@@ -171,7 +171,11 @@ INSTRUMENT = InstrumentValues(
 """Fitted: homing offsets of insertion (1.8 mm), roll (-6.4 deg) and wrist pitch (-0.9
 deg), under Gaussian priors of 1 mm and 1 degree (the outer yaw and pitch offsets turn the
 whole arm about the RCM, which the camera pose absorbs; the wrist-yaw offset turns the tape
-about the pivot, which the tape's position absorbs: both 0). Outer stretch -0.37 / -0.28
+about the pivot, which the tape's position absorbs: both 0). The wrist-pitch offset trades
+with the tape's height on the jaws: held at -15 or -30 degrees the fit is as good, with the
+tape point at z = 3.2 or 8.2 mm, off the jaws (their faces are at +-1.3 mm); the prior
+keeps it near -1 degree, with the tape point at the jaws' -z face, where the simulated tape
+lies (``python benchmarks/fidelity_visibility.py --camera-fit``). Outer stretch -0.37 / -0.28
 degrees (not the 2.6 degrees once tuned to the paper's table); wrist stretch -0.086 (the
 sign: opposite to the nominal coupling); backlash 3.5 degrees in the wrist, none in the
 outer joints. Repeatability: not fitted, but what the real rows' sample-to-sample jitter in
