@@ -33,7 +33,7 @@ This script measures the chain between the two:
 
     python benchmarks/fidelity_visibility.py                        # about 3 min
     python benchmarks/fidelity_visibility.py --calibration DIR      # 10 s more
-    python benchmarks/fidelity_visibility.py --camera-fit           # about 6 min more
+    python benchmarks/fidelity_visibility.py --camera-fit           # about 3 min more
 """
 
 from __future__ import annotations
