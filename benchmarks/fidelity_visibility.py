@@ -14,7 +14,9 @@ This script measures the chain between the two:
    the camera or what shows is too thin for the median filter. Beside it, the real robot's
    share, estimated: its kept rows at that yaw, over the raw rows the protocol commands
    there (the simulated collection's, scaled to the authors' 5,256), over the share that
-   survives the detector's random misses in both images.
+   survives the detector's random misses in both images. Then the angle between the jaws
+   and the line of sight to the tape over the kept rows, real (their reported poses through
+   the identified instrument) and simulated: the angles at which each robot saw its tape.
 3. **What would move it.** The same recorded joints rendered under other instruments: the
    camera orbited about the workspace centre (its position and view turned together by 10
    or 20 degrees about the base x or y axis), and constant offsets on the roll or wrist-pitch
@@ -140,6 +142,23 @@ def jaws_from_line_of_sight_deg(world: DvrkWorld) -> float:
     ray = body.marker_position(world.q_true, world.cable.true_dh) - world.camera.pose[:3, 3]
     cosine = float(frame[:3, 1] @ ray / np.linalg.norm(ray))
     return float(np.rad2deg(np.arccos(np.clip(cosine, -1.0, 1.0))))
+
+
+def real_rows_jaw_angles_deg(real_X: np.ndarray, real_y: np.ndarray) -> np.ndarray:
+    """The jaws' angle from the line of sight (degrees) for each real row: its reported pose
+    through the nominal inverse kinematics and the identified instrument's cables, in the
+    rows' order (as the identification runs them), seen by the identified camera."""
+    from dvrk_gym.fidelity.instrument_model import real_commands
+
+    world = DvrkWorld(WorldConfig())
+    try:
+        angles = []
+        for command in real_commands(real_X, real_y):
+            world.q_true = world.cable.true_joints(command)
+            angles.append(jaws_from_line_of_sight_deg(world))
+    finally:
+        world.close()
+    return np.array(angles)
 
 
 def render_rows(joints: np.ndarray, camera_pose: np.ndarray | None = None, offsets_rad: np.ndarray | None = None, why: bool = False):  # type: ignore[no-untyped-def]
@@ -276,7 +295,7 @@ def main() -> None:
     finally:
         env.close()
     joints = np.array(env.joints)
-    real_X, _ = load_paper_phase1()
+    real_X, real_y = load_paper_phase1()
     kept = data.orientation[data.kept]
 
     print(f"1. Kept rows per nearest paper yaw (real: 1939 rows; simulated: {data.n_kept} of {data.n_raw}, instrument 0)")
@@ -308,6 +327,15 @@ def main() -> None:
         angle = np.median(angles[rows]) if rows.any() else np.nan
         head = f"{yaw:+4.0f} {rows.sum():5d}  {real_seen:.2f}  {seen[rows].mean():.2f}  {angle:5.1f}  "
         print(head + "  ".join(f"{v:10.2f}" for v in shares))
+
+    real_angles = real_rows_jaw_angles_deg(real_X, real_y)
+    real_near = nearest_yaw_index(real_X[:, 3:6])
+    print("\n   The jaws' angle from the line of sight, deg, 5th / 25th / 50th percentile over the kept rows: real (their poses")
+    print("   through the identified instrument) | simulated; and the share of kept rows under 15 degrees")
+    for k, yaw in enumerate(PAPER_YAWS_DEG):
+        real_k, sim_k = real_angles[real_near == k], angles[(near == k) & data.kept]
+        parts = [f"{_fmt(np.percentile(a, [5, 25, 50]), '5.1f')}  {np.mean(a < 15.0):.2f}" if len(a) else "  none" for a in (real_k, sim_k)]
+        print(f"{yaw:+4.0f}  {parts[0]} | {parts[1]}")
 
     real_shares, real_medians = shares_and_medians(real_X[:, 3:6])
     subset = np.arange(0, len(joints), args.every)

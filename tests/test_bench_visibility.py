@@ -59,6 +59,12 @@ def test_it_prints_every_part_and_the_hidden_rows_add_up():
         seen_and_causes = line.split()[3:4] + line.split()[5:]  # skip the angle column
         values = [float(v) for v in seen_and_causes]
         assert abs(sum(values) - 1.0) < 0.05, line  # seen, or hidden by one named cause (each rounded to 0.01)
+    angles = next(i for i, line in enumerate(lines) if line.startswith("   The jaws' angle from the line of sight"))
+    for line in lines[angles + 2 : angles + 7]:
+        real_part, sim_part = line.split("|")
+        real_values = [float(v) for v in real_part.split()[1:]]
+        assert len(real_values) == 4 and real_values[0] <= real_values[1] <= real_values[2], line  # percentiles, then a share
+        assert 0.0 <= real_values[3] <= 1.0 and (sim_part.split() == ["none"] or len(sim_part.split()) == 4), line
     third = next(i for i, line in enumerate(lines) if line.startswith("3. Seen rows"))
     labels = [line.split("  ")[0] for line in lines[third + 1 :]]
     assert labels[0].startswith("real") and labels[1].startswith("as identified") and len(labels) == 14
