@@ -51,7 +51,9 @@ from scipy.spatial.transform import Rotation
 import dvrk_gym  # noqa: F401  (registers the envs)
 from dvrk_gym import paper
 from dvrk_gym.calibration.datasets import load_paper_phase1
+from dvrk_gym.calibration.models.features import nearest_yaw_index
 from dvrk_gym.calibration.phase1 import PaperExplorationPolicy, collect_phase1
+from dvrk_gym.fidelity.statistics import PAPER_YAWS_DEG
 from dvrk_gym.sim.endoscope.camera import WORKSPACE_CENTER_M, default_camera_pose
 from dvrk_gym.sim.identified import MARKER_DETECTION_NOISE
 from dvrk_gym.sim.robot import body
@@ -59,7 +61,6 @@ from dvrk_gym.sim.robot import kinematics as kin
 from dvrk_gym.sim.world import DvrkWorld
 from dvrk_gym.sim.world_config import WorldConfig
 
-PAPER_YAWS_DEG = np.array([-90.0, -45.0, 0.0, 45.0, 90.0])
 _LINK_NAMES = {3: "shaft", 4: "clevis", 5: "pivot", 6: "jaw A", 7: "jaw B"}
 _RAY_STANDOFF_M = 2.0e-5
 """Rays stop this far in front of the tape's faces, so they cannot meet the jaw beneath."""
@@ -80,14 +81,9 @@ class JointRecorder(gym.Wrapper):
         return result
 
 
-def nearest_yaw_index(orientation: np.ndarray) -> np.ndarray:
-    """(N,) index into PAPER_YAWS_DEG of each row's nearest paper yaw (orientation in rad)."""
-    return np.argmin(np.abs(np.rad2deg(orientation[:, :1]) - PAPER_YAWS_DEG[None]), axis=1)
-
-
 def per_yaw_rows(orientation: np.ndarray) -> list[tuple[int, float, float, float, float]]:
     """Per paper yaw: rows, pitch 10th / 50th / 90th percentile and median roll (degrees, roll in (-360, 0])."""
-    near = nearest_yaw_index(orientation)
+    near = nearest_yaw_index(orientation[:, 0])
     rows = []
     for k in range(len(PAPER_YAWS_DEG)):
         pitch = np.rad2deg(orientation[near == k, 1])
@@ -102,17 +98,17 @@ def per_yaw_rows(orientation: np.ndarray) -> list[tuple[int, float, float, float
 
 def shares_and_medians(orientation: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Share of rows per paper yaw, and their median pitch (degrees)."""
-    near = nearest_yaw_index(orientation)
+    near = nearest_yaw_index(orientation[:, 0])
     shares = np.bincount(near, minlength=len(PAPER_YAWS_DEG)) / max(len(near), 1)
     medians = np.array([np.rad2deg(np.median(orientation[near == k, 1])) if np.any(near == k) else np.nan for k in range(5)])
     return shares, medians
 
 
-def orbited_camera(axis: tuple[float, float, float], angle_deg: float) -> np.ndarray:
-    """The default camera pose (4x4) turned by ``angle_deg`` about ``axis`` (base frame)
-    through the workspace centre: position and view turn together."""
+def orbited_camera(axis: tuple[float, float, float], angle_deg: float, pose: np.ndarray | None = None) -> np.ndarray:
+    """A camera pose (4x4; default: the identified camera's) turned by ``angle_deg`` about
+    ``axis`` (base frame) through the workspace centre: position and view turn together."""
     turn = Rotation.from_rotvec(np.deg2rad(angle_deg) * np.asarray(axis, dtype=float)).as_matrix()
-    pose = default_camera_pose().copy()
+    pose = (default_camera_pose() if pose is None else pose).copy()
     centre = np.asarray(WORKSPACE_CENTER_M)
     pose[:3, :3] = turn @ pose[:3, :3]
     pose[:3, 3] = centre + turn @ (pose[:3, 3] - centre)
@@ -232,7 +228,7 @@ def camera_fit_along_orbits() -> None:
     """Part 5: the identification's pixel residuals with the camera held at orbited positions,
     and with the roll or wrist-pitch homing offset held far from its fitted value."""
     from dvrk_gym.fidelity import identify
-    from dvrk_gym.fidelity.instrument_model import PARAMETER_NAMES, PARAMETERS, real_commands, real_pixels
+    from dvrk_gym.fidelity.instrument_model import PARAMETER_NAMES, PARAMETERS, camera_pose, real_commands, real_pixels
 
     X, y = load_paper_phase1()
     commands, pixels = real_commands(X, y), real_pixels(X)
@@ -240,7 +236,6 @@ def camera_fit_along_orbits() -> None:
     fit = identify.fit_parameters(commands[train], pixels[train])
     tape = [PARAMETER_NAMES.index(name) for name in ("marker_x", "marker_y", "marker_z")]
     position = tuple(PARAMETER_NAMES.index(name) for name in ("camera_x", "camera_y", "camera_z"))
-    centre = np.asarray(WORKSPACE_CENTER_M)
 
     def report(label: str, theta: np.ndarray) -> None:
         train_rms = identify.residual_rms(theta, commands[train], pixels[train])
@@ -256,10 +251,10 @@ def camera_fit_along_orbits() -> None:
     report("as identified (camera free)", fit.theta)
     for axis_name, axis in (("x", (1.0, 0.0, 0.0)), ("y", (0.0, 1.0, 0.0))):
         for angle in (-20.0, -10.0, 10.0, 20.0):
-            turn = Rotation.from_rotvec(np.deg2rad(angle) * np.asarray(axis)).as_matrix()
+            moved = orbited_camera(axis, angle, pose=camera_pose(fit.theta)[0])
             theta = fit.theta.copy()
-            theta[0:3] = (Rotation.from_matrix(turn) * Rotation.from_rotvec(theta[0:3])).as_rotvec()
-            theta[3:6] = centre + turn @ (theta[3:6] - centre)
+            theta[0:3] = Rotation.from_matrix(moved[:3, :3]).as_rotvec()
+            theta[3:6] = moved[:3, 3]
             report(f"camera held orbited {angle:+.0f} deg about base {axis_name}", refit_holding(theta, position))
     for name, label, degrees in (
         ("homing_wrist_pitch", "wrist-pitch", -15.0),
@@ -305,13 +300,13 @@ def main() -> None:
         print(f"{yaw:+4.0f}  {real_part} | {s[0]:9d}  {s[1]:6.1f} {s[2]:5.1f} {s[3]:5.1f}  {s[4]:7.1f}")
 
     seen, reasons, angles = render_rows(joints, why=True)
-    near = nearest_yaw_index(data.orientation)
+    near = nearest_yaw_index(data.orientation[:, 0])
     causes = ("clevis", "shaft", "jaw A", "jaw B", "pivot", "faces away", "too thin", "scene")
     # The real robot's share seen, estimated: its kept rows per yaw over the raw rows the same
     # protocol commands there (the simulated raw rows, scaled to the authors' 5256), over the
     # share a detector that misses each image at random keeps ((1 - miss)^2).
     survive = (1.0 - MARKER_DETECTION_NOISE.miss_probability) ** 2
-    real_counts = np.bincount(nearest_yaw_index(real_X[:, 3:6]), minlength=len(PAPER_YAWS_DEG))
+    real_counts = np.bincount(nearest_yaw_index(real_X[:, 3]), minlength=len(PAPER_YAWS_DEG))
     print("\n2. Raw rows whose tape both cameras see without misses, and what hides the others (left camera), per nearest yaw;")
     print(
         "   real: estimated from its kept rows, the raw rows the protocol commands there and the detector's misses"
@@ -329,7 +324,7 @@ def main() -> None:
         print(head + "  ".join(f"{v:10.2f}" for v in shares))
 
     real_angles = real_rows_jaw_angles_deg(real_X, real_y)
-    real_near = nearest_yaw_index(real_X[:, 3:6])
+    real_near = nearest_yaw_index(real_X[:, 3])
     print("\n   The jaws' angle from the line of sight, deg, 5th / 25th / 50th percentile over the kept rows: real (their poses")
     print("   through the identified instrument) | simulated; and the share of kept rows under 15 degrees")
     for k, yaw in enumerate(PAPER_YAWS_DEG):
