@@ -1,22 +1,17 @@
 """benchmarks/fidelity_visibility.py: its instruments are what it says, and its tables add up."""
 
-import importlib.util
 import subprocess
 import sys
-from pathlib import Path
 
 import numpy as np
+from benchmark_scripts import ROOT, load_script, script_path
 
 from dvrk_gym.envs import grid_touch
 from dvrk_gym.sim.endoscope.camera import WORKSPACE_CENTER_M, default_camera_pose
 from dvrk_gym.sim.robot import kinematics as kin
 
-ROOT = Path(__file__).resolve().parents[1]
-SCRIPT = ROOT / "benchmarks" / "fidelity_visibility.py"
-_spec = importlib.util.spec_from_file_location("fidelity_visibility", SCRIPT)
-assert _spec is not None and _spec.loader is not None
-visibility = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(visibility)
+SCRIPT = script_path("fidelity_visibility")
+visibility = load_script("fidelity_visibility")
 
 
 def test_an_orbited_camera_keeps_its_distance_and_turns_by_the_angle():
