@@ -1,6 +1,7 @@
 """Loading a script of benchmarks/ as a module, so tests can call its functions."""
 
 import importlib.util
+import sys
 from pathlib import Path
 from types import ModuleType
 
@@ -13,7 +14,11 @@ def script_path(name: str) -> Path:
 
 
 def load_script(name: str) -> ModuleType:
-    """benchmarks/<name>.py imported as the module ``name`` (its ``main`` is not run)."""
+    """benchmarks/<name>.py imported as the module ``name`` (its ``main`` is not run). The
+    scripts import each other as a script run from benchmarks/ does, so that folder goes on
+    the import path."""
+    if str(ROOT / "benchmarks") not in sys.path:
+        sys.path.insert(0, str(ROOT / "benchmarks"))
     spec = importlib.util.spec_from_file_location(name, script_path(name))
     assert spec is not None and spec.loader is not None
     module = importlib.util.module_from_spec(spec)

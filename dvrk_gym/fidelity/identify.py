@@ -56,6 +56,7 @@ __all__ = [
     "start_camera_pose",
     "fit_parameters",
     "refit",
+    "prior_residuals",
     "residual_rms",
     "bootstrap_sd",
     "model_jitter_mm",
@@ -124,8 +125,12 @@ def _residuals(free_values: np.ndarray, fit: InstrumentFit, commands: np.ndarray
     theta = fit.theta.copy()
     theta[list(fit.free)] = free_values
     scaled = ((predict_pixels(theta, commands) - pixels) / fit.scales).ravel()
-    priors = [theta[i] / PARAMETERS[i].prior_sd for i in fit.free if PARAMETERS[i].prior_sd is not None]
-    return np.concatenate([scaled, np.asarray(priors, dtype=float)])
+    return np.concatenate([scaled, prior_residuals(theta, fit.free)])
+
+
+def prior_residuals(theta: np.ndarray, free: tuple[int, ...]) -> np.ndarray:
+    """The priors' terms of the fit's residuals: each free parameter that has a prior over its sd."""
+    return np.array([theta[i] / PARAMETERS[i].prior_sd for i in free if PARAMETERS[i].prior_sd is not None], dtype=float)
 
 
 def refit(fit: InstrumentFit, commands: np.ndarray, pixels: np.ndarray) -> InstrumentFit:

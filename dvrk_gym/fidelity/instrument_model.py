@@ -34,7 +34,11 @@ __all__ = [
     "pixels_of_camera_points",
     "cable_model",
     "camera_pose",
+    "true_joints",
+    "tape_positions",
     "marker_positions",
+    "camera_points",
+    "wrist_yaw_frames",
     "predict_camera_points",
     "predict_pixels",
     "initial_vector",
@@ -167,7 +171,7 @@ def camera_pose(theta: np.ndarray) -> tuple[np.ndarray, float]:
     return pose, float(np.exp(_value(theta, "log_depth_scale")))
 
 
-def _wrist_yaw_frames(q: np.ndarray) -> np.ndarray:
+def wrist_yaw_frames(q: np.ndarray) -> np.ndarray:
     """Wrist-yaw frames (N, 4, 4) of joints q (N, 6) on the nominal table: link_frames(q)[5], batched."""
     frames = np.tile(np.eye(4), (len(q), 1, 1))
     for i, row in enumerate(kin.PSM_DH):
@@ -184,19 +188,34 @@ def _wrist_yaw_frames(q: np.ndarray) -> np.ndarray:
     return frames
 
 
-def marker_positions(theta: np.ndarray, commands: np.ndarray) -> np.ndarray:
-    """Where the tape really is for each command, in order, (N, 3) base frame, metres."""
+def true_joints(theta: np.ndarray, commands: np.ndarray) -> np.ndarray:
+    """The true joints (N, 6) rad / m behind each command, in order: the cable model of ``theta``
+    run over the commands, so its backlash sees their history."""
     model = cable_model(theta)
-    q_true = np.array([model.true_joints(q) for q in commands])
-    frames = _wrist_yaw_frames(q_true)
+    return np.array([model.true_joints(q) for q in commands])
+
+
+def tape_positions(theta: np.ndarray, q_true: np.ndarray) -> np.ndarray:
+    """Where the tape of ``theta`` is for true joints ``q_true`` (N, 6), (N, 3) base frame, metres."""
+    frames = wrist_yaw_frames(q_true)
     offset = np.array([_value(theta, name) for name in ("marker_x", "marker_y", "marker_z")])
     return frames[:, :3, :3] @ offset + frames[:, :3, 3]
 
 
+def marker_positions(theta: np.ndarray, commands: np.ndarray) -> np.ndarray:
+    """Where the tape really is for each command, in order, (N, 3) base frame, metres."""
+    return tape_positions(theta, true_joints(theta, commands))
+
+
+def camera_points(theta: np.ndarray, positions: np.ndarray) -> np.ndarray:
+    """Base-frame positions (N, 3) m as the authors' triangulation with the camera of ``theta`` gives them, (N, 3) m."""
+    pose, scale = camera_pose(theta)
+    return scale * (positions - pose[:3, 3]) @ pose[:3, :3]
+
+
 def predict_camera_points(theta: np.ndarray, commands: np.ndarray) -> np.ndarray:
     """The camera-frame positions (N, 3) m the authors' triangulation would give, without noise."""
-    pose, scale = camera_pose(theta)
-    return scale * (marker_positions(theta, commands) - pose[:3, 3]) @ pose[:3, :3]
+    return camera_points(theta, marker_positions(theta, commands))
 
 
 def predict_pixels(theta: np.ndarray, commands: np.ndarray) -> np.ndarray:
