@@ -6,6 +6,10 @@ Targets (issue 6; the paper, 15 trials x 8 fragments per cell): DNN+RF success >
 seeds and >= 95 % on raisins with type A rare; DNN alone clearly worse, mostly through A;
 B on seeds only, C on raisins only; about 7.2 s simulated per fragment, the phases in the
 paper's proportions; one 8-fragment trial in at most 30 s wall on one core.
+
+``--what-if-physics-step S`` and ``--what-if-coarse-only`` run the table on a changed
+simulation (``benchmarks/bench_pick_parts.py`` says what each changes and how fast a pick
+then is): what issue 18's 10 picks/s would cost in the table.
 """
 
 from __future__ import annotations
@@ -15,6 +19,7 @@ import time
 from pathlib import Path
 
 import gymnasium as gym
+from bench_pick_parts import what_if_coarse_only, what_if_physics_step
 
 import dvrk_gym  # noqa: F401
 from dvrk_gym import paper
@@ -66,7 +71,17 @@ def main() -> None:
         "--resolution", type=int, nargs=2, default=(1920, 1080), metavar=("W", "H"), help="endoscope image size (default: 1920 1080)"
     )
     parser.add_argument("--rows", action="store_true", help="also print every trial's outcome string")
+    parser.add_argument("--what-if-physics-step", type=float, default=None, metavar="S", help="step the physics every S s (a what-if)")
+    parser.add_argument("--what-if-coarse-only", action="store_true", help="no full-resolution windows (a what-if)")
     args = parser.parse_args()
+    if args.what_if_physics_step is not None:
+        if not 0.0 < args.what_if_physics_step <= 0.05:
+            parser.error("--what-if-physics-step must be in (0, 0.05] s")
+        what_if_physics_step(args.what_if_physics_step)
+        print(f"what-if, not the package's simulation: physics step {args.what_if_physics_step:g} s")
+    if args.what_if_coarse_only:
+        what_if_coarse_only()
+        print("what-if, not the package's simulation: coarse pass only")
     header = f"{'fragment':<14}{'calibrator':<10}{'success':>15}{'A':>5}{'B':>5}{'C':>5}{'s/fragment':>12}{'wall s/trial':>14}{'paper':>26}"
     print(header)
     phase_lines = []

@@ -10,6 +10,13 @@ are also set outside a physics step (``Gripper.place``: the free-space moves). c
 per-call overhead swells the small Python functions of the physics loop about threefold;
 these timers add a few microseconds a call. The parts nest (indented: inside the last part
 one level up), so the shares do not add up. Issue 18's target is 10 picks/s, 100 ms a pick.
+
+Two what-ifs measure how fast a pick would be if the simulation were changed, for a
+decision on which numbers may change (each changes what is simulated or seen, so every
+debridement table with it; neither is an option of the package):
+``--what-if-physics-step S`` steps the physics every S seconds instead of 1/240 (the moves'
+waypoints follow the step), and ``--what-if-coarse-only`` skips the full-resolution window
+around each fragment and takes the coarse pass's centroid (a quarter of the resolution).
 """
 
 from __future__ import annotations
@@ -26,7 +33,7 @@ import dvrk_gym  # noqa: F401
 from dvrk_gym.envs.debridement import DebridementEnv
 from dvrk_gym.envs.picks import PickPrimitive
 from dvrk_gym.sim.endoscope.camera import StereoCamera
-from dvrk_gym.sim.endoscope.fragment_detection import FragmentObserver
+from dvrk_gym.sim.endoscope.fragment_detection import FragmentBlob, FragmentObserver
 from dvrk_gym.sim.physics.client import Physics
 from dvrk_gym.sim.robot.body import PSMBody
 from dvrk_gym.sim.table.grasp import Gripper
@@ -67,12 +74,52 @@ def timed(seconds: dict[str, float], calls: collections.Counter, cls: type, name
     setattr(cls, name, wrapper)
 
 
+def what_if_physics_step(step_s: float) -> None:
+    """Every physics world made after this steps every ``step_s`` seconds (this process only)."""
+    original = Physics.__init__
+
+    def init(self: Physics, gui: bool = False, time_step_s: float = step_s) -> None:
+        original(self, gui=gui, time_step_s=step_s)
+
+    Physics.__init__ = init  # type: ignore[method-assign]
+
+
+def what_if_coarse_only() -> None:
+    """Fragments are located by the coarse pass alone: each takes its coarse blob (centroid,
+    ellipse angle and axes scaled to full resolution) instead of a full-resolution window's
+    (this process only)."""
+    coarse_blobs = FragmentObserver._coarse_blobs
+    found: dict[int, FragmentBlob] = {}
+
+    def remembered(self: FragmentObserver, client: Any, side: str) -> list[tuple[FragmentBlob, np.ndarray]]:
+        blobs = coarse_blobs(self, client, side)
+        for blob, box in blobs:
+            centroid = (blob.centroid + 0.5) * self.scale - 0.5
+            axes = (blob.axes_px[0] * self.scale, blob.axes_px[1] * self.scale)
+            found[id(box)] = FragmentBlob(centroid, blob.angle_rad, axes, blob.area_px * self.scale**2, blob.touches_border)
+        return blobs
+
+    def coarse_blob(self: FragmentObserver, client: Any, side: str, box: np.ndarray, expected: np.ndarray) -> FragmentBlob:
+        return found[id(box)]
+
+    FragmentObserver._coarse_blobs = remembered  # type: ignore[method-assign]
+    FragmentObserver._fine_blob = coarse_blob  # type: ignore[method-assign]
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--trials", type=int, default=4, help="trials of eight random picks (default: %(default)s)")
     parser.add_argument("--resolution", type=int, nargs=2, default=(1920, 1080), metavar=("W", "H"))
     parser.add_argument("--fragment", default="pumpkin_seed", help="pumpkin_seed or raisin (default: %(default)s)")
+    parser.add_argument("--what-if-physics-step", type=float, default=None, metavar="S", help="step the physics every S s (a what-if)")
+    parser.add_argument("--what-if-coarse-only", action="store_true", help="no full-resolution windows (a what-if)")
     args = parser.parse_args()
+    if args.what_if_physics_step is not None:
+        if not 0.0 < args.what_if_physics_step <= 0.05:
+            parser.error("--what-if-physics-step must be in (0, 0.05] s")
+        what_if_physics_step(args.what_if_physics_step)
+    if args.what_if_coarse_only:
+        what_if_coarse_only()
     seconds: dict[str, float] = collections.defaultdict(float)
     calls: collections.Counter = collections.Counter()
     for _, cls, name in PARTS:
@@ -100,7 +147,14 @@ def main() -> None:
         wall += time.perf_counter() - start
     env.close()
     steps = seconds["DebridementEnv._step_episode"]
-    print(f"{picks} picks at {args.resolution[0]} x {args.resolution[1]}: {picks / wall:.2f} picks/s, {1e3 * wall / picks:.0f} ms a pick")
+    what_ifs = []
+    if args.what_if_physics_step is not None:
+        what_ifs.append(f"physics step {args.what_if_physics_step:g} s")
+    if args.what_if_coarse_only:
+        what_ifs.append("coarse pass only")
+    note = f" (what-if, not the package's simulation: {', '.join(what_ifs)})" if what_ifs else ""
+    size = f"{args.resolution[0]} x {args.resolution[1]}"
+    print(f"{picks} picks at {size}: {picks / wall:.2f} picks/s, {1e3 * wall / picks:.0f} ms a pick{note}")
     print(f"{'part (indented: inside the one above it)':<44} {'ms/pick':>8} {'calls':>7} {'share':>6}")
     for depth, cls, name in PARTS:
         label = f"{cls.__name__}.{name}"

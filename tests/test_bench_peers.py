@@ -4,7 +4,13 @@ import subprocess
 import sys
 from pathlib import Path
 
+import gymnasium as gym
+import numpy as np
 import pytest
+from benchmark_scripts import load_script
+
+from dvrk_gym.sim.endoscope.fragment_detection import FragmentObserver
+from dvrk_gym.sim.physics.client import Physics
 
 ROOT = Path(__file__).resolve().parents[1]
 SCRIPT = ROOT / "benchmarks" / "bench_peers.py"
@@ -57,3 +63,32 @@ def test_the_pick_parts_benchmark_times_every_part_of_a_pick():
     for name, (ms, calls, share) in rows.items():
         assert float(ms) > 0.0 and int(calls) > 0 and share.endswith("%"), name
     assert int(rows["Physics.step"][1]) > 100 * int(rows["DebridementEnv._step_episode"][1])  # hundreds of steps a pick
+
+
+def test_the_pick_benchmarks_what_ifs_change_the_simulation_as_they_say(monkeypatch):
+    """bench_pick_parts.py's what-ifs: the physics steps every S seconds; the fragments are
+    located from the coarse pass alone, near where the full-resolution windows put them."""
+    parts = load_script("bench_pick_parts")
+    for name in ("_coarse_blobs", "_fine_blob"):  # restored after the test
+        monkeypatch.setattr(FragmentObserver, name, getattr(FragmentObserver, name))
+    monkeypatch.setattr(Physics, "__init__", Physics.__init__)
+
+    def fragments() -> np.ndarray:
+        env = gym.make("dvrk_gym/Debridement-v0")
+        try:
+            observation, _ = env.reset(seed=3)
+            return observation["fragment_positions"][observation["fragment_seen"] > 0]
+        finally:
+            env.close()
+
+    full = fragments()
+    parts.what_if_coarse_only()
+    coarse = fragments()
+    assert len(coarse) == len(full) > 0
+    assert not np.array_equal(coarse, full) and np.max(np.abs(coarse - full)) < 0.003  # m: a quarter of the pixels
+    parts.what_if_physics_step(1.0 / 120.0)
+    physics = Physics()
+    try:
+        assert physics.time_step_s == 1.0 / 120.0
+    finally:
+        physics.close()
