@@ -32,6 +32,7 @@ import argparse
 
 import gymnasium as gym
 import numpy as np
+from fidelity_visibility import JointRecorder
 
 import dvrk_gym  # noqa: F401  (registers the envs)
 from dvrk_gym import paper
@@ -47,19 +48,6 @@ from dvrk_gym.sim.world_config import WorldConfig
 
 PITCH_BANDS_DEG = np.arange(-20.0, 31.0, 10.0)
 """Edges of the reported pitch's bands in part 1, degrees."""
-
-
-class TrueJointRecorder(gym.Wrapper):
-    """Keeps the true joints (rad, insertion m) after every step of a CalibrationExploration-v0 env."""
-
-    def __init__(self, env: gym.Env) -> None:
-        super().__init__(env)
-        self.joints: list[np.ndarray] = []
-
-    def step(self, action):  # type: ignore[no-untyped-def]
-        result = self.env.step(action)
-        self.joints.append(self.env.unwrapped.world.q_true.copy())
-        return result
 
 
 def row_variables(joints: np.ndarray, world: DvrkWorld) -> np.ndarray:
@@ -139,10 +127,10 @@ def main() -> None:
     if args.trajectories < 1:
         parser.error("--trajectories must be at least 1")
 
-    env = TrueJointRecorder(gym.make("dvrk_gym/CalibrationExploration-v0", max_steps=paper.PHASE1_POSES_PER_TRAJECTORY))
+    env = JointRecorder(gym.make("dvrk_gym/CalibrationExploration-v0", max_steps=paper.PHASE1_POSES_PER_TRAJECTORY))
     try:
         data = collect_phase1(env, PaperExplorationPolicy(seed=args.seed), args.trajectories, seed=args.seed, progress=False)
-        sim_values = row_variables(np.array(env.joints), env.unwrapped.world)
+        sim_values = row_variables(np.array(env.joints)[:, :6], env.unwrapped.world)
     finally:
         env.close()
     real_X, real_y = load_paper_phase1()
