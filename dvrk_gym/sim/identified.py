@@ -82,8 +82,9 @@ robot kept 0.61 (+- 0.05) of the rows the protocol commands there, and 0.86 (+- 
 which is what decides what a rigid tape shows, gives the real robot's kept pitches back; a
 function of the tape's whole orientation in the camera frame does
 (``python benchmarks/fidelity_dropped_rows.py``). What the real detector's misses depended
-on beyond that (the turn of the tape about the line of sight: the light, the occluding
-links, the detector's own filters) is not in the model."""
+on beyond the line of sight (the tape's turn about it: the light, the occluding links, the
+detector's own filters; or the orientation whatever the line of sight, were the identified
+lines of sight off) is not in the model."""
 
 
 WRIST_SETTLE_LAG = 0.25
