@@ -15,8 +15,11 @@ Two what-ifs measure how fast a pick would be if the simulation were changed, fo
 decision on which numbers may change (each changes what is simulated or seen, so every
 debridement table with it; neither is an option of the package):
 ``--what-if-physics-step S`` steps the physics every S seconds instead of 1/240 (the moves'
-waypoints follow the step), and ``--what-if-coarse-only`` skips the full-resolution window
-around each fragment and takes the coarse pass's centroid (a quarter of the resolution).
+waypoints follow the step; what is counted in steps, the fragments' settling before a trial
+and the jaws' still steps, then lasts longer in simulated time), and
+``--what-if-coarse-only`` skips the full-resolution window around each fragment and takes
+the coarse pass's blob (its centroid, ellipse angle and axes scaled to full resolution:
+a quarter of the resolution).
 """
 
 from __future__ import annotations

@@ -2,9 +2,13 @@
 
 import subprocess
 import sys
+from types import SimpleNamespace
 
 import numpy as np
 from benchmark_scripts import ROOT, load_script, script_path
+
+from dvrk_gym.sim.robot import body
+from dvrk_gym.sim.robot import kinematics as kin
 
 SCRIPT = script_path("fidelity_dropped_rows")
 dropped = load_script("fidelity_dropped_rows")
@@ -59,3 +63,27 @@ def test_it_prints_both_parts():
     assert real[-11:] == ["0.13", "0.30", "0.28", "0.20", "0.09", "|", "11.7", "7.6", "-1.0", "-3.0", "-1.1"]  # the authors' rows
     maps = [line for line in lines[second + 3 :] if "(real rows off the map:" in line]
     assert len(maps) == 9 and maps[0].startswith("the reported yaw, pitch, roll")
+
+
+def test_row_variables_read_the_line_of_sight_and_the_tape_frame():
+    q = np.array([0.1, -0.2, 0.13, -2.8, 0.3, -0.4])
+    frame = body.marker_frame(q, kin.PSM_DH)
+    tape = body.marker_position(q, kin.PSM_DH)
+    x_axis, y_axis, z_axis = frame[:3, 0], frame[:3, 1], frame[:3, 2]
+
+    def variables(camera_position: np.ndarray) -> np.ndarray:
+        camera = np.eye(4)
+        camera[:3, 3] = camera_position
+        world = SimpleNamespace(camera=SimpleNamespace(pose=camera), cable=SimpleNamespace(true_dh=kin.PSM_DH))
+        return dropped.row_variables(q[None, :], world)[0]  # type: ignore[arg-type]
+
+    behind = variables(tape - 0.1 * y_axis)  # looking along the jaws from behind them
+    assert abs(behind[0]) < 1e-6
+    beside = variables(tape + 0.1 * x_axis)  # from the tape frame's +x side: 90 deg off the jaws, azimuth 0
+    np.testing.assert_allclose(beside[:2], [90.0, 0.0], atol=1e-6)
+    above = variables(tape + 0.1 * z_axis)  # from its +z side: azimuth 90
+    np.testing.assert_allclose(above[:2], [90.0, 90.0], atol=1e-6)
+    # With the camera's axes the base's, the jaws' direction and the face normal are the frame's y and z.
+    np.testing.assert_allclose(above[2:4], y_axis[:2], atol=1e-12)
+    np.testing.assert_allclose(above[4:6], z_axis[:2], atol=1e-12)
+    np.testing.assert_allclose(above[6:9], np.rad2deg(q[3:6]), atol=1e-12)

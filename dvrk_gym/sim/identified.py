@@ -78,7 +78,7 @@ real robot lost its rows: they fall on the paper's yaws in the simulation's shar
 within a yaw not at random. Near yaw 0 and -45, at pitches of -10 to 0 degrees, the real
 robot kept 0.61 (+- 0.05) of the rows the protocol commands there, and 0.86 (+- 0.13) at yaw
 0 below -10, more than a detector missing each image at random 30.4% of the time can keep
-(0.48); elsewhere far fewer. And no function of the line of sight in the tape's frame,
+(0.48); in others far fewer (0.08 at yaw 45 and 10 to 20 degrees of pitch). And no function of the line of sight in the tape's frame,
 which is what decides what a rigid tape shows, gives the real robot's kept pitches back; a
 function of the tape's whole orientation in the camera frame does
 (``python benchmarks/fidelity_dropped_rows.py``). What the real detector's misses depended
