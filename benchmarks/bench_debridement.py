@@ -19,7 +19,7 @@ import time
 from pathlib import Path
 
 import gymnasium as gym
-from bench_pick_parts import what_if_coarse_only, what_if_physics_step
+from bench_pick_parts import add_what_if_arguments, apply_what_ifs
 
 import dvrk_gym  # noqa: F401
 from dvrk_gym import paper
@@ -71,17 +71,11 @@ def main() -> None:
         "--resolution", type=int, nargs=2, default=(1920, 1080), metavar=("W", "H"), help="endoscope image size (default: 1920 1080)"
     )
     parser.add_argument("--rows", action="store_true", help="also print every trial's outcome string")
-    parser.add_argument("--what-if-physics-step", type=float, default=None, metavar="S", help="step the physics every S s (a what-if)")
-    parser.add_argument("--what-if-coarse-only", action="store_true", help="no full-resolution windows (a what-if)")
+    add_what_if_arguments(parser)
     args = parser.parse_args()
-    if args.what_if_physics_step is not None:
-        if not 0.0 < args.what_if_physics_step <= 0.05:
-            parser.error("--what-if-physics-step must be in (0, 0.05] s")
-        what_if_physics_step(args.what_if_physics_step)
-        print(f"what-if, not the package's simulation: physics step {args.what_if_physics_step:g} s")
-    if args.what_if_coarse_only:
-        what_if_coarse_only()
-        print("what-if, not the package's simulation: coarse pass only")
+    what_if = apply_what_ifs(parser, args)
+    if what_if:
+        print(what_if)
     header = f"{'fragment':<14}{'calibrator':<10}{'success':>15}{'A':>5}{'B':>5}{'C':>5}{'s/fragment':>12}{'wall s/trial':>14}{'paper':>26}"
     print(header)
     phase_lines = []

@@ -109,20 +109,34 @@ def what_if_coarse_only() -> None:
     FragmentObserver._fine_blob = coarse_blob  # type: ignore[method-assign]
 
 
+def add_what_if_arguments(parser: argparse.ArgumentParser) -> None:
+    """The what-ifs' command-line flags (see the module notes)."""
+    parser.add_argument("--what-if-physics-step", type=float, default=None, metavar="S", help="step the physics every S s (a what-if)")
+    parser.add_argument("--what-if-coarse-only", action="store_true", help="no full-resolution windows (a what-if)")
+
+
+def apply_what_ifs(parser: argparse.ArgumentParser, args: argparse.Namespace) -> str:
+    """Apply the what-ifs ``args`` asks for (this process only); what they are, for the output ("" for none)."""
+    what_ifs = []
+    if args.what_if_physics_step is not None:
+        if not 0.0 < args.what_if_physics_step <= 0.05:
+            parser.error("--what-if-physics-step must be in (0, 0.05] s")
+        what_if_physics_step(args.what_if_physics_step)
+        what_ifs.append(f"physics step {args.what_if_physics_step:g} s")
+    if args.what_if_coarse_only:
+        what_if_coarse_only()
+        what_ifs.append("coarse pass only")
+    return f"what-if, not the package's simulation: {', '.join(what_ifs)}" if what_ifs else ""
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--trials", type=int, default=4, help="trials of eight random picks (default: %(default)s)")
     parser.add_argument("--resolution", type=int, nargs=2, default=(1920, 1080), metavar=("W", "H"))
     parser.add_argument("--fragment", default="pumpkin_seed", help="pumpkin_seed or raisin (default: %(default)s)")
-    parser.add_argument("--what-if-physics-step", type=float, default=None, metavar="S", help="step the physics every S s (a what-if)")
-    parser.add_argument("--what-if-coarse-only", action="store_true", help="no full-resolution windows (a what-if)")
+    add_what_if_arguments(parser)
     args = parser.parse_args()
-    if args.what_if_physics_step is not None:
-        if not 0.0 < args.what_if_physics_step <= 0.05:
-            parser.error("--what-if-physics-step must be in (0, 0.05] s")
-        what_if_physics_step(args.what_if_physics_step)
-    if args.what_if_coarse_only:
-        what_if_coarse_only()
+    what_if = apply_what_ifs(parser, args)
     seconds: dict[str, float] = collections.defaultdict(float)
     calls: collections.Counter = collections.Counter()
     for _, cls, name in PARTS:
@@ -150,12 +164,7 @@ def main() -> None:
         wall += time.perf_counter() - start
     env.close()
     steps = seconds["DebridementEnv._step_episode"]
-    what_ifs = []
-    if args.what_if_physics_step is not None:
-        what_ifs.append(f"physics step {args.what_if_physics_step:g} s")
-    if args.what_if_coarse_only:
-        what_ifs.append("coarse pass only")
-    note = f" (what-if, not the package's simulation: {', '.join(what_ifs)})" if what_ifs else ""
+    note = f" ({what_if})" if what_if else ""
     size = f"{args.resolution[0]} x {args.resolution[1]}"
     print(f"{picks} picks at {size}: {picks / wall:.2f} picks/s, {1e3 * wall / picks:.0f} ms a pick{note}")
     print(f"{'part (indented: inside the one above it)':<44} {'ms/pick':>8} {'calls':>7} {'share':>6}")

@@ -32,14 +32,13 @@ import argparse
 
 import gymnasium as gym
 import numpy as np
-from fidelity_visibility import JointRecorder
+from fidelity_visibility import JointRecorder, real_rows_true_joints
 
 import dvrk_gym  # noqa: F401  (registers the envs)
 from dvrk_gym import paper
 from dvrk_gym.calibration.datasets import load_paper_phase1
 from dvrk_gym.calibration.models.features import nearest_yaw_index
 from dvrk_gym.calibration.phase1 import PaperExplorationPolicy, collect_phase1
-from dvrk_gym.fidelity.instrument_model import real_commands
 from dvrk_gym.fidelity.statistics import PAPER_YAWS_DEG
 from dvrk_gym.sim.identified import MARKER_DETECTION_NOISE
 from dvrk_gym.sim.robot import body
@@ -77,8 +76,7 @@ def real_variables(real_X: np.ndarray, real_y: np.ndarray) -> np.ndarray:
     """:func:`row_variables` of the real rows: their commands through the identified cables, in order."""
     world = DvrkWorld(WorldConfig())
     try:
-        joints = np.array([world.cable.true_joints(command) for command in real_commands(real_X, real_y)])
-        return row_variables(joints, world)
+        return row_variables(real_rows_true_joints(world, real_X, real_y), world)
     finally:
         world.close()
 

@@ -53,6 +53,7 @@ from dvrk_gym import paper
 from dvrk_gym.calibration.datasets import load_paper_phase1
 from dvrk_gym.calibration.models.features import nearest_yaw_index
 from dvrk_gym.calibration.phase1 import PaperExplorationPolicy, collect_phase1
+from dvrk_gym.fidelity.instrument_model import real_commands
 from dvrk_gym.fidelity.statistics import PAPER_YAWS_DEG
 from dvrk_gym.sim.endoscope.camera import WORKSPACE_CENTER_M, default_camera_pose
 from dvrk_gym.sim.identified import MARKER_DETECTION_NOISE
@@ -140,17 +141,21 @@ def jaws_from_line_of_sight_deg(world: DvrkWorld) -> float:
     return float(np.rad2deg(np.arccos(np.clip(cosine, -1.0, 1.0))))
 
 
-def real_rows_jaw_angles_deg(real_X: np.ndarray, real_y: np.ndarray) -> np.ndarray:
-    """The jaws' angle from the line of sight (degrees) for each real row: its reported pose
-    through the nominal inverse kinematics and the identified instrument's cables, in the
-    rows' order (as the identification runs them), seen by the identified camera."""
-    from dvrk_gym.fidelity.instrument_model import real_commands
+def real_rows_true_joints(world: DvrkWorld, real_X: np.ndarray, real_y: np.ndarray) -> np.ndarray:
+    """The true joints (N, 6) of the real rows: their reported poses through the nominal inverse
+    kinematics and ``world``'s cables (the identified instrument's in a fresh world), in the
+    rows' order, as the identification runs them."""
+    return np.array([world.cable.true_joints(command) for command in real_commands(real_X, real_y)])
 
+
+def real_rows_jaw_angles_deg(real_X: np.ndarray, real_y: np.ndarray) -> np.ndarray:
+    """The jaws' angle from the line of sight (degrees) for each real row (:func:`real_rows_true_joints`),
+    seen by the identified camera."""
     world = DvrkWorld(WorldConfig())
     try:
         angles = []
-        for command in real_commands(real_X, real_y):
-            world.q_true = world.cable.true_joints(command)
+        for q in real_rows_true_joints(world, real_X, real_y):
+            world.q_true = q
             angles.append(jaws_from_line_of_sight_deg(world))
     finally:
         world.close()

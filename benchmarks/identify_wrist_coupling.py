@@ -44,11 +44,17 @@ TAPE = slice(model.PARAMETER_NAMES.index("marker_x"), model.PARAMETER_NAMES.inde
 """The tape's centre (x, y, z) in a parameter vector."""
 
 
+def coupled(joints: np.ndarray, coupling: float) -> np.ndarray:
+    """A copy of ``joints`` (N, >= 6) whose wrist yaw gains ``coupling`` times the wrist pitch (rad per rad)."""
+    out = np.array(joints, dtype=float)
+    out[:, WRIST_YAW] += coupling * out[:, WRIST_PITCH]
+    return out
+
+
 def coupled_pixels(theta: np.ndarray, coupling: float, commands: np.ndarray) -> np.ndarray:
     """Left (u, v) and disparity (N, 3) px of the instrument ``theta`` whose true wrist yaw
     gains ``coupling`` times its true wrist pitch (rad per rad)."""
-    q_true = model.true_joints(theta, commands)
-    q_true[:, WRIST_YAW] += coupling * q_true[:, WRIST_PITCH]
+    q_true = coupled(model.true_joints(theta, commands), coupling)
     return model.pixels_of_camera_points(model.camera_points(theta, model.tape_positions(theta, q_true)))
 
 
@@ -112,16 +118,14 @@ def main() -> None:
         env.close()
     rows = np.arange(0, data.n_raw, args.every)
     joints = np.array(env.joints)[rows]
-    coupled = joints.copy()
-    coupled[:, WRIST_YAW] += coupling * coupled[:, WRIST_PITCH]
     tip_tape_m = kin.JAW_LENGTH_M - body.MARKER.half_extents_m[1]
     real_shares, real_medians = shares_and_medians(real_X[:, 3:6])
     print(f"\n2. Seen rows (one raw row in {args.every}, no misses) per nearest yaw -90 .. 90: share of the seen rows | median pitch (deg)")
     print(f"{'real (kept rows)':44s} {' '.join(f'{v:.2f}' for v in real_shares)} | {' '.join(f'{v:6.1f}' for v in real_medians)}")
     variants = (
         ("as identified", joints, None),
-        (f"coupling {coupling:+.3f}", coupled, None),
-        (f"coupling {coupling:+.3f}, tape at {tip_tape_m * 1e3:.1f} mm", coupled, tip_tape_m),
+        (f"coupling {coupling:+.3f}", coupled(joints, coupling), None),
+        (f"coupling {coupling:+.3f}, tape at {tip_tape_m * 1e3:.1f} mm", coupled(joints, coupling), tip_tape_m),
     )
     for label, these, tape_y in variants:
         with tape_at(tape_y) if tape_y is not None else contextlib.nullcontext():

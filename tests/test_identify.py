@@ -20,12 +20,12 @@ from dvrk_gym.fidelity.identify import (
 )
 from dvrk_gym.fidelity.instrument_model import (
     PARAMETER_NAMES,
+    _wrist_yaw_frames,
     cable_model,
     initial_vector,
     predict_camera_points,
     real_commands,
     real_pixels,
-    wrist_yaw_frames,
 )
 from dvrk_gym.sim import identified
 from dvrk_gym.sim.endoscope.noise import DetectionNoise
@@ -96,7 +96,7 @@ def test_detector_noise_fit_recovers_the_noise_that_made_a_histogram():
 
 def test_batched_frames_are_the_kinematics_frames(rows):
     _, _, commands = rows
-    np.testing.assert_allclose(wrist_yaw_frames(commands[:20]), [kin.link_frames(q)[5] for q in commands[:20]], atol=1e-12)
+    np.testing.assert_allclose(_wrist_yaw_frames(commands[:20]), [kin.link_frames(q)[5] for q in commands[:20]], atol=1e-12)
 
 
 def test_the_cable_model_of_a_vector_is_the_simulators_identified_one(rows):

@@ -38,7 +38,6 @@ __all__ = [
     "tape_positions",
     "marker_positions",
     "camera_points",
-    "wrist_yaw_frames",
     "predict_camera_points",
     "predict_pixels",
     "initial_vector",
@@ -171,7 +170,7 @@ def camera_pose(theta: np.ndarray) -> tuple[np.ndarray, float]:
     return pose, float(np.exp(_value(theta, "log_depth_scale")))
 
 
-def wrist_yaw_frames(q: np.ndarray) -> np.ndarray:
+def _wrist_yaw_frames(q: np.ndarray) -> np.ndarray:
     """Wrist-yaw frames (N, 4, 4) of joints q (N, 6) on the nominal table: link_frames(q)[5], batched."""
     frames = np.tile(np.eye(4), (len(q), 1, 1))
     for i, row in enumerate(kin.PSM_DH):
@@ -197,7 +196,7 @@ def true_joints(theta: np.ndarray, commands: np.ndarray) -> np.ndarray:
 
 def tape_positions(theta: np.ndarray, q_true: np.ndarray) -> np.ndarray:
     """Where the tape of ``theta`` is for true joints ``q_true`` (N, 6), (N, 3) base frame, metres."""
-    frames = wrist_yaw_frames(q_true)
+    frames = _wrist_yaw_frames(q_true)
     offset = np.array([_value(theta, name) for name in ("marker_x", "marker_y", "marker_z")])
     return frames[:, :3, :3] @ offset + frames[:, :3, 3]
 
