@@ -1,15 +1,16 @@
-"""The authors' rigid body, fitted their way: 35 circles touched by hand at one yaw.
+"""A rigid body fitted as the authors first fitted theirs: 35 circles touched by hand at one yaw.
 
-The paper's RBT misses by 4.55 mm (51.45 px). A rigid transform per yaw fitted to the real
-Phase I rows leaves 2.45 mm, and so does the simulator's RBT, fitted the same way (README,
-*The paper's calibration table*). The authors' code fitted its rigid body otherwise
-(``scripts/mapping.py --collection manual`` of :data:`dvrk_gym.paper.AUTHORS_CODE`): one
-transform from the camera positions of the 35 grid circles to the robot's reported
-positions with the jaws pushed onto them by hand. This benchmark fits that transform in
-simulation, from the Phase II rows of a calibration run at one yaw (the robot pushed onto
-each circle, by the simulated person), and prints the paper's calibration table for it,
-beside the per-yaw RBT fitted to the same run's Phase I rows and a per-yaw RBT on all five
-yaws of Phase II (a hand-placed fit at every yaw). About a minute after the calibration:
+Before their Phase I rows existed, the authors mapped camera to robot with one rigid
+transform from the camera positions of the grid's circles to the robot's reported positions
+with its jaws pushed onto them by hand (``scripts/mapping.py --collection manual`` of
+:data:`dvrk_gym.paper.AUTHORS_CODE`; their versions 00-12). The paper's table did not use it:
+its rigid body is the per-yaw one fitted to the Phase I rows, as the package's RBT is
+(``click_and_crop_v3.py --use_rigid_body`` loads ``auto_params_matrices_v01``; see
+``benchmarks/fidelity_table_runs.py`` for those runs). This benchmark fits the hand-placed
+transform in simulation, from the Phase II rows of a calibration run at one yaw (the robot
+pushed onto each circle by the simulated person), and prints the paper's calibration table
+for it, beside the per-yaw RBT fitted to the same run's Phase I rows and a per-yaw RBT on all
+five yaws of Phase II (a hand-placed fit at every yaw). About a minute after the calibration:
 
     dvrk-gym calibrate --out runs/cal
     python benchmarks/bench_manual_rbt.py --calibration runs/cal [--yaw 0]

@@ -52,6 +52,7 @@ _EXPORTS = {
     "run_calibration": "calibration.pipeline",
     "calibration_table": "calibration.benchmark",
     "load_paper_phase1": "calibration.datasets",
+    "load_paper_table_runs": "calibration.datasets",
     # how close a simulated instrument is to the real robot
     "FidelityStatistics": "fidelity.statistics",
     "fidelity_statistics": "fidelity.statistics",
@@ -78,7 +79,7 @@ ENV_IDS: tuple[str, ...] = tuple(ENV_ENTRY_POINTS)
 
 if TYPE_CHECKING:  # what type checkers and editors see; at run time the names load lazily
     from dvrk_gym.calibration.benchmark import calibration_table
-    from dvrk_gym.calibration.datasets import load_paper_phase1
+    from dvrk_gym.calibration.datasets import load_paper_phase1, load_paper_table_runs
     from dvrk_gym.calibration.loading import load_calibrator
     from dvrk_gym.calibration.models.catalog import make_calibrator
     from dvrk_gym.calibration.models.dnn import DNNCalibrator

@@ -99,6 +99,36 @@ CALIBRATION_MEAN_MM: dict[str, float] = {"RBT": 4.55, "DNN": 2.14, "DNN+RF": 1.0
 PX_PER_MM = 11.3
 """The paper's scale of the left image over the workspace, pixels per millimetre (focal
 length 2144 px x 1 mm / 190 mm)."""
+TABLE_Z_BAND_M = (-0.180, -0.168)
+"""The authors' code, ``scripts/click_and_crop_v3.py`` (which measured every cell of the
+table): the band of the robot's frame a prediction's height is clipped into before the move,
+metres. The clip came in during the rigid body's runs (its author's note at version 43: "I
+wised up and put in minimum and maximum commands for the z-coordinate"); which runs it
+clipped: :data:`TABLE_CLIPPED`."""
+TABLE_CLIPPED: dict[str, tuple[bool, ...]] = {
+    "RBT": (True, True, False, False, False, True),
+    "DNN": (False,) * 6,
+    "DNN+RF": (False,) * 6,
+}
+"""Whether each run of the table clipped its heights into :data:`TABLE_Z_BAND_M`
+(:data:`CALIBRATION_SETTINGS` order): the rigid body's versions 43-45 (yaw -45, -90, random);
+not its first three, nor the network's runs five days before (their records send heights
+above the band)."""
+TABLE_PAPER_Z_M = -0.1677
+"""The authors' code, ``config/mapping_results/manual_params_matrices_v00.txt``: the robot's
+reported height with its jaws pushed onto the grid's circles (mean of 36), metres; the top of
+:data:`TABLE_Z_BAND_M` lies 0.3 mm under it."""
+TABLE_LIFT_MM: dict[str, tuple[float, ...]] = {
+    "RBT": (8.0, 9.0, 8.0, 6.0, 4.0, 8.0),
+    "DNN": (0.0, 0.0, 0.0, 0.0, 0.0, 0.0),
+    "DNN+RF": (0.0, 0.0, 0.0, 0.0, 0.0, 0.0),
+}
+"""The authors' code, ``images/visuals/README.md`` (the runs whose means are the table's, within 0.1 px:
+the network's versions 20-25, with the forests 30-35, the rigid body's 40-45): the
+``--z_offset`` each run added to the clipped height (:data:`CALIBRATION_SETTINGS` order), mm.
+The rigid body's runs were lifted 4 to 9 mm, their author noting that height was a main
+reason for its low performance; the network's example call (``click_and_crop_v3.py``,
+version 23) gives 0, and its other runs record no offset (the script's default is 0)."""
 
 # ---------------------------------------------------------------------------- debridement
 DEBRIDEMENT_TRIALS = 15
@@ -193,3 +223,13 @@ REAL_PHASE1_Y_RANGE_M = (0.011, 0.074)
 REAL_PHASE1_Z_RANGE_M = (-0.170, -0.158)
 """The span of the real data's reported base positions (bx, by, bz), metres: where the
 paper's workspace lay (base frame, origin at the remote centre of motion)."""
+REAL_TABLE_TOUCHES = 630
+"""Touches in the authors' records of their calibration table's runs: 3 methods x 6 settings x
+35 circles (``config/calibration_results/data_vXY.p``, versions 20-25, 30-35, 40-45)."""
+REAL_TABLE_PUSHES = 350
+"""Phase II records of the same days: 2 rounds x 5 yaws x 35 circles, the robot's reported pose
+before and after a person pushed its jaws onto a circle (``data_human_guided_vXY.p``, versions
+20-24 and 40-44)."""
+REAL_TABLE_PACKAGE_DIR = ("data", "seita2018_table_runs")
+"""Where the package keeps its copy of those records, converted to one npz, relative to
+``dvrk_gym`` (same licence: :data:`REAL_PHASE1_LICENCE`)."""

@@ -19,6 +19,7 @@ __all__, __getattr__, __dir__ = lazy_exports(  # PEP 562: each name imported fro
         "load_calibrator": "loading",
         "CalibratedPolicy": "policy",
         "load_paper_phase1": "datasets",
+        "load_paper_table_runs": "datasets",
         "DNNCalibrator": "models.dnn",
         "encode_euler": "models.features",
         "encode_quaternion": "models.features",

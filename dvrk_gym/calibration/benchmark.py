@@ -18,7 +18,7 @@ import numpy as np
 from dvrk_gym import paper
 from dvrk_gym.calibration.policy import CalibratedPolicy, Calibrator
 from dvrk_gym.envs.grid_touch import N_CIRCLES
-from dvrk_gym.evaluation.episodes import run_episodes, summarize
+from dvrk_gym.evaluation.episodes import EpisodeResult, run_episodes, summarize
 from dvrk_gym.sim.physics.scene import GRID_COLUMNS, GRID_ROWS
 from dvrk_gym.utils.atomic import atomic_savefig, atomic_write_json
 
@@ -52,15 +52,16 @@ class CircleErrors:
     yaw: np.ndarray
 
 
-def touch_grid(env: gym.Env, policy: Any, yaw: float | str, seed: int = 0, progress: bool = False) -> CircleErrors:
-    """Touch all 35 circles once with ``policy`` at one yaw setting.
+def touch_grid_episodes(env: gym.Env, policy: Any, yaw: float | str, seed: int = 0, progress: bool = False) -> list[EpisodeResult]:
+    """Touch all 35 circles once with ``policy`` at one yaw setting: the 35 episodes, each with
+    its final info (GridTouch-v0's: the true tip and circle positions, m, and the errors).
 
     The pass starts at home with the cables relaxed (its first touch is a seeded reset with
     ``relax``), so a cell of the table does not depend on which passes ran before it in the
     same env; from one touch to the next the arm lifts and goes on, its cables keeping their
     history (hysteresis), as on the real robot.
     """
-    results = run_episodes(
+    return run_episodes(
         env,
         policy,
         N_CIRCLES,
@@ -69,6 +70,11 @@ def touch_grid(env: gym.Env, policy: Any, yaw: float | str, seed: int = 0, progr
         progress=progress,
         description=f"touch grid ({yaw})",
     )
+
+
+def touch_grid(env: gym.Env, policy: Any, yaw: float | str, seed: int = 0, progress: bool = False) -> CircleErrors:
+    """The errors of :func:`touch_grid_episodes` (the same pass), per circle."""
+    results = touch_grid_episodes(env, policy, yaw, seed=seed, progress=progress)
     pick = lambda key: np.array([r.metrics.get(key, np.nan) for r in results])  # noqa: E731
     return CircleErrors(pixel=pick("pixel_error"), mm=pick("mm_error"), yaw=pick("target_yaw"))
 

@@ -1,0 +1,218 @@
+"""The paper's calibration table run by run: the real robot's records beside the simulated robot's touches.
+
+The authors recorded every touch of the runs that measured the paper's table, and the Phase II
+pushes of the same days (:func:`dvrk_gym.calibration.datasets.load_paper_table_runs`). The
+rigid body's runs did two things ``dvrk-gym evaluate`` does not: they were lifted 4 to 9 mm
+(:data:`~dvrk_gym.paper.TABLE_LIFT_MM`; their author: height was a main reason for its low
+performance), and the last three first clipped the predicted height into a band of the
+robot's frame whose top lies 0.3 mm under the paper (:data:`~dvrk_gym.paper.TABLE_Z_BAND_M`,
+:data:`~dvrk_gym.paper.TABLE_CLIPPED`). The network's runs sent its predictions as they were.
+The robot was sent there, and a person drew a box around the end effector in the left image;
+the table's error is the distance from the circle's centre to the box's.
+
+Per method and setting, over the 35 circles, for the real robot and for the simulated one (a
+calibration run's calibrators on GridTouch-v0 with ``dvrk-gym evaluate``'s seeds, touched
+the authors' way: the same lifts, and the band, where they clipped, carried over by where
+each robot reports its jaws pushed onto the circles; for the network, the authors' way is
+``dvrk-gym evaluate``'s):
+
+- the table's error, px (the simulated one also as ``dvrk-gym evaluate`` touches);
+- the prediction's height (clipped, in a run that clipped: the records keep no other) over
+  the jaws pushed onto the paper, mm (median): over a plane
+  through the reported positions of the Phase II pushes at that yaw (the real robot's from
+  the same day as the run, :data:`PUSH_ROUND`; the simulated robot's from where the simulated
+  person's push leaves the reported jaws at each touch, GridTouch's ``human_correction``);
+- the sent height over that plane, mm (median): how high the jaws hung, or how far under the
+  paper they were sent;
+- the share of touches sent under the plane.
+
+The random setting has no real pushes. A minute after the calibration:
+
+    dvrk-gym calibrate --out runs/cal
+    python benchmarks/fidelity_table_runs.py --calibration runs/cal
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from dvrk_gym import paper
+from dvrk_gym.calibration.benchmark import BENCHMARK_SEED, YAW_SETTINGS, touch_grid_episodes
+from dvrk_gym.calibration.datasets import PaperTableRuns, load_paper_table_runs
+from dvrk_gym.calibration.loading import load_calibrator
+from dvrk_gym.calibration.phase2 import Phase2Data
+from dvrk_gym.calibration.pipeline import PipelineConfig, read_pipeline_settings
+from dvrk_gym.calibration.policy import CalibratedPolicy
+
+FIXED_YAWS = 5
+"""The table's first five settings are the fixed yaws, which have Phase II pushes."""
+STATISTICS = (
+    "table error, px",
+    "prediction over the pushed jaws, mm",
+    "sent over the pushed jaws, mm",
+    "sent under the pushed jaws, share",
+)
+PUSH_ROUND: dict[str, int] = {"DNN": 0, "DNN+RF": 0, "RBT": 1}
+"""The round of Phase II pushes made on the day of each method's runs (the network's and
+DNN+RF's on 1 September 2017, the rigid body's on 6 September): the reported height of the
+jaws on the paper moved by about 1.2 mm between the two."""
+
+
+class AuthorsTouch:
+    """A calibrated policy whose height is clipped into a band (or not) and then lifted, as the
+    authors ran it; it keeps each prediction (m) and what was sent (m).
+
+    Args:
+        policy: the calibrated policy, observation -> (bx, by, bz, yaw) in m and rad.
+        band_m: (lowest, highest) height the prediction is clipped into, base frame, metres;
+            None: not clipped.
+        lift_m: what is added to the clipped height, metres.
+    """
+
+    def __init__(self, policy: CalibratedPolicy, band_m: tuple[float, float] | None, lift_m: float) -> None:
+        if band_m is not None and not band_m[0] < band_m[1]:
+            raise ValueError(f"band_m must be (lowest, highest) with lowest < highest, got {band_m}")
+        self.policy, self.band_m, self.lift_m = policy, band_m, float(lift_m)
+        self.predicted: list[np.ndarray] = []
+        self.sent: list[np.ndarray] = []
+
+    def __call__(self, observation: Any) -> np.ndarray:
+        action = self.policy(observation)
+        self.predicted.append(action[:3].astype(np.float64))
+        if self.band_m is not None or self.lift_m != 0.0:
+            action = action.copy()
+            height = float(action[2]) if self.band_m is None else float(np.clip(action[2], *self.band_m))
+            action[2] = np.float32(height + self.lift_m)
+        self.sent.append(action[:3].astype(np.float64))
+        return action
+
+
+def simulated_band(pushed_heights_m: np.ndarray) -> tuple[float, float]:
+    """The authors' band in the simulated robot's frame, metres: moved by how far the simulated
+    robot's mean reported height with its jaws pushed onto the circles lies from theirs."""
+    shift = float(np.mean(pushed_heights_m)) - paper.TABLE_PAPER_Z_M
+    return paper.TABLE_Z_BAND_M[0] + shift, paper.TABLE_Z_BAND_M[1] + shift
+
+
+def over_plane(points: np.ndarray, pushed: np.ndarray) -> np.ndarray:
+    """Heights (n,) of ``points`` (n, 3) m over the least-squares plane through ``pushed`` (m, 3) m, metres."""
+    design = np.c_[pushed[:, :2], np.ones(len(pushed))]
+    plane, *_ = np.linalg.lstsq(design, pushed[:, 2], rcond=None)
+    return points[:, 2] - np.c_[points[:, :2], np.ones(len(points))] @ plane
+
+
+def statistics(pixels: np.ndarray, predicted: np.ndarray, sent: np.ndarray, pushed: np.ndarray | None) -> tuple[float, ...]:
+    """The statistics (:data:`STATISTICS`) of one setting's touches: errors (n,) px; predicted and
+    sent positions (n, 3) m; the pushed jaws' positions (m, 3) m, or None (NaN heights)."""
+    if pushed is None:
+        return (float(np.mean(pixels)), np.nan, np.nan, np.nan)
+    sent_over = over_plane(sent, pushed)
+    return (
+        float(np.mean(pixels)),
+        1e3 * float(np.median(over_plane(predicted, pushed))),
+        1e3 * float(np.median(sent_over)),
+        float(np.mean(sent_over < 0.0)),
+    )
+
+
+def real_pushed_jaws(runs: PaperTableRuns, label: str, setting: int) -> np.ndarray:
+    """The real Phase II pushes (n, 3) m at a fixed-yaw setting's yaw, from the day of the method's runs."""
+    same = np.isclose(np.rad2deg(runs.push_yaw), paper.PHASE2_YAWS_DEG[setting]) & (runs.push_round == PUSH_ROUND[label])
+    return runs.push_after[same]
+
+
+def sliding(runs: PaperTableRuns, label: str) -> list[float]:
+    """Per fixed yaw, the correlation over a real run's touches between where the end effector
+    landed right of the circle in the image (px) and how high it was sent over the pushed jaws."""
+    correlations = []
+    for setting in range(FIXED_YAWS):
+        mine = (runs.method == label) & (runs.setting == setting)
+        right = runs.end_effector_px[mine, 0] - runs.circle_px[mine, 0]
+        correlations.append(float(np.corrcoef(right, over_plane(runs.sent[mine], real_pushed_jaws(runs, label, setting)))[0, 1]))
+    return correlations
+
+
+def real_table(runs: PaperTableRuns) -> dict[str, list[tuple[float, ...]]]:
+    """Per method, per setting, the statistics of the real runs (NaN heights for the random setting)."""
+    table: dict[str, list[tuple[float, ...]]] = {}
+    for label in paper.METHOD_LABELS.values():
+        table[label] = []
+        for setting, lift in enumerate(paper.TABLE_LIFT_MM[label]):
+            mine = (runs.method == label) & (runs.setting == setting)
+            sent = runs.sent[mine]
+            pushed = real_pushed_jaws(runs, label, setting) if setting < FIXED_YAWS else None
+            table[label].append(statistics(runs.pixel_error[mine], sent - [0.0, 0.0, 1e-3 * lift], sent, pushed))
+    return table
+
+
+def simulated_table(
+    env: gym.Env, policy: CalibratedPolicy, protocol: list[tuple[tuple[float, float] | None, float]]
+) -> list[tuple[float, ...]]:
+    """Per setting, the statistics of the simulated touches sent by ``protocol``: per setting, the
+    band the height is clipped into (None: not clipped) and the lift (m)."""
+    rows = []
+    for k, ((_, yaw), (band, lift)) in enumerate(zip(YAW_SETTINGS, protocol, strict=True)):
+        touch = AuthorsTouch(policy, band, lift)
+        episodes = touch_grid_episodes(env, touch, yaw, seed=BENCHMARK_SEED + k)
+        pixels = np.array([e.metrics["pixel_error"] for e in episodes])
+        pushed = np.array([e.final_info["reported_position"] + e.final_info["human_correction"] for e in episodes])
+        rows.append(statistics(pixels, np.array(touch.predicted), np.array(touch.sent), pushed))
+    return rows
+
+
+def print_rows(name: str, rows: dict[str, list[tuple[float, ...]]]) -> None:
+    """Print each statistic's rows (who: one value per setting) and their mean: over the six
+    settings for the error, as the paper averages, and over the fixed yaws for the rest."""
+    print(name)
+    for i, statistic in enumerate(STATISTICS):
+        form = "{:>9.2f}" if statistic.endswith("share") else "{:>9.1f}"
+        for who, cells in rows.items():
+            values = np.array([cell[i] for cell in cells])
+            text = "".join(form.format(v) if np.isfinite(v) else f"{'-':>9s}" for v in values)
+            mean = np.mean(values) if i == 0 else np.mean(values[:FIXED_YAWS])
+            print(f"  {statistic if who == next(iter(rows)) else '':<38s}{who:<22s}{text}{form.format(mean)}")
+
+
+if __name__ == "__main__":
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--calibration", type=Path, required=True, help="a folder of dvrk-gym calibrate")
+    args = parser.parse_args()
+    settings = read_pipeline_settings(args.calibration)
+    if settings is None:
+        parser.error(f"{args.calibration} is not a calibration run folder (no settings stamp); make one with dvrk-gym calibrate --out")
+    config = PipelineConfig.from_settings(settings)
+    runs = load_paper_table_runs()
+    phase2 = Phase2Data.load(args.calibration / "phase2.npz")
+    band = simulated_band(phase2.corrected[:, 2])
+    print(
+        f"the authors' band {1e3 * paper.TABLE_Z_BAND_M[0]:.1f} to {1e3 * paper.TABLE_Z_BAND_M[1]:.1f} mm (their pushed jaws at "
+        f"{1e3 * paper.TABLE_PAPER_Z_M:.1f}); simulated {1e3 * band[0]:.1f} to {1e3 * band[1]:.1f} mm (pushed jaws at "
+        f"{1e3 * float(np.mean(phase2.corrected[:, 2])):.1f}, mean of {len(phase2.corrected)} Phase II rows)"
+    )
+    print(f"instrument: {config.env_kwargs()}")
+    env = gym.make("dvrk_gym/GridTouch-v0", **config.env_kwargs())
+    real = real_table(runs)
+    print(
+        "real RBT: correlation of how far right of the circle the end effector landed (px) with how high it was sent "
+        "(yaw -90 to 90): " + ", ".join(f"{c:+.2f}" for c in sliding(runs, "RBT"))
+    )
+    print(f"  {'':<60s}" + "".join(f"{label:>9s}" for label, _ in YAW_SETTINGS) + f"{'mean':>9s}")
+    for name, label in paper.METHOD_LABELS.items():
+        policy = CalibratedPolicy(load_calibrator(args.calibration, name)[0])
+        lifts, clipped = paper.TABLE_LIFT_MM[label], paper.TABLE_CLIPPED[label]
+        authors = [(band if clip else None, 1e-3 * lift) for lift, clip in zip(lifts, clipped, strict=True)]
+        as_evaluate = [(None, 0.0)] * len(YAW_SETTINGS)
+        rows = {"real": real[label], "sim, the authors' way": simulated_table(env, policy, authors)}
+        if authors != as_evaluate:
+            rows["sim, as evaluate"] = simulated_table(env, policy, as_evaluate)
+        clips = (
+            "clipped " + ", ".join(s for s, c in zip(paper.CALIBRATION_SETTINGS, clipped, strict=True) if c)
+            if any(clipped)
+            else "not clipped"
+        )
+        print_rows(f"{label} (lifts {', '.join(f'{v:.0f}' for v in lifts)} mm; {clips})", rows)
