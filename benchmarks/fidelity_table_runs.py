@@ -54,8 +54,10 @@ import numpy as np
 
 from dvrk_gym import paper
 from dvrk_gym.calibration.benchmark import BENCHMARK_SEED, YAW_SETTINGS, touch_grid_episodes
-from dvrk_gym.calibration.datasets import PaperTableRuns, load_paper_table_runs
+from dvrk_gym.calibration.datasets import PaperTableRuns, load_paper_phase1, load_paper_table_runs
 from dvrk_gym.calibration.loading import load_calibrator
+from dvrk_gym.calibration.models.features import nearest_yaw_index
+from dvrk_gym.calibration.phase1 import Phase1Data
 from dvrk_gym.calibration.phase2 import Phase2Data
 from dvrk_gym.calibration.pipeline import PipelineConfig, read_pipeline_settings, run_calibration
 from dvrk_gym.calibration.policy import CalibratedPolicy
@@ -169,6 +171,18 @@ def sliding(runs: PaperTableRuns, label: str) -> list[float]:
     return correlations
 
 
+def rows_over_pushes(positions: np.ndarray, yaws: np.ndarray, pushed: np.ndarray, pushed_yaws: np.ndarray) -> np.ndarray:
+    """Heights (n,) m of Phase I rows' reported ``positions`` (n, 3) m over the plane through the
+    pushes at the paper's yaw nearest each row's ``yaws`` (n,) rad; ``pushed`` (m, 3) m at
+    ``pushed_yaws`` (m,) rad."""
+    heights = np.full(len(positions), np.nan)
+    nearest = nearest_yaw_index(yaws)
+    for index, yaw in enumerate(np.deg2rad(paper.PHASE2_YAWS_DEG)):
+        rows, at_yaw = nearest == index, np.isclose(pushed_yaws, yaw)
+        heights[rows] = over_plane(positions[rows], pushed[at_yaw])
+    return heights
+
+
 def real_table(runs: PaperTableRuns) -> dict[str, list[tuple[float, ...]]]:
     """Per method, per setting, the statistics of the real runs (NaN heights for the random setting)."""
     table: dict[str, list[tuple[float, ...]]] = {}
@@ -241,6 +255,15 @@ def report(calibration: Path, config: PipelineConfig, runs: PaperTableRuns) -> N
             else "not clipped"
         )
         print_rows(f"{label} (lifts {', '.join(f'{v:.0f}' for v in lifts)} mm; {clips})", rows)
+    real_X, real_y = load_paper_phase1()
+    first_round = runs.push_round == 0  # the pushes nearest in time to the Phase I collection
+    real_heights = rows_over_pushes(real_y, real_X[:, 3], runs.push_after[first_round], runs.push_yaw[first_round])
+    phase1 = Phase1Data.load(calibration / "phase1.npz")
+    kept = phase1.kept
+    heights = rows_over_pushes(phase1.reported_position[kept], phase1.orientation[kept, 0], phase2.corrected, phase2.orientation[:, 0])
+    for who, values in (("real", real_heights), ("sim", heights)):
+        low, middle, high = np.percentile(1e3 * values, [5, 50, 95])
+        print(f"Phase I kept rows over the pushed jaws, {who}: {low:.1f} / {middle:.1f} / {high:.1f} mm (5th / 50th / 95th percentile)")
 
 
 if __name__ == "__main__":

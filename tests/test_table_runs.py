@@ -129,6 +129,21 @@ def test_a_damaged_package_file_is_refused(monkeypatch):
     with pytest.raises(ValueError, match="push_round"):
         load_paper_table_runs()
 
+    def with_a_stray_method(folder, name):
+        with np.load(__import__("io").BytesIO(real(folder, name)), allow_pickle=False) as data:
+            arrays = {key: data[key] for key in data.files}
+        arrays["touch_method"] = arrays["touch_method"].copy()
+        arrays["touch_method"][7] = "LSTM"
+        arrays["push_after_m"] = arrays["push_after_m"].copy()
+        arrays["push_after_m"][3, 2] = np.nan
+        buffer = __import__("io").BytesIO()
+        np.savez(buffer, **arrays)
+        return buffer.getvalue()
+
+    monkeypatch.setattr(datasets, "_read_packaged", with_a_stray_method)
+    with pytest.raises(ValueError, match="LSTM.*non-finite \\['push_after_m'\\]"):
+        load_paper_table_runs()
+
 
 def test_the_packages_rigid_body_on_the_real_rows_is_the_one_the_table_used():
     X, y = load_paper_phase1()
@@ -154,6 +169,16 @@ def test_the_heights_are_measured_over_the_pushed_plane_and_the_band_moves_with_
     assert np.isclose(low, paper.TABLE_Z_BAND_M[0] + 0.015) and np.isclose(high, paper.TABLE_Z_BAND_M[1] + 0.015)
     stats = table_runs.statistics(np.array([10.0, 20.0]), points, points + [0, 0, 0.001], None)
     assert stats[0] == 15.0 and np.isnan(stats[1:]).all()
+
+
+def test_phase1_rows_are_measured_over_the_plane_of_their_nearest_yaw():
+    yaws = np.deg2rad(paper.PHASE2_YAWS_DEG)
+    grid = np.array([[x, y] for x in (0.0, 0.05) for y in (0.0, 0.05)])
+    pushed = np.vstack([np.c_[grid, np.full(4, -0.16 + 0.001 * i)] for i in range(5)])  # a flat plane per yaw, 1 mm apart
+    pushed_yaws = np.repeat(yaws, 4)
+    rows = np.array([[0.01, 0.02, -0.155], [0.03, 0.01, -0.155]])
+    heights = table_runs.rows_over_pushes(rows, np.deg2rad([-80.0, 50.0]), pushed, pushed_yaws)  # nearest: yaw -90, yaw 45
+    np.testing.assert_allclose(heights, [0.005, 0.002], atol=1e-12)
 
 
 def test_the_authors_touch_clips_then_lifts_and_keeps_both():
@@ -229,6 +254,9 @@ def test_it_prints_the_real_and_simulated_rows(tmp_path):
         simulated = [line for line in lines[block + 2 : block + 4] if line.split()[0] == "sim,"]
         assert len(simulated) == (2 if label == "RBT" else 1)  # the authors' way differs from evaluate's for the rigid body only
         assert all(len(line.split()[-7:]) == 7 and min(float(v) for v in line.split()[-7:]) >= 0.0 for line in simulated)
+    heights = [line for line in lines if line.startswith("Phase I kept rows over the pushed jaws")]
+    assert [line.split(",")[1].split(":")[0].strip() for line in heights] == ["real", "sim"]
+    assert heights[0].endswith("-0.7 / 0.9 / 3.7 mm (5th / 50th / 95th percentile)")  # the authors' rows, their first round's pushes
     too_far = subprocess.run(
         [sys.executable, str(script_path("fidelity_table_runs")), "--calibration", str(calibration), "--what-if-tape-disparity-px", "nan"],
         capture_output=True,

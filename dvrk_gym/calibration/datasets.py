@@ -128,6 +128,22 @@ def load_paper_table_runs() -> PaperTableRuns:
     }
     if wrong:
         raise ValueError(f"packaged table runs have unexpected arrays {wrong}; expected shapes {shapes}")
+    methods, settings, rounds = (
+        set(arrays["touch_method"].astype(str)),
+        set(arrays["touch_setting"].tolist()),
+        set(arrays["push_round"].tolist()),
+    )
+    numbers = [name for name, array in arrays.items() if array.dtype.kind == "f" and not np.isfinite(array).all()]
+    if (
+        methods != set(paper.METHOD_LABELS.values())
+        or not settings <= set(range(len(paper.CALIBRATION_SETTINGS)))
+        or not rounds <= {0, 1}
+        or numbers
+    ):
+        raise ValueError(
+            f"packaged table runs hold methods {sorted(methods)}, settings {sorted(settings)}, push rounds {sorted(rounds)}"
+            f"{f' and non-finite {numbers}' if numbers else ''}; expected {sorted(paper.METHOD_LABELS.values())}, 0-5, 0-1"
+        )
     return PaperTableRuns(
         method=arrays["touch_method"].astype(str),
         setting=arrays["touch_setting"].astype(np.int64),
