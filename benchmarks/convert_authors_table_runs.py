@@ -12,8 +12,8 @@ onto each circle to ``data_human_guided_vXY.p``.
 
 The records are Python 2 pickles (protocol 0). They are read here by a small stack machine
 for the handful of opcodes they use (dicts, lists, tuples, floats, ints, strings, and numpy
-arrays rebuilt from their raw bytes): nothing is imported or called, so a tampered file can
-only fail to parse. Run once, from a clone of the authors' repository:
+arrays rebuilt from their raw bytes): nothing is imported or called, shared objects stay
+shared and nesting is bounded, so a tampered file can only fail to parse. Run once, from a clone of the authors' repository:
 
     python benchmarks/convert_authors_table_runs.py --authors-repo PATH \
         --out dvrk_gym/data/seita2018_table_runs/table_runs.npz
@@ -42,6 +42,8 @@ PHASE2_RUNS: tuple[int, ...] = (24, 23, 22, 21, 20, 44, 43, 42, 41, 40)
 of the network's runs, 1 September 2017; round 1 on the rigid body's, 6 September)."""
 MAX_FILE_BYTES = 1_000_000
 """The largest record file read, bytes (the authors' are under 50 kB)."""
+MAX_NESTING = 64
+"""The deepest a record's containers may nest while it is read (the authors' nest 4 deep)."""
 
 _MARK = object()
 
@@ -60,24 +62,37 @@ class _Reduce:
         self.function, self.arguments, self.state = function, arguments, None
 
 
-def _resolve(value: Any) -> Any:
+def _resolve(value: Any, done: dict[int, Any]) -> Any:
+    """``value`` with numpy's rebuilds evaluated by hand. An object the record refers to more
+    than once (the memo's ``g``) is resolved once and shared, as unpickling would share it,
+    so a record cannot make this copy it exponentially often; a container is registered
+    before its items, so one that holds itself is no endless loop either."""
+    key = id(value)
+    if key in done:
+        return done[key]
     if isinstance(value, _Reduce):
         if value.function.name == "numpy.core.multiarray._reconstruct":
             # (version, shape, dtype, fortran, raw bytes); an ndarray subclass (tfx's frames) wraps it in a pair
             state = value.state[0] if isinstance(value.state[0], tuple) else value.state
-            _, shape, dtype, _, raw = state
-            return np.frombuffer(raw, dtype=_resolve(dtype)).reshape(shape).copy()
-        if value.function.name == "numpy.dtype":
+            _, shape, dtype, fortran, raw = state
+            resolved: Any = np.frombuffer(raw, dtype=_resolve(dtype, done)).reshape(shape, order="F" if fortran else "C").copy()
+        elif value.function.name == "numpy.dtype":
             code, order = value.arguments[0].decode(), value.state[1].decode()
-            return np.dtype(order + code if order in "<>" else code)
-        raise ValueError(f"the record calls {value.function.name}, which is not a numpy array or dtype")
-    if isinstance(value, dict):
-        return {key: _resolve(item) for key, item in value.items()}
-    if isinstance(value, list):
-        return [_resolve(item) for item in value]
-    if isinstance(value, tuple):
-        return tuple(_resolve(item) for item in value)
-    return value
+            resolved = np.dtype(order + code if order in "<>" else code)
+        else:
+            raise ValueError(f"the record calls {value.function.name}, which is not a numpy array or dtype")
+    elif isinstance(value, dict):
+        resolved = done[key] = {}
+        resolved.update({item_key: _resolve(item, done) for item_key, item in value.items()})
+    elif isinstance(value, list):
+        resolved = done[key] = []
+        resolved.extend(_resolve(item, done) for item in value)
+    elif isinstance(value, tuple):
+        resolved = tuple(_resolve(item, done) for item in value)
+    else:
+        resolved = value
+    done[key] = resolved
+    return resolved
 
 
 def _line_end(data: bytes, start: int) -> int:
@@ -90,13 +105,19 @@ def _line_end(data: bytes, start: int) -> int:
 def read_protocol0_records(data: bytes) -> list[Any]:
     """The objects of a file of protocol-0 pickles appended one after another, read without unpickling.
 
+    Nothing the records name is imported or called (numpy arrays and dtypes are rebuilt from
+    their bytes by hand), objects they share stay shared, and they may nest at most
+    :data:`MAX_NESTING` deep.
+
     Raises:
-        ValueError: on an opcode outside the few the authors' records use, or a truncated file.
+        ValueError: on an opcode outside the few the authors' records use, a call of anything
+            but numpy's rebuilds, nesting too deep, or a truncated file.
     """
     records, i = [], 0
     try:
         while i < len(data):
             stack: list[Any] = []
+            marks: list[int] = []  # where each open mark sits in the stack
             memo: dict[int, Any] = {}
             while True:
                 op = chr(data[i])
@@ -105,9 +126,12 @@ def read_protocol0_records(data: bytes) -> list[Any]:
                     end = _line_end(data, i)
                     line, i = data[i:end], end + 1
                 if op == "(":
+                    if len(marks) >= MAX_NESTING:
+                        raise ValueError(f"a record nests deeper than {MAX_NESTING} (byte {i - 1})")
+                    marks.append(len(stack))
                     stack.append(_MARK)
                 elif op in "dlt":
-                    start = len(stack) - 1 - stack[::-1].index(_MARK)
+                    start = marks.pop()
                     items = stack[start + 1 :]
                     del stack[start:]
                     stack.append(
@@ -147,7 +171,9 @@ def read_protocol0_records(data: bytes) -> list[Any]:
                     break
                 else:
                     raise ValueError(f"opcode {op!r} at byte {i - 1} is not one the authors' records use")
-            records.append(_resolve(stack.pop()))
+            records.append(_resolve(stack.pop(), {}))
+    except RecursionError as error:
+        raise ValueError(f"a record nests its objects too deep to read (byte {i})") from error
     except (IndexError, KeyError, AttributeError, TypeError) as error:
         raise ValueError(f"not a file of protocol-0 records as the authors wrote them (byte {i}): {error!r}") from error
     return records

@@ -5,7 +5,8 @@ pushes of the same days (:func:`dvrk_gym.calibration.datasets.load_paper_table_r
 rigid body's runs did two things ``dvrk-gym evaluate`` does not: they were lifted 4 to 9 mm
 (:data:`~dvrk_gym.paper.TABLE_LIFT_MM`; their author: height was a main reason for its low
 performance), and the last three first clipped the predicted height into a band of the
-robot's frame whose top lies 0.3 mm under the paper (:data:`~dvrk_gym.paper.TABLE_Z_BAND_M`,
+robot's frame whose top lies 0.3 mm under the jaws pushed onto the paper in the authors' first
+mapping (:data:`~dvrk_gym.paper.TABLE_Z_BAND_M`,
 :data:`~dvrk_gym.paper.TABLE_CLIPPED`). The network's runs sent its predictions as they were.
 The robot was sent there, and a person drew a box around the end effector in the left image;
 the table's error is the distance from the circle's centre to the box's.
@@ -80,13 +81,13 @@ jaws on the paper moved by about 1.2 mm between the two."""
 
 class AuthorsTouch:
     """A calibrated policy whose height is clipped into a band (or not) and then lifted, as the
-    authors ran it; it keeps each prediction (m) and what was sent (m).
+    authors ran it; it keeps each prediction (m; clipped, where it clips) and what was sent (m).
 
     Args:
         policy: the calibrated policy, observation -> (bx, by, bz, yaw) in m and rad.
         band_m: (lowest, highest) height the prediction is clipped into, base frame, metres;
             None: not clipped.
-        lift_m: what is added to the clipped height, metres.
+        lift_m: what is added to the (clipped) height, metres.
     """
 
     def __init__(self, policy: CalibratedPolicy, band_m: tuple[float, float] | None, lift_m: float) -> None:
@@ -97,12 +98,11 @@ class AuthorsTouch:
         self.sent: list[np.ndarray] = []
 
     def __call__(self, observation: Any) -> np.ndarray:
-        action = self.policy(observation)
-        self.predicted.append(action[:3].astype(np.float64))
-        if self.band_m is not None or self.lift_m != 0.0:
-            action = action.copy()
-            height = float(action[2]) if self.band_m is None else float(np.clip(action[2], *self.band_m))
-            action[2] = np.float32(height + self.lift_m)
+        action = np.array(self.policy(observation), dtype=np.float32)
+        if self.band_m is not None:
+            action[2] = np.float32(np.clip(action[2], *self.band_m))
+        self.predicted.append(action[:3].astype(np.float64))  # clipped where the run clipped, as the real records keep it
+        action[2] = np.float32(float(action[2]) + self.lift_m)
         self.sent.append(action[:3].astype(np.float64))
         return action
 

@@ -123,12 +123,13 @@ TABLE_LIFT_MM: dict[str, tuple[float, ...]] = {
     "DNN": (0.0, 0.0, 0.0, 0.0, 0.0, 0.0),
     "DNN+RF": (0.0, 0.0, 0.0, 0.0, 0.0, 0.0),
 }
-"""The authors' code, ``images/visuals/README.md`` (the runs whose means are the table's, within 0.1 px:
-the network's versions 20-25, with the forests 30-35, the rigid body's 40-45): the
-``--z_offset`` each run added to the clipped height (:data:`CALIBRATION_SETTINGS` order), mm.
-The rigid body's runs were lifted 4 to 9 mm, their author noting that height was a main
-reason for its low performance; the network's example call (``click_and_crop_v3.py``,
-version 23) gives 0, and its other runs record no offset (the script's default is 0)."""
+"""The authors' code, ``images/visuals/README.md`` (the runs whose means are the table's,
+within 0.1 px: the network's versions 20-25, with the forests 30-35, the rigid body's 40-45):
+the ``--z_offset`` each run added to the height, clipped in the runs that clipped
+(:data:`CALIBRATION_SETTINGS` order), mm. The rigid body's runs were lifted 4 to 9 mm, their
+author noting that height was a main reason for its low performance; the network's example
+call (``click_and_crop_v3.py``, version 23) gives 0, and its other runs record no offset (the
+script's default is 0)."""
 
 # ---------------------------------------------------------------------------- debridement
 DEBRIDEMENT_TRIALS = 15

@@ -87,6 +87,16 @@ def test_the_reader_never_calls_what_a_tampered_record_names(tmp_path):
         convert.read_protocol0_records(_record(0.1, np.zeros(3), np.eye(4)).encode("latin-1")[:-40])
 
 
+def test_shared_objects_stay_shared_and_nesting_is_bounded():
+    doubling = b"(lp0\n" + b"(g0\ng0\nlp0\n" * 200 + b"."  # each list holds the previous one twice: 2**200 leaves if copied
+    (record,) = convert.read_protocol0_records(doubling)
+    assert record[0] is record[1] and record[0][0] is record[0][1]
+    (itself,) = convert.read_protocol0_records(b"(dp0\nS'a'\ng0\ns.")
+    assert itself["a"] is itself
+    with pytest.raises(ValueError, match="nests deeper"):
+        convert.read_protocol0_records(b"(" * (convert.MAX_NESTING + 1) + b".")
+
+
 def test_a_record_file_too_large_is_refused_before_reading(tmp_path):
     path = tmp_path / "data_v42.p"
     path.write_bytes(b"(" * (convert.MAX_FILE_BYTES + 1))
@@ -186,7 +196,8 @@ def test_the_authors_touch_clips_then_lifts_and_keeps_both():
     touch = table_runs.AuthorsTouch(policy, (-0.18, -0.168), 0.008)
     assert np.isclose(touch(-0.15)[2], -0.168 + 0.008, atol=1e-7)  # clipped down to the band's top, then lifted
     assert np.isclose(touch(-0.175)[2], -0.175 + 0.008, atol=1e-7)
-    assert np.isclose(touch.predicted[0][2], -0.15, atol=1e-7) and np.isclose(touch.sent[0][2], -0.16, atol=1e-7)
+    assert np.isclose(touch.predicted[0][2], -0.168, atol=1e-7)  # the prediction as the real records keep it: clipped
+    assert np.isclose(touch.sent[0][2], -0.16, atol=1e-7) and np.isclose(touch.predicted[1][2], -0.175, atol=1e-7)
     lifted = table_runs.AuthorsTouch(policy, None, 0.004)
     assert np.isclose(lifted(-0.15)[2], -0.146, atol=1e-7)  # a run that did not clip: lifted only
     as_is = table_runs.AuthorsTouch(policy, None, 0.0)
