@@ -19,15 +19,19 @@ each robot reports its jaws pushed onto the circles; for the network, the author
 
 - the table's error, px (the simulated one also as ``dvrk-gym evaluate`` touches);
 - the prediction's height (clipped, in a run that clipped: the records keep no other) over
-  the jaws pushed onto the paper, mm (median): over a plane
-  through the reported positions of the Phase II pushes at that yaw (the real robot's from
-  the same day as the run, :data:`PUSH_ROUND`; the simulated robot's from where the simulated
-  person's push leaves the reported jaws at each touch, GridTouch's ``human_correction``);
+  the jaws pushed onto the paper, mm (median): over a plane through the reported positions
+  of the Phase II pushes at that yaw (the real robot's from the same day as the run,
+  :data:`PUSH_ROUND`; the simulated robot's from where the simulated person's push leaves
+  the reported jaws at each touch, GridTouch's ``human_correction``);
 - the sent height over that plane, mm (median): how high the jaws hung, or how far under the
   paper they were sent;
-- the share of touches sent under the plane.
+- the share of touches sent under the plane;
 
-The random setting has no real pushes.
+and each row's mean (over the six settings for the error, as the paper averages; over the
+five fixed yaws for the rest: the random setting has no real pushes). Before the rows: how
+the real rigid body's miss to the right in the image follows how deep it was sent; after
+them: where the Phase I kept rows lie over the pushed jaws, real (the first round of pushes,
+the nearest in time) and simulated.
 
 ``--what-if-tape-disparity-px B`` measures one explanation of the rigid body's dive, a change
 of the simulation for the measurement, not an option of the package: the red tape's
@@ -35,10 +39,12 @@ centroid in the right image lands B px left of where it is, so the tape triangul
 than it is while the circles do not (the authors' tape detector was looser in the right image
 than in the left: saturation and value from 70 instead of 90, ``_get_thresholded_image`` of
 ``scripts/automatic_trajectory_collector.py``). The same calibration is run again in a
-temporary folder with that detector, and its table is printed instead. A minute after the calibration:
+temporary folder with that detector (4 minutes), and its comparison is printed instead.
+
+About 15 s after the calibration:
 
     dvrk-gym calibrate --out runs/cal
-    python benchmarks/fidelity_table_runs.py --calibration runs/cal
+    python benchmarks/fidelity_table_runs.py --calibration runs/cal [--what-if-tape-disparity-px 2]
 """
 
 from __future__ import annotations
