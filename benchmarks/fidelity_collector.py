@@ -23,6 +23,7 @@ import contextlib
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
+from unittest import mock
 
 import gymnasium as gym
 import numpy as np
@@ -56,7 +57,6 @@ def collector(step_m: float, corner_z_m: float | None, target_z_m: float | None)
     the simulator's). Undone on exit."""
     if not (np.isfinite(step_m) and 0.0 < step_m <= 0.01):
         raise ValueError(f"step_m must be in (0, 0.01] m, got {step_m}")
-    saved = (exploration.SAFE_Z_M, phase1.SAFE_Z_M, phase1.PaperExplorationPolicy)
     original = phase1.PaperExplorationPolicy
 
     class Stepped(original):  # type: ignore[misc, valid-type]
@@ -65,15 +65,13 @@ def collector(step_m: float, corner_z_m: float | None, target_z_m: float | None)
         ) -> None:
             super().__init__(seed=seed, step_m=step_m, rotations_per_pause=rotations_per_pause)
 
-    try:
-        if corner_z_m is not None:
-            exploration.SAFE_Z_M = (corner_z_m, corner_z_m)  # the corners sit at the middle of this band
+    with contextlib.ExitStack() as patches:
+        if corner_z_m is not None:  # the corners sit at the middle of this band
+            patches.enter_context(mock.patch.object(exploration, "SAFE_Z_M", (corner_z_m, corner_z_m)))
         if target_z_m is not None:
-            phase1.SAFE_Z_M = (target_z_m, target_z_m)
-        phase1.PaperExplorationPolicy = Stepped
+            patches.enter_context(mock.patch.object(phase1, "SAFE_Z_M", (target_z_m, target_z_m)))
+        patches.enter_context(mock.patch.object(phase1, "PaperExplorationPolicy", Stepped))
         yield
-    finally:
-        exploration.SAFE_Z_M, phase1.SAFE_Z_M, phase1.PaperExplorationPolicy = saved
 
 
 if __name__ == "__main__":

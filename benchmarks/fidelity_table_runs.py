@@ -55,6 +55,7 @@ import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
+from unittest import mock
 
 import gymnasium as gym
 import numpy as np
@@ -125,11 +126,8 @@ def tape_disparity_bias(pixels: float) -> Iterator[None]:
             right = Blob(right.centroid - np.array([pixels, 0.0]), right.area_px, right.touches_border)
         return original(camera, left, right)
 
-    world_module.stereo_detection = biased
-    try:
+    with mock.patch.object(world_module, "stereo_detection", biased):
         yield
-    finally:
-        world_module.stereo_detection = original
 
 
 def simulated_band(pushed_heights_m: np.ndarray) -> tuple[float, float]:
@@ -241,6 +239,14 @@ def report(calibration: Path, config: PipelineConfig, runs: PaperTableRuns) -> N
     )
     print(f"instrument: {config.env_kwargs()}")
     env = gym.make("dvrk_gym/GridTouch-v0", **config.env_kwargs())
+    try:
+        _print_comparison(calibration, env, band, phase2, runs)
+    finally:
+        env.close()
+
+
+def _print_comparison(calibration: Path, env: gym.Env, band: tuple[float, float], phase2: Phase2Data, runs: PaperTableRuns) -> None:
+    """The rows of :func:`report`, touched on ``env``; ``band`` (m) carried over by ``phase2``'s pushes."""
     real = real_table(runs)
     print(
         "real RBT: correlation of how far right of the circle the end effector landed (px) with how high it was sent "

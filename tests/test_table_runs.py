@@ -1,6 +1,7 @@
 """The authors' records of their calibration table's runs: converted without unpickling, loaded
 as documented, and compared with the simulated robot by benchmarks/fidelity_table_runs.py."""
 
+import io
 import subprocess
 import sys
 from pathlib import Path
@@ -125,32 +126,31 @@ def test_the_packaged_runs_are_the_papers_table_and_its_protocol():
     assert np.abs(runs.push_after - runs.push_before).max() < 0.01  # a push moves the jaws millimetres
 
 
-def test_a_damaged_package_file_is_refused(monkeypatch):
-    real = datasets._read_packaged
+def _repacked(read, change):
+    """A ``_read_packaged`` that gives the packaged npz with ``change(arrays)`` applied."""
 
-    def without_rounds(folder, name):
-        with np.load(__import__("io").BytesIO(real(folder, name)), allow_pickle=False) as data:
-            arrays = {key: data[key] for key in data.files if key != "push_round"}
-        buffer = __import__("io").BytesIO()
+    def read_changed(folder, name):
+        with np.load(io.BytesIO(read(folder, name)), allow_pickle=False) as data:
+            arrays = {key: data[key].copy() for key in data.files}
+        change(arrays)
+        buffer = io.BytesIO()
         np.savez(buffer, **arrays)
         return buffer.getvalue()
 
-    monkeypatch.setattr(datasets, "_read_packaged", without_rounds)
+    return read_changed
+
+
+def test_a_damaged_package_file_is_refused(monkeypatch):
+    real = datasets._read_packaged
+    monkeypatch.setattr(datasets, "_read_packaged", _repacked(real, lambda arrays: arrays.pop("push_round")))
     with pytest.raises(ValueError, match="push_round"):
         load_paper_table_runs()
 
-    def with_a_stray_method(folder, name):
-        with np.load(__import__("io").BytesIO(real(folder, name)), allow_pickle=False) as data:
-            arrays = {key: data[key] for key in data.files}
-        arrays["touch_method"] = arrays["touch_method"].copy()
+    def stray_method_and_nan(arrays):
         arrays["touch_method"][7] = "LSTM"
-        arrays["push_after_m"] = arrays["push_after_m"].copy()
         arrays["push_after_m"][3, 2] = np.nan
-        buffer = __import__("io").BytesIO()
-        np.savez(buffer, **arrays)
-        return buffer.getvalue()
 
-    monkeypatch.setattr(datasets, "_read_packaged", with_a_stray_method)
+    monkeypatch.setattr(datasets, "_read_packaged", _repacked(real, stray_method_and_nan))
     with pytest.raises(ValueError, match="LSTM.*non-finite \\['push_after_m'\\]"):
         load_paper_table_runs()
 
