@@ -33,29 +33,20 @@ the real rigid body's miss to the right in the image follows how deep it was sen
 them: where the Phase I kept rows lie over the pushed jaws, real (the first round of pushes,
 the nearest in time) and simulated.
 
-``--what-if-tape-disparity-px B`` measures one explanation of the rigid body's dive, a change
-of the simulation for the measurement, not an option of the package: the red tape's
-centroid in the right image lands B px left of where it is, so the tape triangulates nearer
-than it is while the circles do not (the authors' tape detector was looser in the right image
-than in the left: saturation and value from 70 instead of 90, ``_get_thresholded_image`` of
-``scripts/automatic_trajectory_collector.py``). The same calibration is run again in a
-temporary folder with that detector (4 minutes), and its comparison is printed instead.
+The rigid body's dive identifies the tape detector's right-image shift
+(``benchmarks/identify_tape_shift.py``, which uses this script's statistics).
 
 About 15 s after the calibration:
 
     dvrk-gym calibrate --out runs/cal
-    python benchmarks/fidelity_table_runs.py --calibration runs/cal [--what-if-tape-disparity-px 2]
+    python benchmarks/fidelity_table_runs.py --calibration runs/cal
 """
 
 from __future__ import annotations
 
 import argparse
-import contextlib
-import tempfile
-from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
-from unittest import mock
 
 import gymnasium as gym
 import numpy as np
@@ -67,10 +58,8 @@ from dvrk_gym.calibration.loading import load_calibrator
 from dvrk_gym.calibration.models.features import nearest_yaw_index
 from dvrk_gym.calibration.phase1 import Phase1Data
 from dvrk_gym.calibration.phase2 import Phase2Data
-from dvrk_gym.calibration.pipeline import PipelineConfig, read_pipeline_settings, run_calibration
+from dvrk_gym.calibration.pipeline import PipelineConfig, read_pipeline_settings
 from dvrk_gym.calibration.policy import CalibratedPolicy
-from dvrk_gym.sim import world as world_module
-from dvrk_gym.sim.endoscope.detection import Blob
 
 FIXED_YAWS = 5
 """The table's first five settings are the fixed yaws, which have Phase II pushes."""
@@ -112,22 +101,6 @@ class AuthorsTouch:
         action[2] = np.float32(float(action[2]) + self.lift_m)
         self.sent.append(action[:3].astype(np.float64))
         return action
-
-
-@contextlib.contextmanager
-def tape_disparity_bias(pixels: float) -> Iterator[None]:
-    """While open, the simulated world's red-tape detections in the right image land ``pixels``
-    px left of where they are (larger disparity: the tape seen nearer); the circles' are not
-    touched. Undone on exit."""
-    original = world_module.stereo_detection
-
-    def biased(camera: Any, left: Blob | None, right: Blob | None) -> Any:
-        if right is not None:
-            right = Blob(right.centroid - np.array([pixels, 0.0]), right.area_px, right.touches_border)
-        return original(camera, left, right)
-
-    with mock.patch.object(world_module, "stereo_detection", biased):
-        yield
 
 
 def simulated_band(pushed_heights_m: np.ndarray) -> tuple[float, float]:
@@ -281,25 +254,8 @@ def _print_comparison(calibration: Path, env: gym.Env, band: tuple[float, float]
 if __name__ == "__main__":
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--calibration", type=Path, required=True, help="a folder of dvrk-gym calibrate")
-    parser.add_argument(
-        "--what-if-tape-disparity-px",
-        type=float,
-        default=None,
-        metavar="B",
-        help="calibrate again (in a temporary folder, same settings) with the tape's right-image centroid B px to the left",
-    )
     args = parser.parse_args()
     settings = read_pipeline_settings(args.calibration)
     if settings is None:
         parser.error(f"{args.calibration} is not a calibration run folder (no settings stamp); make one with dvrk-gym calibrate --out")
-    bias = args.what_if_tape_disparity_px
-    if bias is not None and not (np.isfinite(bias) and abs(bias) <= 10.0):
-        parser.error(f"--what-if-tape-disparity-px must be a number of pixels in [-10, 10], got {bias}")
-    config = PipelineConfig.from_settings(settings)
-    if bias is None:
-        report(args.calibration, config, load_paper_table_runs())
-    else:
-        with tempfile.TemporaryDirectory() as folder, tape_disparity_bias(bias):
-            print(f"what if: the tape's right-image centroid {bias:g} px to the left; calibrating again in a temporary folder")
-            run_calibration(Path(folder), config, progress=False, benchmark=False)
-            report(Path(folder), config, load_paper_table_runs())
+    report(args.calibration, PipelineConfig.from_settings(settings), load_paper_table_runs())

@@ -13,11 +13,13 @@ from dvrk_gym.sim import identified
 from dvrk_gym.sim.endoscope.camera import (
     PAPER_BASELINE_M,
     PAPER_INTRINSICS,
+    TRUE_BASELINE_M,
     WORKSPACE_CENTER_M,
     CameraIntrinsics,
     PixelWindow,
     StereoCamera,
     default_camera_pose,
+    true_baseline_m,
 )
 from dvrk_gym.sim.endoscope.detection import detect_marker, median_kernel_px
 from dvrk_gym.sim.endoscope.noise import DetectionNoise, PixelNoise, whole_pixels
@@ -347,3 +349,30 @@ def test_the_median_filter_drops_a_sliver_but_keeps_the_tape() -> None:
     assert [median_kernel_px(w) for w in (1920, 960, 640, 320)] == [9, 3, 3, 1]
     with pytest.raises(ValueError, match="median_px"):
         detect_marker(image, median_px=4)
+
+
+def test_the_right_image_shift_moves_the_right_centroid_left_and_draws_nothing() -> None:
+    noise = DetectionNoise(core_px=1.0, outlier_px=5.0, outlier_probability=0.2, right_shift_px=2.5)
+    np.testing.assert_array_equal(noise.shift("right"), [-2.5, 0.0])
+    np.testing.assert_allclose(noise.shift("right", 640), [-2.5 / 3, 0.0])
+    np.testing.assert_array_equal(noise.shift("left"), [0.0, 0.0])
+    unshifted = DetectionNoise(core_px=1.0, outlier_px=5.0, outlier_probability=0.2)
+    np.testing.assert_array_equal(noise.sample(np.random.default_rng(4)), unshifted.sample(np.random.default_rng(4)))
+    with pytest.raises(ValueError, match="side"):
+        noise.shift("middle")
+    for bad in (float("nan"), 25.0, -25.0):
+        with pytest.raises(ValueError, match="right_shift_px"):
+            DetectionNoise(1.0, 1.0, 0.0, right_shift_px=bad)
+
+
+@pytest.mark.parametrize("shift_px", [0.0, identified.TAPE_RIGHT_SHIFT_PX, 4.0])
+def test_the_true_baseline_keeps_the_tape_where_the_rows_put_it(shift_px: float) -> None:
+    """A tape at the rows' median depth, its disparity widened by the shift, triangulates (with
+    the authors' baseline) at the identified depth scale times its depth, whatever the shift."""
+    focal, depth = paper.ENDOSCOPE_FOCAL_PX, identified.TAPE_ROWS_DEPTH_M
+    baseline = true_baseline_m(shift_px)
+    seen_depth = focal * PAPER_BASELINE_M / (focal * baseline / depth + shift_px)
+    assert seen_depth == pytest.approx(identified.CAMERA.depth_scale * depth, rel=1e-12)
+    # What the shift does not touch (the printed circles) is seen at PAPER_BASELINE_M / baseline of its depth.
+    assert PAPER_BASELINE_M / baseline > identified.CAMERA.depth_scale or shift_px == 0.0
+    assert true_baseline_m(identified.TAPE_RIGHT_SHIFT_PX) == TRUE_BASELINE_M

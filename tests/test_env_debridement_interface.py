@@ -160,8 +160,7 @@ def test_debride_command_writes_the_trial_table(tmp_path, capsys):
 
     from dvrk_gym.calibration.models.rigid import RigidBodyCalibrator
     from dvrk_gym.cli.debridement import add_commands
-    from dvrk_gym.sim import identified
-    from dvrk_gym.sim.endoscope.camera import StereoCamera
+    from dvrk_gym.sim.endoscope.camera import PAPER_BASELINE_M, TRUE_BASELINE_M, StereoCamera
 
     rng = np.random.default_rng(0)
     camera = StereoCamera()
@@ -172,8 +171,9 @@ def test_debride_command_writes_the_trial_table(tmp_path, capsys):
         reference = tool_pose(WORKSPACE_CENTER_M + [0.0, 0.0, 0.01], yaw)
         offset = kin.touch_point(ik.inverse_kinematics(reference)) - reference[:3, 3]
         for tip in tips:
-            # As the world's endoscope triangulates: scaled by its identified depth scale.
-            rows.append([*camera.to_camera_frame(tip)[0] * identified.CAMERA.depth_scale, yaw, pitch, roll])
+            # As the world's endoscope triangulates what is not the tape: scaled by the authors'
+            # baseline over the true one.
+            rows.append([*camera.to_camera_frame(tip)[0] * PAPER_BASELINE_M / TRUE_BASELINE_M, yaw, pitch, roll])
             targets.append(tip - offset)
     RigidBodyCalibrator().fit(np.array(rows), np.array(targets)).save(tmp_path / "rbt.zip")
     (tmp_path / "pipeline_config.json").write_text(json.dumps({"bias": "none", "bias_seed": 0}))

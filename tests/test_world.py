@@ -4,6 +4,8 @@ import numpy as np
 import pytest
 
 from dvrk_gym.envs.exploration import sample_paper_poses
+from dvrk_gym.sim.endoscope.camera import true_baseline_m
+from dvrk_gym.sim.endoscope.noise import DetectionNoise
 from dvrk_gym.sim.physics.scene import grid_circle_centers
 from dvrk_gym.sim.robot import ik
 from dvrk_gym.sim.robot import kinematics as kin
@@ -232,3 +234,28 @@ def test_with_the_gui_a_float_path_move_sets_the_body_at_once_and_a_closed_world
         gui.close()
         plain.close()
     assert plain.physics is not None and plain.robot is not None  # nothing left to set on a closed server
+
+
+def test_the_tape_detector_shifts_the_right_image_only_and_the_camera_keeps_its_baseline():
+    """With the detector's error off, a noisy detection is the exact centroid in whole pixels,
+    the right one moved left by the shift; the printed circles are not moved; the endoscope
+    renders with the baseline that goes with the shift."""
+    shift = 3.0
+    noise = DetectionNoise(core_px=0.0, outlier_px=0.0, outlier_probability=0.0, right_shift_px=shift)
+    world = DvrkWorld(WorldConfig(bias="none", camera_resolution=(1920, 1080), marker_noise=noise))
+    try:
+        assert world.camera.baseline_m == true_baseline_m(shift)
+        rng, checked = np.random.default_rng(0), 0
+        for pose in _paper_poses(30, seed=5):
+            world.move_to(pose)
+            exact, seen = world.observe_marker(), world.observe_marker(noise_rng=rng)
+            if not (exact.seen_both and seen.seen_both):
+                continue
+            checked += 1
+            np.testing.assert_array_equal(seen.left_uv, np.floor(exact.left_uv))
+            np.testing.assert_array_equal(seen.right_uv, np.floor(exact.right_uv - [shift, 0.0]))
+        assert checked >= 5
+        _, right = world.camera.project(grid_circle_centers())
+        assert np.abs(np.array([d.right_uv for d in world.observe_grid()]) - right).max() < 0.5
+    finally:
+        world.close()

@@ -27,10 +27,10 @@ from dvrk_gym.sim.compiled import float_paths
 from dvrk_gym.sim.endoscope.camera import (
     PAPER_BASELINE_M,
     PAPER_INTRINSICS,
-    TRUE_BASELINE_M,
     PixelWindow,
     StereoCamera,
     default_camera_pose,
+    true_baseline_m,
 )
 from dvrk_gym.sim.endoscope.detection import Blob, detect_marker, median_kernel_px
 from dvrk_gym.sim.endoscope.noise import PixelNoise, whole_pixels
@@ -82,7 +82,7 @@ class DvrkWorld:
         width, height = self.config.camera_resolution
         self.camera = StereoCamera(
             intrinsics=PAPER_INTRINSICS.scaled(int(width), int(height)),
-            baseline_m=TRUE_BASELINE_M,
+            baseline_m=true_baseline_m(self.config.marker_noise.right_shift_px),
             pose=default_camera_pose() if self.config.camera_pose is None else self.config.camera_pose,
             calibrated_baseline_m=PAPER_BASELINE_M,
         )
@@ -305,16 +305,19 @@ class DvrkWorld:
         above = min(corners[:, 2].min(), self.camera.pose[2, 3]) > PRINT_TOP_Z_M + MARKER_CIRCLE_CLEARANCE_M
         with printed_circles_hidden(self.physics, self.scene.grid) if above else nullcontext():
             left, right = self._detect_in_window("left", left_uv), self._detect_in_window("right", right_uv)
-        return stereo_detection(self.camera, self._as_detected(left, noise_rng), self._as_detected(right, noise_rng))
+        left_seen = self._as_detected(left, noise_rng, "left")
+        return stereo_detection(self.camera, left_seen, self._as_detected(right, noise_rng, "right"))
 
-    def _as_detected(self, blob: Blob | None, noise_rng: np.random.Generator | None) -> Blob | None:
-        """``blob`` as a real detector reports it (``blob`` itself without a generator): the tape
-        detector's own misses and error (``config.marker_noise``, drawn per camera), the
-        configured extra pixel noise, then whole pixels of the paper's 1080p grid."""
+    def _as_detected(self, blob: Blob | None, noise_rng: np.random.Generator | None, side: str) -> Blob | None:
+        """``blob`` in the ``side`` image as a real detector reports it (``blob`` itself without a
+        generator): the tape detector's own misses and error (``config.marker_noise``, drawn per
+        camera) and its right image's shift, the configured extra pixel noise, then whole
+        pixels of the paper's 1080p grid."""
         if blob is None or noise_rng is None or self.config.marker_noise.misses(noise_rng):
             return None if noise_rng is not None else blob
         width = self.camera.intrinsics.width
-        centroid = blob.centroid + self.config.marker_noise.sample(noise_rng, width)
+        noise = self.config.marker_noise
+        centroid = blob.centroid + noise.sample(noise_rng, width) + noise.shift(side, width)
         centroid = whole_pixels(self.pixel_noise.apply(centroid, noise_rng), width)
         return Blob(centroid, blob.area_px, blob.touches_border)
 

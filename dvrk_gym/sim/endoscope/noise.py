@@ -1,5 +1,5 @@
 """Pixel noise of the endoscope's detections: a Gaussian model for every detector, the red
-tape detector's own error (:class:`DetectionNoise`) and its whole pixels (:func:`whole_pixels`).
+tape detector's own error and its right image's bias (:class:`DetectionNoise`) and its whole pixels (:func:`whole_pixels`).
 
 A detection's noise is given as a standard deviation in pixels of the paper's 1920 x 1080
 images (:data:`~dvrk_gym.paper.ENDOSCOPE_RESOLUTION_PX`), so one setting means the
@@ -19,10 +19,20 @@ import numpy as np
 from dvrk_gym import paper
 from dvrk_gym.sim import identified
 
-__all__ = ["MAX_PIXEL_NOISE_PX", "PAPER_WIDTH_PX", "PixelNoise", "DetectionNoise", "IDENTIFIED_MARKER_NOISE", "whole_pixels"]
+__all__ = [
+    "MAX_PIXEL_NOISE_PX",
+    "MAX_RIGHT_SHIFT_PX",
+    "PAPER_WIDTH_PX",
+    "PixelNoise",
+    "DetectionNoise",
+    "IDENTIFIED_MARKER_NOISE",
+    "whole_pixels",
+]
 
 PAPER_WIDTH_PX: int = paper.ENDOSCOPE_RESOLUTION_PX[0]
 """Width of the paper's images (1920 px), at which a pixel-noise setting is given."""
+MAX_RIGHT_SHIFT_PX = 20.0
+"""The largest right-image bias a detector may have (:attr:`DetectionNoise.right_shift_px`), px at 1080p."""
 MAX_PIXEL_NOISE_PX = 50.0
 """The largest detection noise a world or an env accepts (standard deviation at 1920 x 1080), pixels."""
 
@@ -94,12 +104,17 @@ class DetectionNoise:
         outlier_probability: chance that a detection is an outlier, in [0, 1].
         miss_probability: chance that the detector finds no tape in an image where it is
             in view, in [0, 1].
+        right_shift_px: how far left of the point's projection the right camera's centroid
+            lies, px at 1080p, in [-MAX_RIGHT_SHIFT_PX, MAX_RIGHT_SHIFT_PX]: a bias, not
+            noise (nothing is drawn for it). It widens every disparity by that much, so the
+            thing is triangulated nearer than it is (positive) or farther (negative).
     """
 
     core_px: float
     outlier_px: float
     outlier_probability: float
     miss_probability: float = 0.0
+    right_shift_px: float = 0.0
 
     def __post_init__(self) -> None:
         for name in ("core_px", "outlier_px"):
@@ -110,6 +125,20 @@ class DetectionNoise:
             value = getattr(self, name)
             if not 0.0 <= value <= 1.0:
                 raise ValueError(f"DetectionNoise.{name} = {value}; expected a value in [0, 1]")
+        if not (math.isfinite(self.right_shift_px) and abs(self.right_shift_px) <= MAX_RIGHT_SHIFT_PX):
+            raise ValueError(
+                f"DetectionNoise.right_shift_px = {self.right_shift_px}; expected a finite value in "
+                f"[-{MAX_RIGHT_SHIFT_PX:g}, {MAX_RIGHT_SHIFT_PX:g}] px"
+            )
+
+    def shift(self, side: str, width_px: int = PAPER_WIDTH_PX) -> np.ndarray:
+        """The bias (du, dv) of a centroid in the ``side`` ("left" or "right") image, pixels of an
+        image ``width_px`` wide: (-right_shift_px, 0) scaled to that width in the right image,
+        zero in the left."""
+        if side not in ("left", "right"):
+            raise ValueError(f"side must be 'left' or 'right', got {side!r}")
+        du = -self.right_shift_px * width_px / PAPER_WIDTH_PX if side == "right" else 0.0
+        return np.array([du, 0.0])
 
     def misses(self, rng: np.random.Generator) -> bool:
         """Whether the detector misses the tape in one image: one uniform draw (none when miss_probability is 0)."""
@@ -130,6 +159,7 @@ IDENTIFIED_MARKER_NOISE = DetectionNoise(
     identified.MARKER_DETECTION_NOISE.outlier_px,
     identified.MARKER_DETECTION_NOISE.outlier_probability,
     identified.MARKER_DETECTION_NOISE.miss_probability,
+    identified.TAPE_RIGHT_SHIFT_PX,
 )
 """The red-tape detector's error identified from the real rows (:data:`dvrk_gym.sim.identified.MARKER_DETECTION_NOISE`)."""
 
