@@ -57,7 +57,7 @@ AS_EVALUATE = [(None, 0.0)] * len(paper.CALIBRATION_SETTINGS)
 def tape_shift(pixels: float) -> Iterator[None]:
     """While open, every new simulated world's red-tape detector has the right-image shift
     ``pixels`` (px at 1080p) instead of the identified one, and its endoscope the true
-    baseline that goes with it. Undone on exit."""
+    baseline that goes with it. Undone on exit. (Nested, the outer shift wins.)"""
     original = DvrkWorld.__init__
 
     def init(self: DvrkWorld, config: WorldConfig | None = None) -> None:
@@ -133,8 +133,8 @@ if __name__ == "__main__":
     parser.add_argument("--check-seeds", type=int, nargs="*", default=[1, 2, 3], help="instruments to check the shift on")
     parser.add_argument("--seed", type=int, default=0, help="seeds the Phase I collection")
     args = parser.parse_args()
-    if len(args.shifts) < 2 or not all(np.isfinite(s) and abs(s) <= MAX_RIGHT_SHIFT_PX for s in args.shifts):
-        parser.error(f"--shifts needs at least two values in [-{MAX_RIGHT_SHIFT_PX:g}, {MAX_RIGHT_SHIFT_PX:g}] px")
+    if len(set(args.shifts)) < 2 or not all(np.isfinite(s) and abs(s) <= MAX_RIGHT_SHIFT_PX for s in args.shifts):
+        parser.error(f"--shifts needs at least two distinct values in [-{MAX_RIGHT_SHIFT_PX:g}, {MAX_RIGHT_SHIFT_PX:g}] px")
     if min([args.bias_seed, *args.check_seeds]) < 0 or args.seed < 0:
         parser.error("--bias-seed, --check-seeds and --seed must be >= 0")
     main(args.shifts, args.bias_seed, args.check_seeds, args.seed)

@@ -9,6 +9,7 @@ import pytest
 from pybullet_utils import bullet_client
 
 from dvrk_gym import paper
+from dvrk_gym.calibration.datasets import load_paper_phase1
 from dvrk_gym.sim import identified
 from dvrk_gym.sim.endoscope.camera import (
     PAPER_BASELINE_M,
@@ -375,4 +376,12 @@ def test_the_true_baseline_keeps_the_tape_where_the_rows_put_it(shift_px: float)
     assert seen_depth == pytest.approx(identified.CAMERA.depth_scale * depth, rel=1e-12)
     # What the shift does not touch (the printed circles) is seen at PAPER_BASELINE_M / baseline of its depth.
     assert PAPER_BASELINE_M / baseline > identified.CAMERA.depth_scale or shift_px == 0.0
+
+
+def test_the_rows_depth_is_their_median_and_a_bad_shift_is_refused() -> None:
+    X, _ = load_paper_phase1()
+    assert pytest.approx(np.median(X[:, 2]) / identified.CAMERA.depth_scale, abs=1e-5) == identified.TAPE_ROWS_DEPTH_M
     assert true_baseline_m(identified.TAPE_RIGHT_SHIFT_PX) == TRUE_BASELINE_M
+    for bad in (float("nan"), float("inf"), 100.0):
+        with pytest.raises(ValueError, match="tape_right_shift_px"):
+            true_baseline_m(bad)

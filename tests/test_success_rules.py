@@ -44,6 +44,13 @@ def test_grid_touch_success_is_a_distance_in_metres_within_the_threshold(make_en
     depth_scale = env.unwrapped.world.camera.depth_scale
     assert depth_scale == pytest.approx(PAPER_BASELINE_M / TRUE_BASELINE_M)
     assert distance_m == pytest.approx(offset_mm * 1e-3 * depth_scale, abs=0.6e-3)
+    if offset_mm > 0.0:  # against the same circle's touch without offset, the circle's own error cancels
+        achieved = []
+        for offset in ((0.0, 0.0), (offset_mm * 1e-3, 0.0)):
+            env.reset(seed=0, options={"circle": 17})
+            achieved.append(env.step(_aimed_action(env, 17, offset))[0]["achieved_goal"].astype(np.float64))
+        moved = float(np.linalg.norm(achieved[1] - achieved[0]))
+        assert moved == pytest.approx(offset_mm * 1e-3 * depth_scale, abs=0.02e-3)
     assert info["is_success"] == (distance_m <= 0.001)
     assert reward == (0.0 if info["is_success"] else -1.0)  # the sparse reward agrees with is_success
     if offset_mm >= 1.5:

@@ -5,7 +5,7 @@ import pytest
 
 from dvrk_gym.envs.exploration import sample_paper_poses
 from dvrk_gym.sim.endoscope.camera import true_baseline_m
-from dvrk_gym.sim.endoscope.noise import DetectionNoise
+from dvrk_gym.sim.endoscope.noise import DetectionNoise, whole_pixels
 from dvrk_gym.sim.physics.scene import grid_circle_centers
 from dvrk_gym.sim.robot import ik
 from dvrk_gym.sim.robot import kinematics as kin
@@ -240,9 +240,9 @@ def test_the_tape_detector_shifts_the_right_image_only_and_the_camera_keeps_its_
     """With the detector's error off, a noisy detection is the exact centroid in whole pixels,
     the right one moved left by the shift; the printed circles are not moved; the endoscope
     renders with the baseline that goes with the shift."""
-    shift = 3.0
+    shift = 3.0  # px at 1080p: one pixel at 640 wide
     noise = DetectionNoise(core_px=0.0, outlier_px=0.0, outlier_probability=0.0, right_shift_px=shift)
-    world = DvrkWorld(WorldConfig(bias="none", camera_resolution=(1920, 1080), marker_noise=noise))
+    world = DvrkWorld(WorldConfig(bias="none", camera_resolution=(640, 360), marker_noise=noise))
     try:
         assert world.camera.baseline_m == true_baseline_m(shift)
         rng, checked = np.random.default_rng(0), 0
@@ -252,8 +252,8 @@ def test_the_tape_detector_shifts_the_right_image_only_and_the_camera_keeps_its_
             if not (exact.seen_both and seen.seen_both):
                 continue
             checked += 1
-            np.testing.assert_array_equal(seen.left_uv, np.floor(exact.left_uv))
-            np.testing.assert_array_equal(seen.right_uv, np.floor(exact.right_uv - [shift, 0.0]))
+            np.testing.assert_array_equal(seen.left_uv, whole_pixels(exact.left_uv, 640))
+            np.testing.assert_array_equal(seen.right_uv, whole_pixels(exact.right_uv - [shift / 3, 0.0], 640))
         assert checked >= 5
         _, right = world.camera.project(grid_circle_centers())
         assert np.abs(np.array([d.right_uv for d in world.observe_grid()]) - right).max() < 0.5

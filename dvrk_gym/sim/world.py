@@ -289,8 +289,9 @@ class DvrkWorld:
 
         Args:
             noise_rng: draws the detector's error and the configured pixel noise, and
-                the detections come in whole pixels as the authors' did (None: exact
-                sub-pixel centroids, no noise).
+                the detections come in whole pixels, the right one shifted
+                (``config.marker_noise.right_shift_px``), as the authors' did (None: the
+                exact sub-pixel centroids of the rendered tape, no noise and no shift).
 
         The detection runs on rendered pixels. Only the window where the marker can
         appear gets rendered: the bounding box of its corners' projections plus a margin,

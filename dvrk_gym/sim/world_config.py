@@ -36,8 +36,13 @@ class WorldConfig:
         pixel_noise_px: standard deviation of the noise added to every detected pixel
             coordinate, at 1920 x 1080 (scaled with the resolution), on top of
             ``marker_noise`` for the red marker.
-        marker_noise: the red-tape detector's own error in each camera (the identified
-            one by default: :data:`dvrk_gym.sim.identified.MARKER_DETECTION_NOISE`).
+        marker_noise: the red-tape detector's own error in each camera and its
+            right-image shift (the identified ones by default:
+            :data:`dvrk_gym.sim.identified.MARKER_DETECTION_NOISE`,
+            :data:`~dvrk_gym.sim.identified.TAPE_RIGHT_SHIFT_PX`). The shift also sets the
+            baseline the endoscope renders with
+            (:func:`dvrk_gym.sim.endoscope.camera.true_baseline_m`), when the world is made,
+            so that the tape is seen where the real rows put it.
     """
 
     camera_resolution: tuple[int, int] = (PAPER_INTRINSICS.width, PAPER_INTRINSICS.height)
