@@ -10,7 +10,7 @@ them 5.5 to 8.4 mm under the jaws pushed onto those circles (mean -7.2 mm over t
 yaws). Seen nearer than the circles, the tape teaches a mapping that sends the circles deeper.
 
 For each candidate shift (``--shifts``; the true baseline follows from it so that the tape
-stays where the rows put it, :func:`dvrk_gym.sim.endoscope.camera.true_baseline_m`) this
+stays where the rows put it, :func:`dvrk_gym.sim.endoscope.baseline.true_baseline_m`) this
 collects the paper's Phase I on the instrument, fits the rigid body to its kept rows,
 touches the 35 circles at the table's six settings as ``dvrk-gym evaluate`` does, and prints
 the statistics of ``benchmarks/fidelity_table_runs.py``: the prediction's median height over
@@ -44,7 +44,7 @@ from dvrk_gym.calibration.models.rigid import RigidBodyCalibrator
 from dvrk_gym.calibration.phase1 import run_paper_phase1
 from dvrk_gym.calibration.policy import CalibratedPolicy
 from dvrk_gym.sim import identified
-from dvrk_gym.sim.endoscope.camera import true_baseline_m
+from dvrk_gym.sim.endoscope.baseline import true_baseline_m
 from dvrk_gym.sim.endoscope.noise import MAX_RIGHT_SHIFT_PX
 from dvrk_gym.sim.world import DvrkWorld
 from dvrk_gym.sim.world_config import WorldConfig

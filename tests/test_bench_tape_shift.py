@@ -8,7 +8,7 @@ import pytest
 from benchmark_scripts import ROOT, load_script, script_path
 
 from dvrk_gym.sim import identified
-from dvrk_gym.sim.endoscope.camera import true_baseline_m
+from dvrk_gym.sim.endoscope.baseline import true_baseline_m
 from dvrk_gym.sim.world import DvrkWorld, WorldConfig
 
 shift_script = load_script("identify_tape_shift")

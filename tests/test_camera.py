@@ -11,16 +11,15 @@ from pybullet_utils import bullet_client
 from dvrk_gym import paper
 from dvrk_gym.calibration.datasets import load_paper_phase1
 from dvrk_gym.sim import identified
+from dvrk_gym.sim.endoscope.baseline import TRUE_BASELINE_M, true_baseline_m
 from dvrk_gym.sim.endoscope.camera import (
     PAPER_BASELINE_M,
     PAPER_INTRINSICS,
-    TRUE_BASELINE_M,
     WORKSPACE_CENTER_M,
     CameraIntrinsics,
     PixelWindow,
     StereoCamera,
     default_camera_pose,
-    true_baseline_m,
 )
 from dvrk_gym.sim.endoscope.detection import detect_marker, median_kernel_px
 from dvrk_gym.sim.endoscope.noise import DetectionNoise, PixelNoise, whole_pixels

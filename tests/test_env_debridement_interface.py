@@ -160,7 +160,8 @@ def test_debride_command_writes_the_trial_table(tmp_path, capsys):
 
     from dvrk_gym.calibration.models.rigid import RigidBodyCalibrator
     from dvrk_gym.cli.debridement import add_commands
-    from dvrk_gym.sim.endoscope.camera import PAPER_BASELINE_M, TRUE_BASELINE_M, StereoCamera
+    from dvrk_gym.sim.endoscope.baseline import PAPER_BASELINE_M, TRUE_BASELINE_M
+    from dvrk_gym.sim.endoscope.camera import StereoCamera
 
     rng = np.random.default_rng(0)
     camera = StereoCamera()
@@ -202,7 +203,8 @@ def test_debride_command_writes_the_trial_table(tmp_path, capsys):
     printed = capsys.readouterr().out
     assert "total  success" in printed and "paper" in printed
     written = json.loads((tmp_path / "out" / "debridement_rbt_raisin.json").read_text())
-    assert len(written["trials"][0]["outcomes"].split(",")) == 8
+    # One outcome per pick: eight, or fewer when no raisin is left on the paper sooner (a pick can carry two).
+    assert 7 <= len(written["trials"][0]["outcomes"].split(",")) <= 8
     assert written["totals"]["success"] >= 6
     assert (tmp_path / "out" / "debridement_rbt_raisin.png").stat().st_size > 1000
 

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from dvrk_gym.envs.grid_touch import tool_pose
-from dvrk_gym.sim.endoscope.camera import PAPER_BASELINE_M, TRUE_BASELINE_M
+from dvrk_gym.sim.endoscope.baseline import PAPER_BASELINE_M, TRUE_BASELINE_M
 from dvrk_gym.sim.physics.scene import RECEPTACLE_CENTER_M, RECEPTACLE_INNER_SIZE_M, RECEPTACLE_WALL_HEIGHT_M
 from dvrk_gym.sim.robot import kinematics as kin
 from dvrk_gym.sim.table import judge

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from dvrk_gym.envs.exploration import sample_paper_poses
-from dvrk_gym.sim.endoscope.camera import true_baseline_m
+from dvrk_gym.sim.endoscope.baseline import true_baseline_m
 from dvrk_gym.sim.endoscope.noise import DetectionNoise, whole_pixels
 from dvrk_gym.sim.physics.scene import grid_circle_centers
 from dvrk_gym.sim.robot import ik

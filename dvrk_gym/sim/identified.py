@@ -103,12 +103,13 @@ reported 1.4 degrees of pitch apart, and rows taken at one pause report position
 1.6 mm apart, where a robot that reported its command would repeat it exactly. Matched to
 the share of consecutive kept rows whose reported positions lie within 0.2 mm (real 0.0304)
 with simulated Phase I collections of the identified instrument at lags 0.10, 0.15, ...,
-0.35 (:func:`dvrk_gym.fidelity.identify.match_settle_lag`): shares 0.075, 0.047, 0.033,
-0.027, 0.023, 0.018, and 0.25 is the first lag whose share falls to the real one (without
-a lag: 0.44). The collections use this module's detector, whose misses are matched with the
-lag (:data:`MARKER_DETECTION_NOISE`); the script gives back both values from them, so the
-two are consistent. The lag also correlates the reported pitch from row to row, but only
-half as much as the real rows' 0.27 (0.10-0.14 over the grid): a joint-space lag becomes a
+0.35 (:func:`dvrk_gym.fidelity.identify.match_settle_lag`): shares 0.079, 0.047, 0.035,
+0.026, 0.021, 0.017 (with the tape's right-image shift; 0.075 to 0.018 before it), and 0.25
+is the first lag whose share falls to the real one (without a lag: 0.44). The collections
+use this module's detector, whose misses are matched with the lag
+(:data:`MARKER_DETECTION_NOISE`); the script gives back both values from them, so the two
+are consistent. The lag also correlates the reported pitch from row to row, but only
+half as much as the real rows' 0.27 (0.08-0.13 over the grid): a joint-space lag becomes a
 pitch lag only while roll stays put."""
 
 
@@ -118,7 +119,7 @@ at 1920 x 1080 (:attr:`dvrk_gym.sim.endoscope.noise.DetectionNoise.right_shift_p
 widens the tape's disparity, so the tape, and only the tape, is triangulated nearer than it
 is. The Phase I rows cannot tell this from a short stereo baseline (the depth scale of
 :data:`CAMERA` holds both); the records of the table's runs can
-(``python benchmarks/identify_tape_shift.py``, about 8 minutes). The rigid body the authors
+(``python benchmarks/identify_tape_shift.py``, about 6 minutes on a busy machine). The rigid body the authors
 fitted to the tape's rows put the printed circles 7.2 mm under the jaws pushed onto them
 (the mean over the five yaws of the median per yaw). The simulated rigid body, fitted to a
 Phase I of the identified instrument and touched as ``dvrk-gym evaluate`` does, put them
@@ -136,7 +137,7 @@ TAPE_ROWS_DEPTH_M = 0.19574
 """The real rows' median depth, metres: the median camera z of the 1939 rows (0.18649 m, as
 the authors triangulated them) over the depth scale (:data:`CAMERA`). Where the tape's
 right-image shift (:data:`TAPE_RIGHT_SHIFT_PX`) and the true baseline together put the tape
-as the rows do (:func:`dvrk_gym.sim.endoscope.camera.true_baseline_m`)."""
+as the rows do (:func:`dvrk_gym.sim.endoscope.baseline.true_baseline_m`)."""
 
 
 @dataclass(frozen=True)
@@ -191,11 +192,11 @@ A baseline short of the true one does that to everything the camera sees, a tape
 whose right-image centroid lies left of the tape to the tape alone; the rows hold only the
 tape and cannot tell the two apart. The records of the table's runs split it: the detector's
 shift (:data:`TAPE_RIGHT_SHIFT_PX`) with a true baseline 1.3% longer than the authors' 6.18 mm
-(:func:`dvrk_gym.sim.endoscope.camera.true_baseline_m`). A scale in the robot's kinematics
+(:func:`dvrk_gym.sim.endoscope.baseline.true_baseline_m`). A scale in the robot's kinematics
 would do the same to these rows; the camera's is the one free parameter that does it for all
 three axes at once. The identification scales the tape's depth by this one number; the
 simulator, with the shift, sees the tape within 0.5 mm of it over the rows' depths (5th to
-95th percentile; :func:`~dvrk_gym.sim.endoscope.camera.true_baseline_m`), against 5 mm of
+95th percentile; :func:`~dvrk_gym.sim.endoscope.baseline.true_baseline_m`), against 5 mm of
 stereo depth noise. Fitting the camera with the shift in the model is not done."""
 
 MARKER_OFFSET_M = (-0.0012731, 0.0079513, -0.0011300)

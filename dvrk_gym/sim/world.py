@@ -24,14 +24,8 @@ from contextlib import nullcontext
 import numpy as np
 
 from dvrk_gym.sim.compiled import float_paths
-from dvrk_gym.sim.endoscope.camera import (
-    PAPER_BASELINE_M,
-    PAPER_INTRINSICS,
-    PixelWindow,
-    StereoCamera,
-    default_camera_pose,
-    true_baseline_m,
-)
+from dvrk_gym.sim.endoscope.baseline import PAPER_BASELINE_M, true_baseline_m
+from dvrk_gym.sim.endoscope.camera import PAPER_INTRINSICS, PixelWindow, StereoCamera, default_camera_pose
 from dvrk_gym.sim.endoscope.detection import Blob, detect_marker, median_kernel_px
 from dvrk_gym.sim.endoscope.noise import PixelNoise, whole_pixels
 from dvrk_gym.sim.endoscope.printed_grid import observe_printed_grid
@@ -306,7 +300,7 @@ class DvrkWorld:
         above = min(corners[:, 2].min(), self.camera.pose[2, 3]) > PRINT_TOP_Z_M + MARKER_CIRCLE_CLEARANCE_M
         with printed_circles_hidden(self.physics, self.scene.grid) if above else nullcontext():
             left, right = self._detect_in_window("left", left_uv), self._detect_in_window("right", right_uv)
-        left_seen = self._as_detected(left, noise_rng, "left")
+        left_seen = self._as_detected(left, noise_rng, "left")  # before the right one: the draws' order
         return stereo_detection(self.camera, left_seen, self._as_detected(right, noise_rng, "right"))
 
     def _as_detected(self, blob: Blob | None, noise_rng: np.random.Generator | None, side: str) -> Blob | None:

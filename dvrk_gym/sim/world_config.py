@@ -41,7 +41,7 @@ class WorldConfig:
             :data:`dvrk_gym.sim.identified.MARKER_DETECTION_NOISE`,
             :data:`~dvrk_gym.sim.identified.TAPE_RIGHT_SHIFT_PX`). The shift also sets the
             baseline the endoscope renders with
-            (:func:`dvrk_gym.sim.endoscope.camera.true_baseline_m`), when the world is made,
+            (:func:`dvrk_gym.sim.endoscope.baseline.true_baseline_m`), when the world is made,
             so that the tape is seen where the real rows put it.
     """
 
