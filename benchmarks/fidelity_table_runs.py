@@ -30,8 +30,11 @@ each robot reports its jaws pushed onto the circles; for the network, the author
 and each row's mean (over the six settings for the error, as the paper averages; over the
 five fixed yaws for the rest: the random setting has no real pushes). Before the rows: how
 the real rigid body's miss to the right in the image follows how deep it was sent; after
-them: where the Phase I kept rows lie over the pushed jaws, real (the first round of pushes,
-the nearest in time) and simulated.
+them: for the rigid body's touches sent more than 1 mm under the pushed jaws, how far over
+the sent height the robot reported itself after the move (the real arm gave way to part of
+the depth; the simulated descent stops where the jaws meet the paper, so it reports all of
+it); and where the Phase I kept rows lie over the pushed jaws, real (the first round of
+pushes, the nearest in time) and simulated.
 
 The rigid body's dive identifies the tape detector's right-image shift
 (``benchmarks/identify_tape_shift.py``, which uses this script's statistics).
@@ -45,6 +48,7 @@ About 15 s after the calibration:
 from __future__ import annotations
 
 import argparse
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -69,6 +73,8 @@ STATISTICS = (
     "sent over the pushed jaws, mm",
     "sent under the pushed jaws, share",
 )
+GIVE_DEPTH_M = 1e-3
+"""A touch sent deeper than this under the pushed jaws counts for :func:`give`, metres."""
 PUSH_ROUND: dict[str, int] = {"DNN": 0, "DNN+RF": 0, "RBT": 1}
 """The round of Phase II pushes made on the day of each method's runs (the network's and
 DNN+RF's on 1 September 2017, the rigid body's on 6 September): the reported height of the
@@ -173,19 +179,61 @@ def real_table(runs: PaperTableRuns) -> dict[str, list[tuple[float, ...]]]:
     return table
 
 
-def simulated_table(
-    env: gym.Env, policy: CalibratedPolicy, protocol: list[tuple[tuple[float, float] | None, float]]
-) -> list[tuple[float, ...]]:
-    """Per setting, the statistics of the simulated touches sent by ``protocol``: per setting, the
-    band the height is clipped into (None: not clipped) and the lift (m)."""
-    rows = []
+@dataclass(frozen=True)
+class Touches:
+    """One setting's 35 touches: the table's errors (n,) px; the predicted, sent and reported
+    positions (n, 3) m (reported: where the robot reported itself after the move); the jaws
+    pushed onto the circles (n, 3) m."""
+
+    pixels: np.ndarray
+    predicted: np.ndarray
+    sent: np.ndarray
+    reported: np.ndarray
+    pushed: np.ndarray
+
+
+def simulated_touches(env: gym.Env, policy: CalibratedPolicy, protocol: list[tuple[tuple[float, float] | None, float]]) -> list[Touches]:
+    """Per setting, the simulated touches sent by ``protocol``: per setting, the band the height
+    is clipped into (None: not clipped) and the lift (m)."""
+    settings = []
     for k, ((_, yaw), (band, lift)) in enumerate(zip(YAW_SETTINGS, protocol, strict=True)):
         touch = AuthorsTouch(policy, band, lift)
         episodes = touch_grid_episodes(env, touch, yaw, seed=BENCHMARK_SEED + k)
+        reported = np.array([e.final_info["reported_position"] for e in episodes])
+        pushed = reported + np.array([e.final_info["human_correction"] for e in episodes])
         pixels = np.array([e.metrics["pixel_error"] for e in episodes])
-        pushed = np.array([e.final_info["reported_position"] + e.final_info["human_correction"] for e in episodes])
-        rows.append(statistics(pixels, np.array(touch.predicted), np.array(touch.sent), pushed))
-    return rows
+        settings.append(Touches(pixels, np.array(touch.predicted), np.array(touch.sent), reported, pushed))
+    return settings
+
+
+def simulated_table(
+    env: gym.Env, policy: CalibratedPolicy, protocol: list[tuple[tuple[float, float] | None, float]]
+) -> list[tuple[float, ...]]:
+    """Per setting, the statistics of :func:`simulated_touches`."""
+    return [statistics(t.pixels, t.predicted, t.sent, t.pushed) for t in simulated_touches(env, policy, protocol)]
+
+
+def give(sent: list[np.ndarray], reported: list[np.ndarray], pushed: list[np.ndarray]) -> tuple[int, float, float]:
+    """How far the arm reported itself over where it was sent, where it was sent more than
+    :data:`GIVE_DEPTH_M` under the plane through the pushed jaws (per fixed yaw: sent and
+    reported (n, 3) m, pushed (m, 3) m): the number of such touches, and the medians of how
+    deep they were sent and of how far over the sent height they were reported, mm."""
+    depth, rise = [], []
+    for s, r, p in zip(sent, reported, pushed, strict=True):
+        under = -over_plane(s, p)
+        deep = under > GIVE_DEPTH_M
+        depth.append(under[deep])
+        rise.append((r[:, 2] - s[:, 2])[deep])
+    depths, rises = np.concatenate(depth), np.concatenate(rise)
+    if len(depths) == 0:
+        return 0, np.nan, np.nan
+    return len(depths), 1e3 * float(np.median(depths)), 1e3 * float(np.median(rises))
+
+
+def print_give(who: str, counted: tuple[int, float, float]) -> None:
+    n, depth, rise = counted
+    share = f"{rise / depth:.2f} of the depth" if n else "-"
+    print(f"  {who:<34s}{n:>4d} touches  sent {depth:5.1f} mm under, reported {rise:5.1f} mm over the sent height ({share})")
 
 
 def print_rows(name: str, rows: dict[str, list[tuple[float, ...]]]) -> None:
@@ -240,6 +288,20 @@ def _print_comparison(calibration: Path, env: gym.Env, band: tuple[float, float]
             else "not clipped"
         )
         print_rows(f"{label} (lifts {', '.join(f'{v:.0f}' for v in lifts)} mm; {clips})", rows)
+    print(
+        f"RBT, the touches sent more than {1e3 * GIVE_DEPTH_M:.0f} mm under the pushed jaws (fixed yaws): how far over the sent "
+        "height the robot reported itself (the simulated descent stops where the jaws meet the paper)"
+    )
+    settings = [(runs.method == "RBT") & (runs.setting == k) for k in range(FIXED_YAWS)]
+    pushes = [real_pushed_jaws(runs, "RBT", k) for k in range(FIXED_YAWS)]
+    print_give("real", give([runs.sent[m] for m in settings], [runs.reported[m] for m in settings], pushes))
+    policy = CalibratedPolicy(load_calibrator(calibration, "rbt")[0])
+    authors = [
+        (band if clip else None, 1e-3 * lift) for lift, clip in zip(paper.TABLE_LIFT_MM["RBT"], paper.TABLE_CLIPPED["RBT"], strict=True)
+    ]
+    for who, protocol in (("sim, the authors' way", authors), ("sim, as evaluate", [(None, 0.0)] * len(YAW_SETTINGS))):
+        touches = simulated_touches(env, policy, protocol)[:FIXED_YAWS]
+        print_give(who, give([t.sent for t in touches], [t.reported for t in touches], [t.pushed for t in touches]))
     real_X, real_y = load_paper_phase1()
     first_round = runs.push_round == 0  # the pushes nearest in time to the Phase I collection
     real_heights = rows_over_pushes(real_y, real_X[:, 3], runs.push_after[first_round], runs.push_yaw[first_round])

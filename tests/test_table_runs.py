@@ -239,6 +239,10 @@ def test_it_prints_the_real_and_simulated_rows(tmp_path):
         simulated = [line for line in lines[block + 2 : block + 4] if line.split()[0] == "sim,"]
         assert len(simulated) == (2 if label == "RBT" else 1)  # the authors' way differs from evaluate's for the rigid body only
         assert all(len(line.split()[-7:]) == 7 and min(float(v) for v in line.split()[-7:]) >= 0.0 for line in simulated)
+    gave = lines.index(next(line for line in lines if line.startswith("RBT, the touches sent more than 1 mm under")))
+    real_give = "real 73 touches sent 2.7 mm under, reported 1.1 mm over the sent height (0.42 of the depth)"
+    assert " ".join(lines[gave + 1].split()) == real_give  # the authors' records, whatever the simulation
+    assert [line.split()[1] for line in lines[gave + 2 : gave + 4]] == ["the", "as"]  # the authors' way, as evaluate
     heights = [line for line in lines if line.startswith("Phase I kept rows over the pushed jaws")]
     assert [line.split(",")[1].split(":")[0].strip() for line in heights] == ["real", "sim"]
     assert heights[0].endswith("-0.7 / 0.9 / 3.7 mm (5th / 50th / 95th percentile)")  # the authors' rows, their first round's pushes
@@ -249,3 +253,13 @@ def test_it_prints_the_real_and_simulated_rows(tmp_path):
         timeout=120,
     )
     assert missing.returncode == 2 and "not a calibration run folder" in missing.stderr
+
+
+def test_the_give_counts_the_deep_touches_and_their_reported_rise():
+    pushed = np.array([[0.0, 0.0, 0.0], [0.1, 0.0, 0.0], [0.0, 0.1, 0.0], [0.1, 0.1, 0.0]])  # the plane z = 0
+    sent = np.array([[0.05, 0.05, -0.003], [0.02, 0.03, -0.0005], [0.03, 0.02, 0.002], [0.04, 0.04, -0.005]])
+    reported = sent + [[0.0, 0.0, 0.002], [0.0, 0.0, 0.0004], [0.0, 0.0, 0.0], [0.0, 0.0, 0.004]]
+    n, depth, rise = table_runs.give([sent[:2], sent[2:]], [reported[:2], reported[2:]], [pushed, pushed])
+    assert n == 2  # 3 and 5 mm under; 0.5 mm under is too shallow, 2 mm over does not count
+    assert depth == pytest.approx(4.0) and rise == pytest.approx(3.0)  # medians, mm
+    assert table_runs.give([sent[2:3]], [reported[2:3]], [pushed])[0] == 0
