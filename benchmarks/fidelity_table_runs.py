@@ -210,7 +210,12 @@ def simulated_table(
     env: gym.Env, policy: CalibratedPolicy, protocol: list[tuple[tuple[float, float] | None, float]]
 ) -> list[tuple[float, ...]]:
     """Per setting, the statistics of :func:`simulated_touches`."""
-    return [statistics(t.pixels, t.predicted, t.sent, t.pushed) for t in simulated_touches(env, policy, protocol)]
+    return touch_statistics(simulated_touches(env, policy, protocol))
+
+
+def touch_statistics(touches: list[Touches]) -> list[tuple[float, ...]]:
+    """Per setting, the statistics (:data:`STATISTICS`) of its touches."""
+    return [statistics(t.pixels, t.predicted, t.sent, t.pushed) for t in touches]
 
 
 def give(sent: list[np.ndarray], reported: list[np.ndarray], pushed: list[np.ndarray]) -> tuple[int, float, float]:
@@ -274,14 +279,19 @@ def _print_comparison(calibration: Path, env: gym.Env, band: tuple[float, float]
         "(yaw -90 to 90): " + ", ".join(f"{c:+.2f}" for c in sliding(runs, "RBT"))
     )
     print(f"  {'':<60s}" + "".join(f"{label:>9s}" for label, _ in YAW_SETTINGS) + f"{'mean':>9s}")
+    rigid_body: dict[str, list[Touches]] = {}  # the rigid body's simulated touches, kept for its give below
     for name, label in paper.METHOD_LABELS.items():
         policy = CalibratedPolicy(load_calibrator(calibration, name)[0])
         lifts, clipped = paper.TABLE_LIFT_MM[label], paper.TABLE_CLIPPED[label]
         authors = [(band if clip else None, 1e-3 * lift) for lift, clip in zip(lifts, clipped, strict=True)]
         as_evaluate = [(None, 0.0)] * len(YAW_SETTINGS)
-        rows = {"real": real[label], "sim, the authors' way": simulated_table(env, policy, authors)}
+        touched = {"sim, the authors' way": simulated_touches(env, policy, authors)}
         if authors != as_evaluate:
-            rows["sim, as evaluate"] = simulated_table(env, policy, as_evaluate)
+            touched["sim, as evaluate"] = simulated_touches(env, policy, as_evaluate)
+        if label == "RBT":
+            rigid_body = touched
+        rows = {"real": real[label]}
+        rows.update({who: touch_statistics(touches) for who, touches in touched.items()})
         clips = (
             "clipped " + ", ".join(s for s, c in zip(paper.CALIBRATION_SETTINGS, clipped, strict=True) if c)
             if any(clipped)
@@ -295,13 +305,9 @@ def _print_comparison(calibration: Path, env: gym.Env, band: tuple[float, float]
     settings = [(runs.method == "RBT") & (runs.setting == k) for k in range(FIXED_YAWS)]
     pushes = [real_pushed_jaws(runs, "RBT", k) for k in range(FIXED_YAWS)]
     print_give("real", give([runs.sent[m] for m in settings], [runs.reported[m] for m in settings], pushes))
-    policy = CalibratedPolicy(load_calibrator(calibration, "rbt")[0])
-    authors = [
-        (band if clip else None, 1e-3 * lift) for lift, clip in zip(paper.TABLE_LIFT_MM["RBT"], paper.TABLE_CLIPPED["RBT"], strict=True)
-    ]
-    for who, protocol in (("sim, the authors' way", authors), ("sim, as evaluate", [(None, 0.0)] * len(YAW_SETTINGS))):
-        touches = simulated_touches(env, policy, protocol)[:FIXED_YAWS]
-        print_give(who, give([t.sent for t in touches], [t.reported for t in touches], [t.pushed for t in touches]))
+    for who, touches in rigid_body.items():
+        fixed = touches[:FIXED_YAWS]
+        print_give(who, give([t.sent for t in fixed], [t.reported for t in fixed], [t.pushed for t in fixed]))
     real_X, real_y = load_paper_phase1()
     first_round = runs.push_round == 0  # the pushes nearest in time to the Phase I collection
     real_heights = rows_over_pushes(real_y, real_X[:, 3], runs.push_after[first_round], runs.push_yaw[first_round])
