@@ -33,8 +33,11 @@ the real rigid body's miss to the right in the image follows how deep it was sen
 them: for the rigid body's touches sent more than 1 mm under the pushed jaws, how far over
 the sent height the robot reported itself after the move (the real arm gave way to part of
 the depth; the simulated descent stops where the jaws meet the paper, so it reports all of
-it); and where the Phase I kept rows lie over the pushed jaws, real (the first round of
-pushes, the nearest in time) and simulated.
+it); where the Phase I kept rows lie over the pushed jaws, real (the first round of
+pushes, the nearest in time) and simulated; and, per yaw, the mean of the Phase II pushes
+(how far a person moved the jaws from the network's prediction onto the circle, in the
+robot's x and y), real (both rounds) and simulated (the calibration run's Phase II), with
+how far the mean y spreads over the yaws.
 
 The rigid body's dive identifies the tape detector's right-image shift
 (``benchmarks/identify_tape_shift.py``, which uses this script's statistics).
@@ -164,6 +167,16 @@ def rows_over_pushes(positions: np.ndarray, yaws: np.ndarray, pushed: np.ndarray
         rows, at_yaw = nearest == index, np.isclose(pushed_yaws, yaw)
         heights[rows] = over_plane(positions[rows], pushed[at_yaw])
     return heights
+
+
+def push_means(yaws: np.ndarray, moves: np.ndarray) -> np.ndarray:
+    """Per paper yaw (-90 .. 90 degrees), the mean of the Phase II ``moves`` (n, 3) m made
+    nearest it (``yaws`` (n,) rad), (5, 3) m: where the network's prediction left the jaws
+    against the circle, which a person's push measures. Raises ValueError if a yaw has none."""
+    nearest = nearest_yaw_index(yaws)
+    if len(moves) != len(yaws) or np.bincount(nearest, minlength=len(paper.PHASE2_YAWS_DEG)).min() == 0:
+        raise ValueError(f"every paper yaw needs a push; got {len(yaws)} yaws and {len(moves)} moves")
+    return np.array([moves[nearest == k].mean(axis=0) for k in range(len(paper.PHASE2_YAWS_DEG))])
 
 
 def real_table(runs: PaperTableRuns) -> dict[str, list[tuple[float, ...]]]:
@@ -317,6 +330,21 @@ def _print_comparison(calibration: Path, env: gym.Env, band: tuple[float, float]
     for who, values in (("real", real_heights), ("sim", heights)):
         low, middle, high = np.percentile(1e3 * values, [5, 50, 95])
         print(f"Phase I kept rows over the pushed jaws, {who}: {low:.1f} / {middle:.1f} / {high:.1f} mm (5th / 50th / 95th percentile)")
+    print(
+        "Phase II pushes: how far the person moved the jaws from the network's prediction, mean per yaw (x, y mm, base "
+        "frame), and how far the mean y spreads over the yaws"
+    )
+    print(f"  {'':<24s}" + "".join(f"{yaw:>16.0f}" for yaw in paper.PHASE2_YAWS_DEG) + f"{'y spread':>10s}")
+    for who, yaws, moves in (
+        *(
+            (f"real, round {k}", runs.push_yaw[runs.push_round == k], (runs.push_after - runs.push_predicted)[runs.push_round == k])
+            for k in (0, 1)
+        ),
+        ("sim", phase2.orientation[:, 0], phase2.corrected - phase2.commanded),
+    ):
+        means = 1e3 * push_means(yaws, moves)
+        cells = "".join(f"{f'{x:+.1f}, {y:+.1f}':>16s}" for x, y in means[:, :2])
+        print(f"  {who:<24s}{cells}{np.ptp(means[:, 1]):>10.1f}")
 
 
 if __name__ == "__main__":

@@ -246,6 +246,11 @@ def test_it_prints_the_real_and_simulated_rows(tmp_path):
     heights = [line for line in lines if line.startswith("Phase I kept rows over the pushed jaws")]
     assert [line.split(",")[1].split(":")[0].strip() for line in heights] == ["real", "sim"]
     assert heights[0].endswith("-0.7 / 0.9 / 3.7 mm (5th / 50th / 95th percentile)")  # the authors' rows, their first round's pushes
+    pushes = lines.index(next(line for line in lines if line.startswith("Phase II pushes: how far the person moved")))
+    real_pushes = "real, round 0 +0.7, +1.8 -0.3, +2.3 -0.8, +1.8 -0.6, +1.3 +0.2, +1.3 1.0"
+    assert " ".join(lines[pushes + 2].split()) == real_pushes  # the authors' pushes: y within 1 mm over the yaws
+    assert lines[pushes + 3].split()[:2] == ["real,", "round"] and lines[pushes + 4].split()[0] == "sim"
+    assert len(lines[pushes + 4].split()) == 1 + 2 * 5 + 1
     missing = subprocess.run(
         [sys.executable, str(script_path("fidelity_table_runs")), "--calibration", str(Path(tmp_path))],
         capture_output=True,
@@ -263,3 +268,14 @@ def test_the_give_counts_the_deep_touches_and_their_reported_rise():
     assert n == 2  # 3 and 5 mm under; 0.5 mm under is too shallow, 2 mm over does not count
     assert depth == pytest.approx(4.0) and rise == pytest.approx(3.0)  # medians, mm
     assert table_runs.give([sent[2:3]], [reported[2:3]], [pushed])[0] == 0
+
+
+def test_the_push_means_are_taken_per_nearest_paper_yaw():
+    yaws = np.deg2rad([-88.0, -92.0, -40.0, 3.0, 50.0, 85.0, 89.0])
+    moves = np.array([[1.0, 0, 0], [3.0, 0, 0], [0, 2.0, 0], [0, 0, 4.0], [5.0, 5.0, 5.0], [0, 1.0, 0], [0, 3.0, 0]])
+    means = table_runs.push_means(yaws, moves)
+    np.testing.assert_allclose(means, [[2.0, 0, 0], [0, 2.0, 0], [0, 0, 4.0], [5.0, 5.0, 5.0], [0, 2.0, 0]])
+    with pytest.raises(ValueError, match="every paper yaw needs a push"):
+        table_runs.push_means(yaws[:-3], moves[:-3])  # none at yaw 45 or 90
+    with pytest.raises(ValueError, match="every paper yaw needs a push"):
+        table_runs.push_means(yaws, moves[:-1])
