@@ -347,11 +347,17 @@ def _print_comparison(calibration: Path, env: gym.Env, band: tuple[float, float]
         print(f"  {who:<24s}{cells}{np.ptp(means[:, 1]):>10.1f}")
 
 
-if __name__ == "__main__":
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+def calibration_arguments(description: str) -> tuple[Path, PipelineConfig]:
+    """Parse ``--calibration DIR`` (a ``dvrk-gym calibrate`` folder): the folder and the settings
+    it was made with; a folder with no settings stamp is a usage error (exit 2)."""
+    parser = argparse.ArgumentParser(description=description)
     parser.add_argument("--calibration", type=Path, required=True, help="a folder of dvrk-gym calibrate")
     args = parser.parse_args()
     settings = read_pipeline_settings(args.calibration)
     if settings is None:
         parser.error(f"{args.calibration} is not a calibration run folder (no settings stamp); make one with dvrk-gym calibrate --out")
-    report(args.calibration, PipelineConfig.from_settings(settings), load_paper_table_runs())
+    return args.calibration, PipelineConfig.from_settings(settings)
+
+
+if __name__ == "__main__":
+    report(*calibration_arguments(__doc__.splitlines()[0]), load_paper_table_runs())

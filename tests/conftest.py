@@ -34,3 +34,20 @@ def json_from_fresh_process(code: str):
     """Run ``code`` in a new Python process (in the tests' folder) and parse the JSON it prints last."""
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=Path(__file__).parent)
     return json.loads(result.stdout.strip().splitlines()[-1])
+
+
+@pytest.fixture(scope="session")
+def small_calibration(tmp_path_factory) -> Path:
+    """A ``dvrk-gym calibrate`` folder made once per test process (2 trajectories, 20 epochs,
+    640 x 360): for the benchmark scripts that read a calibration run. Read it; do not write to it."""
+    folder = tmp_path_factory.mktemp("small_calibration") / "cal"
+    small = ["--trajectories", "2", "--epochs", "20", "--resolution", "640", "360", "--out", str(folder), "--no-progress"]
+    made = subprocess.run(
+        [sys.executable, "-m", "dvrk_gym.cli.main", "calibrate", *small],
+        cwd=Path(__file__).parents[1],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert made.returncode == 0, made.stderr[-2000:]
+    return folder

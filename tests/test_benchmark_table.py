@@ -25,3 +25,24 @@ def test_any_method_name_lines_up_and_a_method_without_a_paper_figure_shows_a_da
 def test_the_table_and_the_pipeline_share_one_default_seed():
     assert inspect.signature(calibration_table).parameters["seed"].default == BENCHMARK_SEED
     assert pipeline.PipelineConfig().seed + pipeline.BENCHMARK_SEED_OFFSET == BENCHMARK_SEED
+
+
+def test_a_pass_tours_the_authors_order_and_its_errors_come_back_per_circle_in_row_major_order():
+    import gymnasium as gym
+
+    from dvrk_gym.calibration.benchmark import touch_grid, touch_grid_episodes
+    from dvrk_gym.envs.grid_touch import TOUR
+
+    env = gym.make("dvrk_gym/GridTouch-v0", camera_resolution=(320, 180))
+    try:
+        centres = env.unwrapped.circle_centers
+        # a policy that aims a little off each circle, by an amount that differs from circle to circle
+        policy = lambda obs: np.array([*centres[env.unwrapped._circle, :2] + [0.001 * (env.unwrapped._circle % 4), 0.0], -0.16, 0.0])  # noqa: E731
+        episodes = touch_grid_episodes(env, policy, 0.0, seed=3)
+        errors = touch_grid(env, policy, 0.0, seed=3)
+    finally:
+        env.close()
+    assert [e.final_info["circle_index"] for e in episodes] == list(TOUR)
+    by_circle = {e.final_info["circle_index"]: e.metrics["mm_error"] for e in episodes}
+    np.testing.assert_array_equal(errors.mm, [by_circle[c] for c in range(35)])  # the same pass, put back in circle order
+    assert len(set(np.round(errors.mm, 6))) > 4

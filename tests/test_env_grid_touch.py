@@ -5,7 +5,8 @@ import dataclasses
 import numpy as np
 import pytest
 
-from dvrk_gym.envs.grid_touch import N_CIRCLES, SURFACE_Z_M, tool_pose
+from dvrk_gym.calibration.datasets import load_paper_table_runs
+from dvrk_gym.envs.grid_touch import N_CIRCLES, SURFACE_Z_M, TOUR, tool_pose
 from dvrk_gym.sim.robot import kinematics as kin
 from dvrk_gym.sim.robot.bias import BIAS_PRESETS
 
@@ -22,8 +23,8 @@ def test_goal_spaces_and_info_keys(make_env):
     env = make_env("dvrk_gym/GridTouch-v0")
     obs, info = env.reset(seed=0)
     assert set(obs) == {"observation", "achieved_goal", "desired_goal"}
-    assert info["circle_index"] == 0
-    obs, reward, terminated, truncated, info = env.step(_nominal_action(env, 0))
+    assert info["circle_index"] == TOUR[0] == 6  # the authors began each pass at the top row's +x end
+    obs, reward, terminated, truncated, info = env.step(_nominal_action(env, TOUR[0]))
     assert terminated and not truncated
     for key in ("pixel_error", "mm_error", "true_tip_position", "reported_position", "human_correction", "is_success"):
         assert key in info
@@ -37,12 +38,31 @@ def test_successive_episodes_tour_the_35_circles_and_seed_restarts_the_tour(make
         env.step(_nominal_action(env, seen[-1]))
         _, info = env.reset()
         seen.append(info["circle_index"])
-    assert seen == list(range(N_CIRCLES)) + [0]
+    assert seen == [*TOUR, TOUR[0]]
     env.reset()
     _, info = env.reset(seed=1)
-    assert info["circle_index"] == 0
+    assert info["circle_index"] == TOUR[0]
     _, info = env.reset(options={"circle": 17})
     assert info["circle_index"] == 17
+    _, info = env.reset()
+    assert info["circle_index"] == 16  # the tour goes on from a chosen circle: along its row towards -x
+    _, info = env.reset(options={"circle": 28})
+    _, info = env.reset()
+    assert info["circle_index"] == 6  # from the last row's -x end back to the first row's +x end
+
+
+def test_the_tour_is_the_authors_order_row_by_row_along_y_each_row_from_plus_x_to_minus_x(make_env):
+    env = make_env("dvrk_gym/GridTouch-v0")
+    centres = env.unwrapped.circle_centers[list(TOUR)]
+    assert sorted(TOUR) == list(range(N_CIRCLES))
+    steps = np.diff(centres[:, :2], axis=0)
+    within_rows = steps[:, 1] == 0.0
+    assert within_rows.sum() == N_CIRCLES - 5 and (steps[within_rows, 0] < 0).all()  # -x along each row
+    assert (steps[~within_rows, 1] > 0).all() and (steps[~within_rows, 0] > 0).all()  # then back to +x, one row on
+    runs = load_paper_table_runs()  # the authors' records went the same way: -x within a row, the rows along +y
+    first_pass = runs.push_predicted[:N_CIRCLES, :2]
+    moves = np.diff(first_pass, axis=0)
+    assert (moves[:, 0] < 0).sum() == N_CIRCLES - 8 and (moves[moves[:, 0] > 0, 1] > 0.005).all()  # 8 rows of 4 or 5
 
 
 def test_yaw_option_fixed_random_and_invalid(make_env):

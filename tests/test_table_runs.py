@@ -216,15 +216,9 @@ def test_the_real_rigid_body_dove_under_the_paper_and_was_lifted_to_it():
     assert (np.abs(network) < 2.0).all()
 
 
-def test_it_prints_the_real_and_simulated_rows(tmp_path):
-    calibration = tmp_path / "cal"
-    small = ["--trajectories", "2", "--epochs", "20", "--resolution", "640", "360", "--out", str(calibration), "--no-progress"]
-    made = subprocess.run(
-        [sys.executable, "-m", "dvrk_gym.cli.main", "calibrate", *small], cwd=ROOT, capture_output=True, text=True, timeout=600
-    )
-    assert made.returncode == 0, made.stderr[-2000:]
+def test_it_prints_the_real_and_simulated_rows(small_calibration, tmp_path):
     result = subprocess.run(
-        [sys.executable, str(script_path("fidelity_table_runs")), "--calibration", str(calibration)],
+        [sys.executable, str(script_path("fidelity_table_runs")), "--calibration", str(small_calibration)],
         cwd=ROOT,
         capture_output=True,
         text=True,

@@ -30,7 +30,7 @@ from dvrk_gym.baselines.budgets import CALIBRATOR_MOVES, DEBRIDEMENT_ID
 from dvrk_gym.baselines.picking import GripOffsetLog
 from dvrk_gym.baselines.wrappers import TRAINING_YAWS
 from dvrk_gym.calibration.benchmark import YAW_SETTINGS
-from dvrk_gym.envs.grid_touch import N_CIRCLES
+from dvrk_gym.envs.grid_touch import N_CIRCLES, TOUR
 from dvrk_gym.evaluation.episodes import run_episodes
 from dvrk_gym.evaluation.trials import run_trials, totals
 from dvrk_gym.utils.checks import check_choice, check_int_fields, check_resolution
@@ -179,8 +179,9 @@ def make_training_vec_env(config: TrainConfig) -> VecEnv:
 
 
 def curve_options(index: int) -> dict[str, Any]:
-    """Reset options of the learning curve's ``index``-th touch: circle ``index``, a cycling yaw setting."""
-    return {"circle": index % N_CIRCLES, "yaw": YAW_SETTINGS[index % len(YAW_SETTINGS)][1]}
+    """Reset options of the learning curve's ``index``-th touch: the ``index``-th circle of the
+    authors' tour (:data:`~dvrk_gym.envs.grid_touch.TOUR`), a cycling yaw setting."""
+    return {"circle": TOUR[index % N_CIRCLES], "yaw": YAW_SETTINGS[index % len(YAW_SETTINGS)][1]}
 
 
 def evaluate_curve_point(model: BaseAlgorithm, env: gym.Env, env_steps: int, seed: int) -> CurvePoint:

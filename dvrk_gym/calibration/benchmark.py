@@ -17,7 +17,7 @@ import numpy as np
 
 from dvrk_gym import paper
 from dvrk_gym.calibration.policy import CalibratedPolicy, Calibrator
-from dvrk_gym.envs.grid_touch import N_CIRCLES
+from dvrk_gym.envs.grid_touch import N_CIRCLES, TOUR
 from dvrk_gym.evaluation.episodes import EpisodeResult, run_episodes, summarize
 from dvrk_gym.sim.physics.scene import GRID_COLUMNS, GRID_ROWS
 from dvrk_gym.utils.atomic import atomic_savefig, atomic_write_json
@@ -59,22 +59,24 @@ def touch_grid_episodes(env: gym.Env, policy: Any, yaw: float | str, seed: int =
     The pass starts at home with the cables relaxed (its first touch is a seeded reset with
     ``relax``), so a cell of the table does not depend on which passes ran before it in the
     same env; from one touch to the next the arm lifts and goes on, its cables keeping their
-    history (hysteresis), as on the real robot.
+    history (hysteresis), as on the real robot. It tours the circles in the authors' order
+    (:data:`~dvrk_gym.envs.grid_touch.TOUR`), and the episodes come in that order.
     """
     return run_episodes(
         env,
         policy,
         N_CIRCLES,
         seed=seed,
-        options=lambda i: {"yaw": yaw, "circle": i, "relax": i == 0},
+        options=lambda i: {"yaw": yaw, "circle": TOUR[i], "relax": i == 0},
         progress=progress,
         description=f"touch grid ({yaw})",
     )
 
 
 def touch_grid(env: gym.Env, policy: Any, yaw: float | str, seed: int = 0, progress: bool = False) -> CircleErrors:
-    """The errors of :func:`touch_grid_episodes` (the same pass), per circle."""
-    results = touch_grid_episodes(env, policy, yaw, seed=seed, progress=progress)
+    """The errors of :func:`touch_grid_episodes` (the same pass), per circle in row-major order."""
+    toured = touch_grid_episodes(env, policy, yaw, seed=seed, progress=progress)
+    results = sorted(toured, key=lambda r: int(r.final_info["circle_index"]))
     pick = lambda key: np.array([r.metrics.get(key, np.nan) for r in results])  # noqa: E731
     return CircleErrors(pixel=pick("pixel_error"), mm=pick("mm_error"), yaw=pick("target_yaw"))
 

@@ -16,7 +16,7 @@ from tqdm.auto import tqdm
 
 from dvrk_gym.calibration.policy import CalibratedPolicy, Calibrator, calibrator_input
 from dvrk_gym.calibration.records import ArrayRecord
-from dvrk_gym.envs.grid_touch import N_CIRCLES
+from dvrk_gym.envs.grid_touch import N_CIRCLES, TOUR
 from dvrk_gym.sim.robot.kinematics import PAPER_YAWS_RAD
 
 
@@ -47,7 +47,8 @@ class Phase2Data(ArrayRecord):
 def collect_phase2(
     env: gym.Env, calibrator: Calibrator, yaws: np.ndarray = PAPER_YAWS_RAD, seed: int = 0, progress: bool = True
 ) -> Phase2Data:
-    """Run the paper's Phase II on GridTouch-v0: every yaw, every circle, one correction each.
+    """Run the paper's Phase II on GridTouch-v0: every yaw, every circle (in the authors' order,
+    :data:`~dvrk_gym.envs.grid_touch.TOUR`), one correction each.
 
     Args:
         env: a GridTouch-v0 environment (wrapped or not).
@@ -61,7 +62,7 @@ def collect_phase2(
     env.reset(seed=seed)
     with tqdm(total=len(yaws) * N_CIRCLES, desc="Phase II touches", disable=not progress) as bar:
         for yaw in yaws:
-            for circle in range(N_CIRCLES):
+            for circle in TOUR:  # the authors' order: the cables' history carries from circle to circle
                 observation, _ = env.reset(options={"yaw": float(yaw), "circle": circle})
                 action = policy(observation)
                 _, _, _, _, info = env.step(action)

@@ -8,7 +8,7 @@ yaw by the paper's rule). A step goes above the target, moves down until the jaw
 the paper (or the command is reached), and records the touch.
 
 An episode is one touch of one circle, and successive episodes tour the 35 circles in
-grid order (a seeded reset starts the tour again), so the goal stays fixed within an
+the authors' order (:data:`TOUR`; a seeded reset starts the tour again), so the goal stays fixed within an
 episode, as HER's relabelling and stable-baselines3's GoalEnv check require. The paper's
 35-circle pass for one yaw is 35 consecutive episodes.
 """
@@ -34,6 +34,13 @@ from dvrk_gym.sim.robot.bias import BiasConfig
 from dvrk_gym.sim.world_config import MoveResult
 
 N_CIRCLES = GRID_ROWS * GRID_COLUMNS
+TOUR: tuple[int, ...] = tuple(row * GRID_COLUMNS + column for row in range(GRID_ROWS) for column in reversed(range(GRID_COLUMNS)))
+"""The order the authors touched their circles in, as circle indices (row-major): row by row
+along the robot's +y (down the endoscope's image), each row from +x to -x (left to right in the
+image). Every run of their calibration table and every round of their Phase II pushes went so
+(their records: :func:`dvrk_gym.calibration.datasets.load_paper_table_runs`). The cables keep
+their history from one touch to the next, so the order is part of the protocol: successive
+episodes tour it, and Phase II and the benchmark follow it."""
 ACTION_NAMES = ("bx", "by", "bz", "yaw")
 ACTION_LOW = np.array([0.0, 0.0, -0.175, -np.pi / 2])
 ACTION_HIGH = np.array([0.080, 0.085, -0.130, np.pi / 2])
@@ -110,7 +117,7 @@ class GridTouchEnv(DvrkEnv[GridTouchConfig]):
             ``"random"``: a random yaw per circle (the paper's sixth setting). Default 0;
             the setting persists until changed.
         ``"circle"``: which circle (0-34, row-major) to touch; default: the next one of
-            the tour (circle 0 after a seeded reset).
+            the authors' tour (:data:`TOUR`; its first, circle 6, after a seeded reset).
         ``"relax"``: True starts the episode at home (``HOME_POSITION_M``, yaw 0) with
             relaxed cables, as a fresh env does. False: the arm lifts
             ``approach_height_m`` straight up from its last touch (or stays where it is
@@ -151,7 +158,7 @@ class GridTouchEnv(DvrkEnv[GridTouchConfig]):
             {"observation": spaces.Box(obs_low, obs_high, dtype=np.float32), "achieved_goal": goal, "desired_goal": goal}
         )
         self.circle_centers = grid_circle_centers()
-        self._next_circle = 0
+        self._next_circle = TOUR[0]
         self._yaw_setting: float | str = 0.0
         self._circle = 0
         self._yaw = 0.0
@@ -161,7 +168,7 @@ class GridTouchEnv(DvrkEnv[GridTouchConfig]):
     # ------------------------------------------------------------------ episode
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         if seed is not None:
-            self._next_circle = 0
+            self._next_circle = TOUR[0]
         return super().reset(seed=seed, options=options)
 
     def _reset_episode(self, options: dict[str, Any]) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
@@ -171,7 +178,7 @@ class GridTouchEnv(DvrkEnv[GridTouchConfig]):
         if isinstance(circle, bool) or not isinstance(circle, (int, np.integer)) or not 0 <= circle < N_CIRCLES:
             raise ValueError(f"option 'circle' must be an int in [0, {N_CIRCLES - 1}], got {circle!r}")
         self._circle = int(circle)
-        self._next_circle = (self._circle + 1) % N_CIRCLES
+        self._next_circle = TOUR[(TOUR.index(self._circle) + 1) % N_CIRCLES]
         if self._yaw_setting == "random":
             self._yaw = float(self.np_random.uniform(-np.pi / 2, np.pi / 2))
         else:

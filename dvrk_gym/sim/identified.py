@@ -120,16 +120,18 @@ at 1920 x 1080 (:attr:`dvrk_gym.sim.endoscope.noise.DetectionNoise.right_shift_p
 widens the tape's disparity, so the tape, and only the tape, is triangulated nearer than it
 is. The Phase I rows cannot tell this from a short stereo baseline (the depth scale of
 :data:`CAMERA` holds both); the records of the table's runs can
-(``python benchmarks/identify_tape_shift.py``, about 6 minutes on a busy machine). The rigid body the authors
+(``python benchmarks/identify_tape_shift.py``, 6 to 14 minutes on a busy machine). The rigid body the authors
 fitted to the tape's rows put the printed circles 7.2 mm under the jaws pushed onto them
 (the mean over the five yaws of the median per yaw). The simulated rigid body, fitted to a
 Phase I of the identified instrument and touched as ``dvrk-gym evaluate`` does, put them
 1.7, 6.1, 8.4 and 10.8 mm under at shifts of 0, 2, 3 and 4 px; 7.2 mm is reached at 2.47 px
 (linear between 2 and 3, on the unrounded means). The shift narrows what the 12 px gate
 keeps, so the detector's misses were matched again with it (:data:`MARKER_DETECTION_NOISE`);
-with them the script gives 1.8, 6.2, 8.5 and 10.8 mm, and 2.45 px: 0.05 mm of dive, a
-quarter of its spread over instruments at one shift (instruments 1-3, not identified on,
-dive 7.4 mm at 2.45 px; the real per-yaw medians -5.5 to -8.4, the simulated -6.1 to -8.1).
+with them the script gives 1.8, 6.2, 8.5 and 10.8 mm, and 2.45 px; with the circles
+touched in the authors' order (:data:`dvrk_gym.envs.grid_touch.TOUR`) 1.7, 6.1, 8.4 and
+10.8 mm, and 2.46 px: 0.02 mm of dive from 2.47, a tenth of its spread over instruments at
+one shift (instruments 1-3, not identified on, dive 7.2 to 7.5 mm at 2.46 px; the real
+per-yaw medians -5.5 to -8.4, the simulated -5.5 to -8.2).
 The authors' right-image tape detector was the looser one
 (saturation and value from 70, not 90: ``_get_thresholded_image`` in their
 ``scripts/automatic_trajectory_collector.py``). With it the true baseline is 6.26 mm, 1.3%

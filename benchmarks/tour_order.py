@@ -1,0 +1,121 @@
+"""What the order of the touches does: the authors' tour against the grid's row-major order.
+
+The cables keep their history from one touch to the next, so the order the circles are
+touched in is part of the protocol. The authors toured theirs row by row along the robot's
++y, each row from +x to -x (:data:`dvrk_gym.envs.grid_touch.TOUR`, from their records); the
+package toured each row from -x to +x until it took theirs. For a calibration run, this
+script prints:
+
+1. the calibration table's mean error per method and setting (mm), touched as ``dvrk-gym
+   evaluate`` does (its seeds; each pass starts relaxed and carries the history within it),
+   in the authors' order and in row-major order. The forests learned their corrections from
+   a Phase II in the run's order, the authors' since the tour;
+2. how the Phase II pushes (how far a person moved the jaws from the network's prediction
+   onto the circle) depend on the move before them, real and simulated: their mean x and y
+   (mm, the robot's frame) after a move along a row (towards -x in the authors' tour) and
+   after the move to the next row (back towards +x), per yaw. Hysteresis in the joints
+   that carry the jaws along x leaves the jaws on the side they came from.
+
+About 1 minute after the calibration:
+
+    dvrk-gym calibrate --out runs/cal
+    python benchmarks/tour_order.py --calibration runs/cal
+"""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+from fidelity_table_runs import calibration_arguments
+
+import dvrk_gym  # noqa: F401  (registers the envs)
+from dvrk_gym import paper
+from dvrk_gym.calibration.benchmark import BENCHMARK_SEED, YAW_SETTINGS
+from dvrk_gym.calibration.datasets import load_paper_table_runs
+from dvrk_gym.calibration.loading import load_calibrator
+from dvrk_gym.calibration.models.features import nearest_yaw_index
+from dvrk_gym.calibration.phase2 import Phase2Data
+from dvrk_gym.calibration.policy import CalibratedPolicy
+from dvrk_gym.envs.grid_touch import N_CIRCLES, TOUR
+from dvrk_gym.evaluation.episodes import run_episodes
+
+ORDERS: dict[str, tuple[int, ...]] = {"authors'": TOUR, "row-major": tuple(range(N_CIRCLES))}
+"""The two orders the table is touched in, as circle indices."""
+ROW_MOVE_M = 0.005
+"""A move between successive pushes whose +x exceeds this goes to the next row, metres (the
+moves along a row go 10 to 17 mm towards -x; to the next row, 30 to 70 mm back)."""
+
+
+def mean_error(env: gym.Env, policy: CalibratedPolicy, setting: int, order: tuple[int, ...]) -> float:
+    """Mean touch error (mm) of one pass over the circles in ``order`` at ``setting`` of YAW_SETTINGS."""
+    yaw = YAW_SETTINGS[setting][1]
+    results = run_episodes(
+        env,
+        policy,
+        N_CIRCLES,
+        seed=BENCHMARK_SEED + setting,
+        options=lambda i: {"yaw": yaw, "circle": order[i], "relax": i == 0},
+        progress=False,
+    )
+    return float(np.mean([r.metrics["mm_error"] for r in results]))
+
+
+def pushes_by_move(sent: np.ndarray, pushes: np.ndarray, yaws: np.ndarray) -> np.ndarray:
+    """Per paper yaw, the mean push (x, y) after a move along a row and after a move to the next
+    row, (5, 2, 2) m: ``sent`` (n, 3) m where each touch was sent, in the order touched;
+    ``pushes`` (n, 3) m; ``yaws`` (n,) rad. A move to the next row goes more than
+    :data:`ROW_MOVE_M` towards +x (the authors' tour); the first touch of each yaw has no move
+    before it. NaN where a yaw has no such move."""
+    nearest = nearest_yaw_index(yaws)
+    out = np.full((len(paper.PHASE2_YAWS_DEG), 2, 2), np.nan)
+    for k in range(len(paper.PHASE2_YAWS_DEG)):
+        rows = np.flatnonzero(nearest == k)
+        if len(rows) < 2:
+            continue
+        moves = np.diff(sent[rows], axis=0)
+        after = pushes[rows[1:], :2]
+        next_row = moves[:, 0] > ROW_MOVE_M
+        for j, chosen in enumerate((~next_row, next_row)):
+            if chosen.any():
+                out[k, j] = after[chosen].mean(axis=0)
+    return out
+
+
+def main() -> None:
+    calibration, config = calibration_arguments(__doc__.splitlines()[0])
+    print("1. Mean touch error (mm) per setting, touched in each order")
+    print(f"  {'method':<8s}{'order':<11s}" + "".join(f"{label:>9s}" for label, _ in YAW_SETTINGS) + f"{'mean':>9s}")
+    env = gym.make("dvrk_gym/GridTouch-v0", **config.env_kwargs())
+    try:
+        for name, label in paper.METHOD_LABELS.items():
+            policy = CalibratedPolicy(load_calibrator(calibration, name)[0])
+            for order_name, order in ORDERS.items():
+                cells = [mean_error(env, policy, k, order) for k in range(len(YAW_SETTINGS))]
+                print(f"  {label:<8s}{order_name:<11s}" + "".join(f"{v:9.2f}" for v in cells) + f"{np.mean(cells):9.2f}")
+    finally:
+        env.close()
+    print("2. Phase II pushes (x, y mm) after a move along a row | after the move to the next row, per yaw")
+    runs = load_paper_table_runs()
+    phase2 = Phase2Data.load(calibration / "phase2.npz")
+    robots = [
+        (
+            f"real, round {r}",
+            runs.push_predicted[runs.push_round == r],
+            (runs.push_after - runs.push_predicted)[runs.push_round == r],
+            runs.push_yaw[runs.push_round == r],
+        )
+        for r in (0, 1)
+    ]
+    robots.append(("sim", phase2.commanded, phase2.corrected - phase2.commanded, phase2.orientation[:, 0]))
+    for who, sent, pushes, yaws in robots:
+        means = 1e3 * pushes_by_move(sent, pushes, yaws)
+        cells = "   ".join(
+            f"{yaw:+4.0f}: {a[0]:+.1f},{a[1]:+.1f} | {b[0]:+.1f},{b[1]:+.1f}"
+            for yaw, (a, b) in zip(paper.PHASE2_YAWS_DEG, means, strict=True)
+        )
+        gap = np.nanmean(means[:, 1, 0] - means[:, 0, 0])
+        print(f"  {who:<14s}{cells}   x after the next-row move minus along a row: {gap:+.1f}")
+
+
+if __name__ == "__main__":
+    main()
