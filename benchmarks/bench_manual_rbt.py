@@ -17,30 +17,26 @@ five yaws of Phase II (a hand-placed fit at every yaw). About a minute after the
 """
 
 import argparse
-from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
+from fidelity_table_runs import add_calibration_argument, read_calibration
 
 from dvrk_gym.calibration.benchmark import calibration_table, format_table
 from dvrk_gym.calibration.loading import load_calibrator
 from dvrk_gym.calibration.models.rigid import RigidBodyCalibrator
 from dvrk_gym.calibration.phase2 import Phase2Data
-from dvrk_gym.calibration.pipeline import PipelineConfig, read_pipeline_settings
 from dvrk_gym.sim.robot.kinematics import PAPER_YAWS_RAD
 
 if __name__ == "__main__":
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--calibration", type=Path, required=True, help="a folder of dvrk-gym calibrate")
+    add_calibration_argument(parser)
     paper_yaws = [round(float(np.rad2deg(yaw))) for yaw in PAPER_YAWS_RAD]
     parser.add_argument(
         "--yaw", type=int, default=0, choices=paper_yaws, help="the yaw of the hand-placed points, degrees (default: %(default)s)"
     )
     args = parser.parse_args()
-    settings = read_pipeline_settings(args.calibration)
-    if settings is None:
-        parser.error(f"{args.calibration} is not a calibration run folder (no settings stamp); make one with dvrk-gym calibrate --out")
-    config = PipelineConfig.from_settings(settings)
+    config = read_calibration(parser, args.calibration)
     phase2 = Phase2Data.load(args.calibration / "phase2.npz")
     at_yaw = np.isclose(phase2.orientation[:, 0], np.deg2rad(args.yaw))
     # One transform: with no rows at the other yaws, the rigid body uses its all-rows fit there.

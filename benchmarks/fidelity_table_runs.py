@@ -330,34 +330,48 @@ def _print_comparison(calibration: Path, env: gym.Env, band: tuple[float, float]
     for who, values in (("real", real_heights), ("sim", heights)):
         low, middle, high = np.percentile(1e3 * values, [5, 50, 95])
         print(f"Phase I kept rows over the pushed jaws, {who}: {low:.1f} / {middle:.1f} / {high:.1f} mm (5th / 50th / 95th percentile)")
+    _print_push_means(runs, phase2)
+
+
+def _print_push_means(runs: PaperTableRuns, phase2: Phase2Data) -> None:
+    """The Phase II pushes' mean per yaw (:func:`push_means`), real (both rounds) and simulated (``phase2``)."""
     print(
         "Phase II pushes: how far the person moved the jaws from the network's prediction, mean per yaw (x, y mm, base "
         "frame), and how far the mean y spreads over the yaws"
     )
     print(f"  {'':<24s}" + "".join(f"{yaw:>16.0f}" for yaw in paper.PHASE2_YAWS_DEG) + f"{'y spread':>10s}")
-    for who, yaws, moves in (
-        *(
-            (f"real, round {k}", runs.push_yaw[runs.push_round == k], (runs.push_after - runs.push_predicted)[runs.push_round == k])
-            for k in (0, 1)
-        ),
-        ("sim", phase2.orientation[:, 0], phase2.corrected - phase2.commanded),
+    for who, (_, moves, yaws) in (
+        *((f"real, round {k}", real_pushes(runs, k)) for k in (0, 1)),
+        ("sim", (phase2.commanded, phase2.corrected - phase2.commanded, phase2.orientation[:, 0])),
     ):
         means = 1e3 * push_means(yaws, moves)
         cells = "".join(f"{f'{x:+.1f}, {y:+.1f}':>16s}" for x, y in means[:, :2])
         print(f"  {who:<24s}{cells}{np.ptp(means[:, 1]):>10.1f}")
 
 
-def calibration_arguments(description: str) -> tuple[Path, PipelineConfig]:
-    """Parse ``--calibration DIR`` (a ``dvrk-gym calibrate`` folder): the folder and the settings
-    it was made with; a folder with no settings stamp is a usage error (exit 2)."""
-    parser = argparse.ArgumentParser(description=description)
+def add_calibration_argument(parser: argparse.ArgumentParser) -> None:
+    """Give a benchmark's parser ``--calibration DIR``, a ``dvrk-gym calibrate`` folder (read with :func:`read_calibration`)."""
     parser.add_argument("--calibration", type=Path, required=True, help="a folder of dvrk-gym calibrate")
-    args = parser.parse_args()
-    settings = read_pipeline_settings(args.calibration)
+
+
+def read_calibration(parser: argparse.ArgumentParser, folder: Path) -> PipelineConfig:
+    """The settings a calibration run ``folder`` was made with; a folder with no settings stamp
+    is a usage error of ``parser`` (exit 2)."""
+    settings = read_pipeline_settings(folder)
     if settings is None:
-        parser.error(f"{args.calibration} is not a calibration run folder (no settings stamp); make one with dvrk-gym calibrate --out")
-    return args.calibration, PipelineConfig.from_settings(settings)
+        parser.error(f"{folder} is not a calibration run folder (no settings stamp); make one with dvrk-gym calibrate --out")
+    return PipelineConfig.from_settings(settings)
+
+
+def real_pushes(runs: PaperTableRuns, round_index: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """One round of the real Phase II pushes (:data:`PUSH_ROUND`), in the order made: the network's
+    predictions (n, 3) m, how far the person moved the jaws from them (n, 3) m, and the yaws (n,) rad."""
+    mine = runs.push_round == round_index
+    return runs.push_predicted[mine], (runs.push_after - runs.push_predicted)[mine], runs.push_yaw[mine]
 
 
 if __name__ == "__main__":
-    report(*calibration_arguments(__doc__.splitlines()[0]), load_paper_table_runs())
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    add_calibration_argument(parser)
+    args = parser.parse_args()
+    report(args.calibration, read_calibration(parser, args.calibration), load_paper_table_runs())

@@ -1,5 +1,7 @@
 """benchmarks/tour_order.py: the pushes split by the move before them, its flag, a run."""
 
+import dataclasses
+import shutil
 import subprocess
 import sys
 
@@ -7,14 +9,11 @@ import numpy as np
 import pytest
 from benchmark_scripts import ROOT, load_script, script_path
 
-from dvrk_gym.envs.grid_touch import N_CIRCLES, TOUR
+from dvrk_gym.calibration.phase2 import Phase2Data
+from dvrk_gym.envs.grid_touch import N_CIRCLES
 
 tour_order = load_script("tour_order")
 SCRIPT = script_path("tour_order")
-
-
-def test_the_orders_are_the_authors_tour_and_row_major():
-    assert tour_order.ORDERS["authors'"] == TOUR and tour_order.ORDERS["row-major"] == tuple(range(N_CIRCLES))
 
 
 def test_the_pushes_are_split_by_whether_the_move_before_went_to_the_next_row():
@@ -28,6 +27,8 @@ def test_the_pushes_are_split_by_whether_the_move_before_went_to_the_next_row():
     alone = tour_order.pushes_by_move(sent[:3], pushes[:3], yaws[:3])
     np.testing.assert_allclose(alone[2, 0], [2.0, 3.0])
     assert np.isnan(alone[2, 1]).all()  # no move to a next row
+    with pytest.raises(ValueError, match="must be as long, got 5, 4, 5"):
+        tour_order.pushes_by_move(sent, pushes[:4], yaws)
 
 
 def test_it_refuses_a_folder_no_calibration_made(tmp_path):
@@ -52,3 +53,18 @@ def test_it_prints_both_orders_for_each_method_and_the_pushes_by_move(small_cali
     pushes = lines[lines.index(next(line for line in lines if line.startswith("2. Phase II pushes"))) + 1 :]
     assert [line.split()[0].rstrip(",") for line in pushes] == ["real", "real", "sim"]
     assert pushes[0].endswith("x after the next-row move minus along a row: -1.0")  # the authors' pushes, their first round
+    assert pushes[1].endswith("x after the next-row move minus along a row: -0.4")  # and their second
+
+
+def test_it_refuses_a_phase_ii_made_before_the_authors_tour(small_calibration, tmp_path):
+    stale = tmp_path / "stale"
+    shutil.copytree(small_calibration, stale)
+    phase2 = Phase2Data.load(stale / "phase2.npz")
+    assert phase2.in_authors_tour
+    row_major = dataclasses.replace(phase2, circle=np.tile(np.arange(N_CIRCLES), len(phase2.circle) // N_CIRCLES))
+    assert not row_major.in_authors_tour
+    row_major.save(stale / "phase2.npz")
+    result = subprocess.run(
+        [sys.executable, str(SCRIPT), "--calibration", str(stale)], cwd=ROOT, capture_output=True, text=True, timeout=300
+    )
+    assert result.returncode == 2 and "made before the authors' tour" in result.stderr.splitlines()[-1]

@@ -3,6 +3,7 @@
 import inspect
 
 import numpy as np
+import pytest
 
 from dvrk_gym.calibration import pipeline
 from dvrk_gym.calibration.benchmark import BENCHMARK_SEED, YAW_SETTINGS, CircleErrors, calibration_table, format_table
@@ -46,3 +47,29 @@ def test_a_pass_tours_the_authors_order_and_its_errors_come_back_per_circle_in_r
     by_circle = {e.final_info["circle_index"]: e.metrics["mm_error"] for e in episodes}
     np.testing.assert_array_equal(errors.mm, [by_circle[c] for c in range(35)])  # the same pass, put back in circle order
     assert len(set(np.round(errors.mm, 6))) > 4
+
+
+def test_a_pass_refuses_an_order_that_is_not_each_circle_once():
+    from dvrk_gym.calibration.benchmark import touch_grid_episodes
+
+    for order in ([0] * 35, list(range(34)), list(range(1, 36))):
+        with pytest.raises(ValueError, match="each circle index 0-34 once"):
+            touch_grid_episodes(None, None, 0.0, order=order)  # refused before any env is touched
+
+
+def test_a_calibration_folder_whose_phase_ii_went_row_major_is_refused_not_mixed(small_calibration, tmp_path):
+    import dataclasses
+    import shutil
+
+    from dvrk_gym.calibration.phase2 import Phase2Data
+    from dvrk_gym.calibration.pipeline import PipelineConfig, read_pipeline_settings, run_calibration
+
+    stale = tmp_path / "stale"
+    shutil.copytree(small_calibration, stale)
+    phase2 = Phase2Data.load(stale / "phase2.npz")
+    dataclasses.replace(phase2, circle=np.tile(np.arange(35), len(phase2.circle) // 35)).save(stale / "phase2.npz")
+    forests = (stale / "two_phase.zip").read_bytes()
+    config = PipelineConfig.from_settings(read_pipeline_settings(stale))
+    with pytest.raises(ValueError, match="another order than the authors' tour.*delete it and two_phase.zip"):
+        run_calibration(stale, config, progress=False)
+    assert (stale / "two_phase.zip").read_bytes() == forests  # nothing made or moved in the folder

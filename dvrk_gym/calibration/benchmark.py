@@ -8,6 +8,7 @@ and the circle's centre, over the 35 circles, in pixels (left image) and millime
 from __future__ import annotations
 
 import logging
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -52,22 +53,27 @@ class CircleErrors:
     yaw: np.ndarray
 
 
-def touch_grid_episodes(env: gym.Env, policy: Any, yaw: float | str, seed: int = 0, progress: bool = False) -> list[EpisodeResult]:
+def touch_grid_episodes(
+    env: gym.Env, policy: Any, yaw: float | str, seed: int = 0, progress: bool = False, order: Sequence[int] = TOUR
+) -> list[EpisodeResult]:
     """Touch all 35 circles once with ``policy`` at one yaw setting: the 35 episodes, each with
     its final info (GridTouch-v0's: the true tip and circle positions, m, and the errors).
 
     The pass starts at home with the cables relaxed (its first touch is a seeded reset with
     ``relax``), so a cell of the table does not depend on which passes ran before it in the
     same env; from one touch to the next the arm lifts and goes on, its cables keeping their
-    history (hysteresis), as on the real robot. It tours the circles in the authors' order
-    (:data:`~dvrk_gym.envs.grid_touch.TOUR`), and the episodes come in that order.
+    history (hysteresis), as on the real robot. It tours the circles in ``order`` (circle
+    indices, each once; default the authors' order, :data:`~dvrk_gym.envs.grid_touch.TOUR`),
+    and the episodes come in that order.
     """
+    if sorted(order) != list(range(N_CIRCLES)):
+        raise ValueError(f"order must hold each circle index 0-{N_CIRCLES - 1} once, got {list(order)}")
     return run_episodes(
         env,
         policy,
         N_CIRCLES,
         seed=seed,
-        options=lambda i: {"yaw": yaw, "circle": TOUR[i], "relax": i == 0},
+        options=lambda i: {"yaw": yaw, "circle": int(order[i]), "relax": i == 0},
         progress=progress,
         description=f"touch grid ({yaw})",
     )
@@ -76,7 +82,7 @@ def touch_grid_episodes(env: gym.Env, policy: Any, yaw: float | str, seed: int =
 def touch_grid(env: gym.Env, policy: Any, yaw: float | str, seed: int = 0, progress: bool = False) -> CircleErrors:
     """The errors of :func:`touch_grid_episodes` (the same pass), per circle in row-major order."""
     toured = touch_grid_episodes(env, policy, yaw, seed=seed, progress=progress)
-    results = sorted(toured, key=lambda r: int(r.final_info["circle_index"]))
+    results = [toured[i] for i in np.argsort(TOUR)]  # episode i touched circle TOUR[i]
     pick = lambda key: np.array([r.metrics.get(key, np.nan) for r in results])  # noqa: E731
     return CircleErrors(pixel=pick("pixel_error"), mm=pick("mm_error"), yaw=pick("target_yaw"))
 

@@ -43,6 +43,13 @@ class Phase2Data(ArrayRecord):
         """Calibrator inputs (N, 6): camera position (m), yaw, pitch, roll (rad)."""
         return np.hstack([self.camera_position, self.orientation])
 
+    @property
+    def in_authors_tour(self) -> bool:
+        """Whether each yaw's 35 touches went in the authors' order (:data:`~dvrk_gym.envs.grid_touch.TOUR`),
+        as :func:`collect_phase2` touches them (a Phase II made before it took their tour went row-major)."""
+        circles = np.asarray(self.circle)
+        return len(circles) > 0 and len(circles) % N_CIRCLES == 0 and bool((circles.reshape(-1, N_CIRCLES) == TOUR).all())
+
 
 def collect_phase2(
     env: gym.Env, calibrator: Calibrator, yaws: np.ndarray = PAPER_YAWS_RAD, seed: int = 0, progress: bool = True

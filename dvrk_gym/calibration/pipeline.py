@@ -110,6 +110,11 @@ def _run_stages(out: Path, folder: RunFolder, config: PipelineConfig, progress: 
             _save,
         )
         phase2 = folder.cached("phase2.npz", lambda: collect_phase2(grid, dnn, seed=config.seed, progress=progress), Phase2Data.load, _save)
+        if not phase2.in_authors_tour:  # cached before the tour: its forests learned another order's hysteresis
+            raise ValueError(
+                f"{folder.file('phase2.npz')} touched the circles in another order than the authors' tour (a run made before "
+                f"dvrk-gym took it); delete it and {CALIBRATOR_FILES['dnn+rf']} to make them again, or use another --out"
+            )
         two_phase = folder.cached(
             CALIBRATOR_FILES["dnn+rf"],
             lambda: TwoPhaseCalibrator(dnn=dnn, seed=config.seed).fit_phase2(phase2.X, phase2.corrected),

@@ -35,12 +35,15 @@ from dvrk_gym.sim.world_config import MoveResult
 
 N_CIRCLES = GRID_ROWS * GRID_COLUMNS
 TOUR: tuple[int, ...] = tuple(row * GRID_COLUMNS + column for row in range(GRID_ROWS) for column in reversed(range(GRID_COLUMNS)))
-"""The order the authors touched their circles in, as circle indices (row-major): row by row
-along the robot's +y (down the endoscope's image), each row from +x to -x (left to right in the
-image). Every run of their calibration table and every round of their Phase II pushes went so
-(their records: :func:`dvrk_gym.calibration.datasets.load_paper_table_runs`). The cables keep
-their history from one touch to the next, so the order is part of the protocol: successive
-episodes tour it, and Phase II and the benchmark follow it."""
+"""The authors' tour of the circles, as circle indices (row-major): row by row along the robot's
++y (down the endoscope's image), each row from +x to -x (left to right in the image). Every run
+of their calibration table and every round of their Phase II pushes went so (their records:
+:func:`dvrk_gym.calibration.datasets.load_paper_table_runs`). Their printed grid was not this
+one: 8 staggered rows of 4 or 5 circles about 16 mm apart, so a pass moved 27 times towards -x
+and returned to +x 7 times; on this grid of 5 rows of 7 circles 10 mm apart it moves 30 times
+towards -x and returns 4 times. The cables keep their history from one touch to the next, so
+the direction is part of the protocol: successive episodes tour it, and Phase II and the
+benchmark follow it."""
 ACTION_NAMES = ("bx", "by", "bz", "yaw")
 ACTION_LOW = np.array([0.0, 0.0, -0.175, -np.pi / 2])
 ACTION_HIGH = np.array([0.080, 0.085, -0.130, np.pi / 2])
