@@ -65,7 +65,7 @@ from dvrk_gym.calibration.loading import load_calibrator
 from dvrk_gym.calibration.models.features import nearest_yaw_index
 from dvrk_gym.calibration.phase1 import Phase1Data
 from dvrk_gym.calibration.phase2 import Phase2Data
-from dvrk_gym.calibration.pipeline import PipelineConfig, read_pipeline_settings
+from dvrk_gym.calibration.pipeline import BENCHMARK_SEED_OFFSET, PipelineConfig, read_pipeline_settings
 from dvrk_gym.calibration.policy import CalibratedPolicy
 
 FIXED_YAWS = 5
@@ -205,13 +205,17 @@ class Touches:
     pushed: np.ndarray
 
 
-def simulated_touches(env: gym.Env, policy: CalibratedPolicy, protocol: list[tuple[tuple[float, float] | None, float]]) -> list[Touches]:
+def simulated_touches(
+    env: gym.Env, policy: CalibratedPolicy, protocol: list[tuple[tuple[float, float] | None, float]], seed: int = BENCHMARK_SEED
+) -> list[Touches]:
     """Per setting, the simulated touches sent by ``protocol``: per setting, the band the height
-    is clipped into (None: not clipped) and the lift (m)."""
+    is clipped into (None: not clipped) and the lift (m). Setting k's pass is seeded with
+    ``seed + k``, as ``dvrk-gym evaluate`` seeds it (``seed``: the run's seed plus
+    :data:`~dvrk_gym.calibration.pipeline.BENCHMARK_SEED_OFFSET`)."""
     settings = []
     for k, ((_, yaw), (band, lift)) in enumerate(zip(YAW_SETTINGS, protocol, strict=True)):
         touch = AuthorsTouch(policy, band, lift)
-        episodes = touch_grid_episodes(env, touch, yaw, seed=BENCHMARK_SEED + k)
+        episodes = touch_grid_episodes(env, touch, yaw, seed=seed + k)
         reported = np.array([e.final_info["reported_position"] for e in episodes])
         pushed = reported + np.array([e.final_info["human_correction"] for e in episodes])
         pixels = np.array([e.metrics["pixel_error"] for e in episodes])
@@ -220,10 +224,10 @@ def simulated_touches(env: gym.Env, policy: CalibratedPolicy, protocol: list[tup
 
 
 def simulated_table(
-    env: gym.Env, policy: CalibratedPolicy, protocol: list[tuple[tuple[float, float] | None, float]]
+    env: gym.Env, policy: CalibratedPolicy, protocol: list[tuple[tuple[float, float] | None, float]], seed: int = BENCHMARK_SEED
 ) -> list[tuple[float, ...]]:
-    """Per setting, the statistics of :func:`simulated_touches`."""
-    return touch_statistics(simulated_touches(env, policy, protocol))
+    """Per setting, the statistics of :func:`simulated_touches` (seeded from ``seed``)."""
+    return touch_statistics(simulated_touches(env, policy, protocol, seed))
 
 
 def touch_statistics(touches: list[Touches]) -> list[tuple[float, ...]]:
@@ -279,13 +283,16 @@ def report(calibration: Path, config: PipelineConfig, runs: PaperTableRuns) -> N
     print(f"instrument: {config.env_kwargs()}")
     env = gym.make("dvrk_gym/GridTouch-v0", **config.env_kwargs())
     try:
-        _print_comparison(calibration, env, band, phase2, runs)
+        _print_comparison(calibration, env, band, phase2, runs, config.seed + BENCHMARK_SEED_OFFSET)
     finally:
         env.close()
 
 
-def _print_comparison(calibration: Path, env: gym.Env, band: tuple[float, float], phase2: Phase2Data, runs: PaperTableRuns) -> None:
-    """The rows of :func:`report`, touched on ``env``; ``band`` (m) carried over by ``phase2``'s pushes."""
+def _print_comparison(
+    calibration: Path, env: gym.Env, band: tuple[float, float], phase2: Phase2Data, runs: PaperTableRuns, seed: int
+) -> None:
+    """The rows of :func:`report`, touched on ``env`` with ``dvrk-gym evaluate``'s seeds (from
+    ``seed``); ``band`` (m) carried over by ``phase2``'s pushes."""
     real = real_table(runs)
     print(
         "real RBT: correlation of how far right of the circle the end effector landed (px) with how high it was sent "
@@ -298,9 +305,9 @@ def _print_comparison(calibration: Path, env: gym.Env, band: tuple[float, float]
         lifts, clipped = paper.TABLE_LIFT_MM[label], paper.TABLE_CLIPPED[label]
         authors = [(band if clip else None, 1e-3 * lift) for lift, clip in zip(lifts, clipped, strict=True)]
         as_evaluate = [(None, 0.0)] * len(YAW_SETTINGS)
-        touched = {"sim, the authors' way": simulated_touches(env, policy, authors)}
+        touched = {"sim, the authors' way": simulated_touches(env, policy, authors, seed)}
         if authors != as_evaluate:
-            touched["sim, as evaluate"] = simulated_touches(env, policy, as_evaluate)
+            touched["sim, as evaluate"] = simulated_touches(env, policy, as_evaluate, seed)
         if label == "RBT":
             rigid_body = touched
         rows = {"real": real[label]}

@@ -5,6 +5,7 @@ import io
 import subprocess
 import sys
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -274,3 +275,22 @@ def test_the_push_means_are_taken_per_nearest_paper_yaw():
         table_runs.push_means(yaws[:-3], moves[:-3])  # none at yaw 45 or 90
     with pytest.raises(ValueError, match="every paper yaw needs a push"):
         table_runs.push_means(yaws, moves[:-1])
+
+
+def test_the_simulated_passes_are_seeded_from_the_runs_seed(monkeypatch):
+    seeds = []
+
+    def fake_pass(env, touch, yaw, seed):  # one episode per circle, as touch_grid_episodes gives them
+        seeds.append(seed)
+        touch(None)
+        info = {"reported_position": np.zeros(3), "human_correction": np.zeros(3)}
+        return [SimpleNamespace(final_info=info, metrics={"pixel_error": 1.0})]
+
+    monkeypatch.setattr(table_runs, "touch_grid_episodes", fake_pass)
+    policy = lambda observation: np.array([0.04, 0.04, -0.16, 0.0], dtype=np.float32)  # noqa: E731
+    protocol = [(None, 0.0)] * 6
+    table_runs.simulated_touches(None, policy, protocol, seed=1007)  # a run made with --seed 7
+    assert seeds == [1007, 1008, 1009, 1010, 1011, 1012]
+    seeds.clear()
+    table_runs.simulated_table(None, policy, protocol)
+    assert seeds == [1000 + k for k in range(6)]  # dvrk-gym evaluate's seeds for a run made with --seed 0
