@@ -349,7 +349,7 @@ def _print_push_means(runs: PaperTableRuns, phase2: Phase2Data) -> None:
     print(f"  {'':<24s}" + "".join(f"{yaw:>16.0f}" for yaw in paper.PHASE2_YAWS_DEG) + f"{'y spread':>10s}")
     for who, (_, moves, yaws) in (
         *((f"real, round {k}", real_pushes(runs, k)) for k in (0, 1)),
-        ("sim", (phase2.commanded, phase2.corrected - phase2.commanded, phase2.orientation[:, 0])),
+        ("sim", simulated_pushes(phase2)),
     ):
         means = 1e3 * push_means(yaws, moves)
         cells = "".join(f"{f'{x:+.1f}, {y:+.1f}':>16s}" for x, y in means[:, :2])
@@ -368,6 +368,12 @@ def read_calibration(parser: argparse.ArgumentParser, folder: Path) -> PipelineC
     if settings is None:
         parser.error(f"{folder} is not a calibration run folder (no settings stamp); make one with dvrk-gym calibrate --out")
     return PipelineConfig.from_settings(settings)
+
+
+def simulated_pushes(phase2: Phase2Data) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A simulated Phase II's pushes as :func:`real_pushes` gives the real ones: the network's
+    predictions (n, 3) m, how far the person moved the jaws from them (n, 3) m, the yaws (n,) rad."""
+    return phase2.commanded, phase2.corrected - phase2.commanded, phase2.orientation[:, 0]
 
 
 def real_pushes(runs: PaperTableRuns, round_index: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

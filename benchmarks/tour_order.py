@@ -31,7 +31,7 @@ from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
-from fidelity_table_runs import add_calibration_argument, read_calibration, real_pushes
+from fidelity_table_runs import add_calibration_argument, read_calibration, real_pushes, simulated_pushes
 
 import dvrk_gym  # noqa: F401  (registers the envs)
 from dvrk_gym import paper
@@ -100,7 +100,7 @@ def print_pushes_by_move(runs: PaperTableRuns, phase2: Phase2Data) -> None:
     """Part 2: the pushes after each kind of move (:func:`pushes_by_move`), real (both rounds) and simulated."""
     print("2. Phase II pushes (x, y mm) after a move along a row | after the move to the next row, per yaw")
     robots = [(f"real, round {k}", real_pushes(runs, k)) for k in (0, 1)]
-    robots.append(("sim", (phase2.commanded, phase2.corrected - phase2.commanded, phase2.orientation[:, 0])))
+    robots.append(("sim", simulated_pushes(phase2)))
     for who, (sent, pushes, yaws) in robots:
         means = 1e3 * pushes_by_move(sent, pushes, yaws)
         cells = "   ".join(

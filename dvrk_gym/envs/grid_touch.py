@@ -44,6 +44,8 @@ and returned to +x 7 times; on this grid of 5 rows of 7 circles 10 mm apart it m
 towards -x and returns 4 times. The cables keep their history from one touch to the next, so
 the direction is part of the protocol: successive episodes tour it, and Phase II and the
 benchmark follow it."""
+_NEXT_IN_TOUR: tuple[int, ...] = tuple(TOUR[(TOUR.index(circle) + 1) % N_CIRCLES] for circle in range(N_CIRCLES))
+"""The circle after each circle (by index) in :data:`TOUR`, the last back to the first: looked up at every reset."""
 ACTION_NAMES = ("bx", "by", "bz", "yaw")
 ACTION_LOW = np.array([0.0, 0.0, -0.175, -np.pi / 2])
 ACTION_HIGH = np.array([0.080, 0.085, -0.130, np.pi / 2])
@@ -181,7 +183,7 @@ class GridTouchEnv(DvrkEnv[GridTouchConfig]):
         if isinstance(circle, bool) or not isinstance(circle, (int, np.integer)) or not 0 <= circle < N_CIRCLES:
             raise ValueError(f"option 'circle' must be an int in [0, {N_CIRCLES - 1}], got {circle!r}")
         self._circle = int(circle)
-        self._next_circle = TOUR[(TOUR.index(self._circle) + 1) % N_CIRCLES]
+        self._next_circle = _NEXT_IN_TOUR[self._circle]
         if self._yaw_setting == "random":
             self._yaw = float(self.np_random.uniform(-np.pi / 2, np.pi / 2))
         else:
