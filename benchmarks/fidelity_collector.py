@@ -1,25 +1,36 @@
 """What-ifs of the Phase I collector against the authors' real rows: the pause step and the heights.
 
-The authors' collector (``scripts/automatic_trajectory_collector.py`` of
-:data:`dvrk_gym.paper.AUTHORS_CODE`) drove each trajectory along one straight path from a
-corner 5 mm over the paper to a random target 1 mm over it, pausing every 20 steps of 0.1 mm
-(2 mm). The simulated collection pauses every :data:`dvrk_gym.paper.PHASE1_STEP_M` (1 mm),
-93 poses a trajectory, from corners at the middle of a 6 mm band of heights towards targets
-anywhere in it. This measures the simulated collection changed that way, a change for the
-measurement and not an option of the package: ``--step-mm`` sets the pause step,
-``--corner-mm`` and ``--target-mm`` the heights of the corners and the targets over where the
-robot reports its jaws pushed onto the paper (taken from one GridTouch-v0 push at the grid's
-middle, yaw 0). It prints the fidelity comparison of ``dvrk-gym fidelity`` for that
-collection, and with ``--calibrate`` also the calibration table of a whole calibration run
-with it (in a temporary folder; 4 minutes more at the paper's budgets).
+The simulated Phase I follows the authors' collector (``scripts/automatic_trajectory_collector.py``
+of :data:`dvrk_gym.paper.AUTHORS_CODE`): each trajectory runs straight from a corner 5 mm over
+the paper towards a random target 1 mm over it, pausing every 2 mm
+(:data:`dvrk_gym.paper.PHASE1_STEP_M`, :data:`dvrk_gym.envs.exploration.CORNER_Z_M` and
+``TARGET_Z_M``). This measures it changed, a change for the measurement and not an option of
+the package: ``--step-mm`` sets the pause step, ``--corner-mm`` and ``--target-mm`` the heights
+of the corners and the targets over where the robot reports its jaws pushed onto the paper
+(taken from one GridTouch-v0 push at the grid's middle, yaw 0, on the instrument measured;
+the package takes instrument 0's, :data:`dvrk_gym.envs.exploration.PAPER_REPORTED_Z_M`, for
+every instrument). The collector the simulator had before paused every millimetre, from
+corners 2.6 mm over the paper towards targets spread over a 6 mm band around that height:
+``--step-mm 1 --corner-mm 2.6 --target-mm 2.6`` is the nearest. The red-tape detector
+searches only the authors' boxes of each image (:data:`dvrk_gym.paper.MARKER_SEARCH_BOXES_PX`);
+``--no-search-box`` lets it search the whole image, as the simulator's did before, and
+``--miss-probability`` sets its misses per image (29.0% matched the real share of kept rows
+without the boxes). It prints the fidelity
+comparison of ``dvrk-gym fidelity`` for that collection, the share of its kept rows whose
+tape lay outside the boxes, and with ``--calibrate`` also the
+calibration table of a whole calibration run with it (in a temporary folder, or ``--out``,
+where ``benchmarks/fidelity_table_runs.py --calibration`` can read it; 4 minutes more at the
+paper's budgets).
 
-    python benchmarks/fidelity_collector.py --step-mm 2 --corner-mm 5 --target-mm 1 [--calibrate]
+    python benchmarks/fidelity_collector.py --step-mm 1 --corner-mm 2.6 --target-mm 2.6 [--calibrate]
+    python benchmarks/fidelity_collector.py --no-search-box --miss-probability 0.29 [--calibrate]
 """
 
 from __future__ import annotations
 
 import argparse
 import contextlib
+import dataclasses
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
@@ -35,7 +46,9 @@ from dvrk_gym.calibration.pipeline import PipelineConfig, run_calibration
 from dvrk_gym.envs import exploration
 from dvrk_gym.envs.grid_touch import HOME_POSITION_M
 from dvrk_gym.fidelity.comparison import run_fidelity
+from dvrk_gym.fidelity.instrument_model import pixels_of_camera_points
 from dvrk_gym.fidelity.report import format_table as format_fidelity_table
+from dvrk_gym.sim.world import DvrkWorld, WorldConfig
 
 
 def pushed_jaws_height(bias_seed: int, resolution: tuple[int, int]) -> float:
@@ -66,25 +79,74 @@ def collector(step_m: float, corner_z_m: float | None, target_z_m: float | None)
             super().__init__(seed=seed, step_m=step_m, rotations_per_pause=rotations_per_pause)
 
     with contextlib.ExitStack() as patches:
-        if corner_z_m is not None:  # the corners sit at the middle of this band
-            patches.enter_context(mock.patch.object(exploration, "SAFE_Z_M", (corner_z_m, corner_z_m)))
+        if corner_z_m is not None:
+            patches.enter_context(mock.patch.object(exploration, "CORNER_Z_M", corner_z_m))
         if target_z_m is not None:
-            patches.enter_context(mock.patch.object(phase1, "SAFE_Z_M", (target_z_m, target_z_m)))
+            patches.enter_context(mock.patch.object(phase1, "TARGET_Z_M", target_z_m))
         patches.enter_context(mock.patch.object(phase1, "PaperExplorationPolicy", Stepped))
         yield
+
+
+@contextlib.contextmanager
+def detector(search_boxes: bool, miss_probability: float | None) -> Iterator[None]:
+    """While open, every new simulated world's red-tape detector searches the whole image
+    (``search_boxes`` False) instead of the authors' boxes, and misses each image with
+    ``miss_probability`` (None keeps the identified one). Undone on exit."""
+    if miss_probability is not None and not 0.0 <= miss_probability < 1.0:
+        raise ValueError(f"miss_probability must be in [0, 1), got {miss_probability}")
+    original = DvrkWorld.__init__
+
+    def init(self: DvrkWorld, config: WorldConfig | None = None) -> None:
+        config = config or WorldConfig()
+        noise = config.marker_noise
+        if not search_boxes:
+            noise = dataclasses.replace(noise, search_boxes_px=None)
+        if miss_probability is not None:
+            noise = dataclasses.replace(noise, miss_probability=miss_probability)
+        original(self, dataclasses.replace(config, marker_noise=noise))
+
+    with mock.patch.object(DvrkWorld, "__init__", init):
+        yield
+
+
+def outside_boxes_share(X: np.ndarray) -> float:
+    """The share of rows (camera position (m) and angles, as the authors triangulated them)
+    whose detections lie outside the authors' search boxes (:data:`dvrk_gym.paper.MARKER_SEARCH_BOXES_PX`):
+    the left one by its (u, v), the right one by u minus the disparity (within a pixel)."""
+    u, v, disparity = pixels_of_camera_points(np.asarray(X, dtype=float)[:, :3]).T
+    (lu, lv, lw, lh), (ru, rv, rw, rh) = paper.MARKER_SEARCH_BOXES_PX
+    inside = (lu < u) & (u < lu + lw) & (lv < v) & (v < lv + lh) & (ru < u - disparity) & (u - disparity < ru + rw)
+    return float(1.0 - np.mean(inside))
 
 
 if __name__ == "__main__":
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument(
-        "--step-mm", type=float, default=1e3 * paper.PHASE1_STEP_M, help="pause step, mm (the simulator: 1; the authors' code: 2)"
+        "--step-mm", type=float, default=1e3 * paper.PHASE1_STEP_M, help="pause step, mm (the authors' code and the simulator: 2)"
     )
-    parser.add_argument("--corner-mm", type=float, default=None, help="corners' height over the pushed jaws, mm (the authors: 5)")
-    parser.add_argument("--target-mm", type=float, default=None, help="targets' height over the pushed jaws, mm (the authors: 1)")
+    parser.add_argument(
+        "--corner-mm",
+        type=float,
+        default=None,
+        help="corners' height over the pushed jaws, mm (default: the simulator's, 5 over its paper)",
+    )
+    parser.add_argument(
+        "--target-mm",
+        type=float,
+        default=None,
+        help="targets' height over the pushed jaws, mm (default: the simulator's, 1 over its paper)",
+    )
     parser.add_argument("--bias-seed", type=int, default=0, help="which instrument (default: 0)")
     parser.add_argument("--trajectories", type=int, default=paper.PHASE1_TRAJECTORIES, help="Phase I trajectories (default: 57)")
     parser.add_argument("--resolution", type=int, nargs=2, default=list(paper.ENDOSCOPE_RESOLUTION_PX), metavar=("W", "H"))
+    parser.add_argument("--no-search-box", action="store_true", help="the tape detector searches the whole image, not the authors' boxes")
+    parser.add_argument(
+        "--miss-probability", type=float, default=None, help="the tape detector's misses per image (default: the identified ones)"
+    )
     parser.add_argument("--calibrate", action="store_true", help="also run a whole calibration with it and print its table")
+    parser.add_argument(
+        "--out", type=Path, default=None, help="with --calibrate: keep its calibration folder here (default: a temporary folder)"
+    )
     args = parser.parse_args()
     for name in ("corner_mm", "target_mm"):
         value = getattr(args, name)
@@ -92,17 +154,27 @@ if __name__ == "__main__":
             parser.error(f"--{name.replace('_', '-')} must be in [-2, 20] mm, got {value}")
     if not (np.isfinite(args.step_mm) and 0.0 < args.step_mm <= 10.0):
         parser.error(f"--step-mm must be in (0, 10] mm, got {args.step_mm}")
+    if args.miss_probability is not None and not 0.0 <= args.miss_probability < 1.0:
+        parser.error(f"--miss-probability must be in [0, 1), got {args.miss_probability}")
+    if args.out is not None and not args.calibrate:
+        parser.error("--out keeps the folder of --calibrate's run: give --calibrate too")
     resolution = (int(args.resolution[0]), int(args.resolution[1]))
     paper_z = pushed_jaws_height(args.bias_seed, resolution)
     corner = None if args.corner_mm is None else paper_z + 1e-3 * args.corner_mm
     target = None if args.target_mm is None else paper_z + 1e-3 * args.target_mm
     heights = f"corners {args.corner_mm}, targets {args.target_mm} mm over it (None: the simulator's)"
     print(f"the jaws pushed onto the paper report {1e3 * paper_z:.1f} mm; step {args.step_mm:g} mm, {heights}")
-    with collector(1e-3 * args.step_mm, corner, target):
+    searched = "the whole image" if args.no_search_box else "the authors' boxes"
+    misses = "as identified" if args.miss_probability is None else f"{args.miss_probability:g} of the images"
+    print(f"the tape detector searches {searched} and misses {misses}")
+    with collector(1e-3 * args.step_mm, corner, target), detector(not args.no_search_box, args.miss_probability):
         run = run_fidelity(bias_seed=args.bias_seed, n_trajectories=args.trajectories, camera_resolution=resolution, progress=False)
         print(format_fidelity_table(run))
+        outside = f"real {outside_boxes_share(run.real_X):.3f}, simulated {outside_boxes_share(run.sim_X):.3f}"
+        print(f"kept rows outside the authors' search boxes: {outside}")
         if args.calibrate:
             config = PipelineConfig(n_trajectories=args.trajectories, bias_seed=args.bias_seed, camera_resolution=resolution)
-            with tempfile.TemporaryDirectory() as folder:
-                result = run_calibration(Path(folder), config, progress=False, benchmark=True)
+            with contextlib.ExitStack() as stack:
+                folder = args.out if args.out is not None else Path(stack.enter_context(tempfile.TemporaryDirectory()))
+                result = run_calibration(folder, config, progress=False, benchmark=True)
             print(format_calibration_table(result["table"]))

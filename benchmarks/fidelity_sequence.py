@@ -3,8 +3,8 @@
 A simulator whose encoders report the command (``wrist_settle_lag=0``) reports the pose it
 was commanded (``World.reported_pose``: nominal FK of the measured joints). Two statistics
 of ``dvrk-gym fidelity`` say the real robot does not: its consecutive rows rarely report the
-same position (0.03 against 0.44 without the lag), and consecutive pitches are correlated
-(0.27 against 0.06). This script measured, on the authors' rows, what led to the ``paper``
+same position (0.03 against 0.52 without the lag), and consecutive pitches are correlated
+(0.27 against 0.05). This script measured, on the authors' rows, what led to the ``paper``
 preset's settle lag (:data:`dvrk_gym.sim.identified.WRIST_SETTLE_LAG`):
 
 1. How far a repeated command is reported apart. The authors' protocol returns to the
@@ -21,9 +21,18 @@ preset's settle lag (:data:`dvrk_gym.sim.identified.WRIST_SETTLE_LAG`):
    ``alpha`` of the previous error, ``reported = command + alpha (previous reported -
    command)``. The best ``alpha`` matches the spread and the four correlations in least
    squares (three seeds of the toy protocol each).
+3. How far the arm moved between pauses (:func:`pause_steps`): from each row at a
+   trajectory's own orientation to the next row, 1 to 4 rows on, within 4 degrees of it on
+   every angle (the next pause's first row), the distance in x and y. The paper's text says
+   about a millimetre, the authors' collector 2 mm (:data:`dvrk_gym.paper.PHASE1_STEP_M`);
+   ``--phase1 FILE`` prints the same for a simulated collection (a calibration folder's
+   ``phase1.npz``, its kept rows).
 
-    python benchmarks/fidelity_sequence.py
+    python benchmarks/fidelity_sequence.py [--phase1 DIR/phase1.npz]
 """
+
+import argparse
+from pathlib import Path
 
 import numpy as np
 
@@ -50,6 +59,36 @@ def return_deviations(angles_deg: np.ndarray, positions_m: np.ndarray) -> np.nda
         if len(returns) >= _MIN_RETURNS:
             deviations.append(returns - np.median(returns, axis=0))
     return np.vstack(deviations)
+
+
+def pause_steps(angles_rad: np.ndarray, positions_m: np.ndarray, max_rows: int = 4, tolerance_deg: float = 4.0) -> np.ndarray:
+    """(M, 2): for each row followed, 1 to ``max_rows`` rows on, by one within ``tolerance_deg``
+    on every angle (the first such), how many rows on and the distance between the two in x
+    and y, metres. At the protocol's pauses the trajectory's own orientation comes first, so
+    such a pair is one pause and the next (or, rarely, two random draws alike).
+
+    Args:
+        angles_rad: (N, 3) yaw, pitch, roll of the rows in collection order, radians.
+        positions_m: (N, 3) their reported positions, metres.
+    """
+    angles_rad, positions_m = np.asarray(angles_rad, dtype=float), np.asarray(positions_m, dtype=float)
+    if angles_rad.ndim != 2 or angles_rad.shape[1] != 3 or positions_m.shape != angles_rad.shape:
+        raise ValueError(f"expected (N, 3) angles and positions, got {angles_rad.shape} and {positions_m.shape}")
+    tolerance = np.deg2rad(tolerance_deg)
+    pairs = []
+    for row in range(len(angles_rad)):
+        for later in range(row + 1, min(len(angles_rad), row + max_rows + 1)):
+            if np.all(np.abs(angles_rad[later] - angles_rad[row]) < tolerance):
+                pairs.append((later - row, float(np.linalg.norm(positions_m[later, :2] - positions_m[row, :2]))))
+                break
+    return np.array(pairs, dtype=float).reshape(-1, 2)
+
+
+def print_pause_steps(name: str, angles_rad: np.ndarray, positions_m: np.ndarray) -> None:
+    """The median of :func:`pause_steps` for each number of rows on, mm."""
+    steps = pause_steps(angles_rad, positions_m)
+    medians = [f"{1e3 * np.median(steps[steps[:, 0] == rows, 1]):.2f} ({int(np.sum(steps[:, 0] == rows))})" for rows in range(1, 5)]
+    print(f"{name}: the step between pauses, median mm (pairs) for the next pause 1 / 2 / 3 / 4 rows on: {' / '.join(medians)}")
 
 
 def protocol_pitches(rng: np.random.Generator, trajectories: int = 57, pauses: int = 23) -> tuple[np.ndarray, np.ndarray]:
@@ -99,7 +138,16 @@ def play(commands: np.ndarray, half_width: float) -> np.ndarray:
 
 
 if __name__ == "__main__":
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--phase1", type=Path, default=None, help="a simulated collection's phase1.npz, for its step between pauses")
+    args = parser.parse_args()
     X, y = load_paper_phase1()
+    print_pause_steps("real rows", X[:, 3:], y)
+    if args.phase1 is not None:
+        from dvrk_gym.calibration.phase1 import Phase1Data
+
+        simulated = Phase1Data.load(args.phase1).cleaned()
+        print_pause_steps(f"simulated kept rows ({args.phase1})", simulated.orientation, simulated.reported_position)
     angles = np.rad2deg(X[:, 3:])
     angles[:, 2] = np.where(angles[:, 2] > 0, angles[:, 2] - 360.0, angles[:, 2])  # roll wraps at +-180
     deviations = return_deviations(angles, y)

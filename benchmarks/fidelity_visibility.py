@@ -1,7 +1,7 @@
 """Which orientations keep their Phase I rows, on the real robot and the simulated one, and why.
 
-``dvrk-gym fidelity`` finds the kept rows' median pitch at yaw 90 at -9 degrees where the real
-rows' is -1, and the DNN's yaw-90 cell of the calibration table 4.1 mm against the paper's 2.0.
+``dvrk-gym fidelity`` finds the kept rows' median pitch at yaw 90 at -6 degrees where the real
+rows' is -1, and the DNN's yaw-90 cell of the calibration table 3.4 mm against the paper's 2.0.
 This script measures the chain between the two:
 
 1. **Kept rows per nearest paper yaw**, real and simulated (the ``paper`` instrument, the
@@ -9,9 +9,10 @@ This script measures the chain between the two:
    their median roll, degrees.
 2. **What hides the tape.** Every raw row's true joints are recorded during the collection
    and rendered again with a detector that never misses: the share of rows whose tape both
-   cameras see, per nearest yaw, and for a hidden one what the left camera's rays to the
-   tape's faces meet first (the clevis, the shaft, the jaws), or that no face turns towards
-   the camera or what shows is too thin for the median filter. Beside it, the real robot's
+   cameras see inside the authors' search boxes (:data:`dvrk_gym.paper.MARKER_SEARCH_BOXES_PX`),
+   per nearest yaw, and for a hidden one whether it lay outside a box, or else what the left
+   camera's rays to the tape's faces meet first (the clevis, the shaft, the jaws), or that
+   no face turns towards the camera or what shows is too thin for the median filter. Beside it, the real robot's
    share, estimated: its kept rows at that yaw, over the raw rows the protocol commands
    there (the simulated collection's, scaled to the authors' 5,256), over the share that
    survives the detector's random misses in both images. Then the angle between the jaws
@@ -56,6 +57,7 @@ from dvrk_gym.calibration.phase1 import PaperExplorationPolicy, collect_phase1
 from dvrk_gym.fidelity.instrument_model import real_commands
 from dvrk_gym.fidelity.statistics import PAPER_YAWS_DEG
 from dvrk_gym.sim.endoscope.camera import WORKSPACE_CENTER_M, default_camera_pose
+from dvrk_gym.sim.endoscope.noise import whole_pixels
 from dvrk_gym.sim.identified import MARKER_DETECTION_NOISE
 from dvrk_gym.sim.robot import body
 from dvrk_gym.sim.robot import kinematics as kin
@@ -133,6 +135,15 @@ def hidden_by(world: DvrkWorld) -> str:
     return max(set(blockers), key=blockers.count)
 
 
+def in_search_boxes(world: DvrkWorld, left_uv: np.ndarray, right_uv: np.ndarray) -> bool:
+    """Whether exact detections lie where the authors' tape detector searched
+    (:data:`dvrk_gym.paper.MARKER_SEARCH_BOXES_PX`), in whole pixels, the right one shifted
+    as the detector reports it: a tape seen outside is a row the detector loses."""
+    noise, width = world.config.marker_noise, world.camera.intrinsics.width
+    right = right_uv + noise.shift("right", width)
+    return noise.searches("left", whole_pixels(left_uv, width), width) and noise.searches("right", whole_pixels(right, width), width)
+
+
 def jaws_from_line_of_sight_deg(world: DvrkWorld) -> float:
     """Angle between the closed jaws' direction (pivot to tips) and the left camera's ray to the tape, degrees."""
     frame = body.marker_frame(world.q_true, world.cable.true_dh)
@@ -163,7 +174,7 @@ def real_rows_jaw_angles_deg(real_X: np.ndarray, real_y: np.ndarray) -> np.ndarr
 
 
 def render_rows(joints: np.ndarray, camera_pose: np.ndarray | None = None, offsets_rad: np.ndarray | None = None, why: bool = False):  # type: ignore[no-untyped-def]
-    """Which rows' tape both cameras see (noise-free pixel path), with the joints ``joints``
+    """Which rows' tape both cameras see (noise-free pixel path) inside the authors' search boxes, with the joints ``joints``
     ((N, 7): six joints and the jaw) plus ``offsets_rad`` (6,), seen by ``camera_pose``;
     with ``why``, also what hid each hidden row and the jaws' angle from the line of sight."""
     world = DvrkWorld(WorldConfig(camera_pose=camera_pose))
@@ -177,9 +188,10 @@ def render_rows(joints: np.ndarray, camera_pose: np.ndarray | None = None, offse
             world.jaw_angle = float(row[6])
             world.robot.set_joints(q, float(row[6]))
             detection = world.observe_marker(None)
-            seen[i] = bool(np.all(np.isfinite(detection.left_uv)) and np.all(np.isfinite(detection.right_uv)))
+            visible = bool(np.all(np.isfinite(detection.left_uv)) and np.all(np.isfinite(detection.right_uv)))
+            seen[i] = visible and in_search_boxes(world, detection.left_uv, detection.right_uv)
             if why:
-                reasons.append("seen" if seen[i] else hidden_by(world))
+                reasons.append("seen" if seen[i] else "outside box" if visible else hidden_by(world))
                 angles[i] = jaws_from_line_of_sight_deg(world)
     finally:
         world.close()
@@ -306,7 +318,7 @@ def main() -> None:
 
     seen, reasons, angles = render_rows(joints, why=True)
     near = nearest_yaw_index(data.orientation[:, 0])
-    causes = ("clevis", "shaft", "jaw A", "jaw B", "pivot", "faces away", "too thin", "scene")
+    causes = ("outside box", "clevis", "shaft", "jaw A", "jaw B", "pivot", "faces away", "too thin", "scene")
     # The real robot's share seen, estimated: its kept rows per yaw over the raw rows the same
     # protocol commands there (the simulated raw rows, scaled to the authors' 5256), over the
     # share a detector that misses each image at random keeps ((1 - miss)^2).

@@ -118,7 +118,7 @@ def main() -> None:
     print(f"\nsame-position share of consecutive rows: real {lag.real_share:.4f}")
     for value, share, correlation in zip(lag.lags, lag.sim_shares, lag.sim_pitch_autocorrelations):
         print(f"  simulated Phase I, settle lag {value:.2f}: share {share:.4f}, pitch autocorrelation {correlation:.3f}")
-    print(f"wrist settle lag: {lag.wrist_settle_lag:.2f} (the first whose share falls to the real one)")
+    print(f"wrist settle lag: {lag.wrist_settle_lag:.2f} (where the share first falls to the real one, linear between the lags around it)")
     miss = match_miss_probability(wrist_settle_lag=lag.wrist_settle_lag)
     print(
         f"simulated Phase I (identified instrument, no repeatability, no misses): kept share {miss.sim_kept_share:.3f} "

@@ -41,8 +41,17 @@ PHASE1_KEPT_SAMPLES = 1939
 PHASE1_POSES_PER_TRAJECTORY = -(-PHASE1_RAW_SAMPLES // PHASE1_TRAJECTORIES)
 """Commanded poses per Phase I trajectory here: 93, the raw samples over the trajectories
 rounded up (the paper gives only the totals); 57 x 93 = 5,301 poses."""
-PHASE1_STEP_M = 0.001
-"""Phase I: the tool pauses about every millimetre along a trajectory, metres."""
+PHASE1_STEP_M = 0.002
+"""Phase I: the tool pauses every 2 mm along a trajectory, metres. The paper's text says
+about every millimetre; the authors' collector (``scripts/automatic_trajectory_collector.py``
+of :data:`AUTHORS_CODE`) pauses every 20 interpolation steps of 0.1 mm, and their real rows
+agree: a trajectory's own orientation, commanded first at every pause, recurs 1.96 to 2.02 mm
+(median, 1 to 4 rows later) from where it was last reported."""
+PHASE1_CORNER_HEIGHT_M = 0.005
+PHASE1_TARGET_HEIGHT_M = 0.001
+"""Phase I (the authors' collector): each trajectory runs from a corner of the workspace 5 mm
+over the paper towards a random target 1 mm over it, heights over the plane through the four
+corners where the arm was put on the paper by hand, metres."""
 PHASE1_ROTATIONS_PER_PAUSE = 3
 """Phase I: random rotations commanded at each pause."""
 PHASE1_YAW_RANGE_DEG = (-90.0, 90.0)
@@ -199,6 +208,14 @@ MARKER_GATE_PX = 12.0
 and the right detection lies less than this from where an affine map fitted to the grid
 circles sends the left one, pixels at 1920 x 1080 (``is_this_clean`` in
 ``scripts/automatic_trajectory_collector_part2.py`` of :data:`AUTHORS_CODE`)."""
+MARKER_SEARCH_BOXES_PX: tuple[tuple[int, int, int, int], tuple[int, int, int, int]] = ((675, 50, 750, 750), (600, 75, 750, 750))
+"""The image regions the authors' red-tape detector searched, (u, v, width, height) of the
+left and the right rectified image at 1920 x 1080, pixels: ``lx, ly, lw, lh`` and ``rx, ry,
+rw, rh`` of ``autolab/data_collector.py`` in :data:`AUTHORS_CODE`. Their Phase I collector
+(``_get_contour`` of ``scripts/automatic_trajectory_collector.py``) kept only a blob whose
+whole-pixel centroid lay strictly inside, and found no tape otherwise. Every one of the 1939
+real rows' detections does (left u 684-1422, v 75-798; right u 614-1349): where the tape
+appeared outside, the row was lost."""
 MARKER_MEDIAN_KERNEL_PX = 9
 """The authors' red-tape detector median-filters the image and the thresholded mask with
 this kernel (pixels at 1920 x 1080) before it takes the largest contour's centroid,

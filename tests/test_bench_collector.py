@@ -3,31 +3,31 @@
 import subprocess
 import sys
 
-import numpy as np
 import pytest
 from benchmark_scripts import ROOT, load_script, script_path
 
 from dvrk_gym import paper
 from dvrk_gym.calibration import phase1
+from dvrk_gym.calibration.datasets import load_paper_phase1
 from dvrk_gym.envs import exploration
+from dvrk_gym.sim import identified
 
 collector_script = load_script("fidelity_collector")
 SCRIPT = script_path("fidelity_collector")
 
 
 def test_the_collector_what_if_steps_and_heights_apply_and_are_undone():
-    before = (exploration.SAFE_Z_M, phase1.SAFE_Z_M, phase1.PaperExplorationPolicy)
-    with collector_script.collector(0.002, -0.147, -0.151):
+    before = (exploration.CORNER_Z_M, phase1.TARGET_Z_M, phase1.PaperExplorationPolicy)
+    with collector_script.collector(0.001, -0.150, -0.151):
         policy = phase1.PaperExplorationPolicy(seed=0)
-        assert policy.step_m == 0.002 and isinstance(policy, before[2])
-        assert exploration.workspace_corners()[:, 2].tolist() == [-0.147] * 4  # the corners sit at the middle of the band
-        position = policy._draw_target()
-        assert position[2] == -0.151
+        assert policy.step_m == 0.001 and isinstance(policy, before[2])
+        assert exploration.workspace_corners()[:, 2].tolist() == [-0.150] * 4
+        assert policy._draw_target()[2] == -0.151
         assert phase1.PaperExplorationPolicy(seed=0, step_m=0.003).step_m == 0.003  # an explicit step still wins
-    assert (exploration.SAFE_Z_M, phase1.SAFE_Z_M, phase1.PaperExplorationPolicy) == before
+    assert (exploration.CORNER_Z_M, phase1.TARGET_Z_M, phase1.PaperExplorationPolicy) == before
     assert phase1.PaperExplorationPolicy(seed=0).step_m == paper.PHASE1_STEP_M
-    with collector_script.collector(0.001, None, None):
-        assert before[:2] == (exploration.SAFE_Z_M, phase1.SAFE_Z_M)
+    with collector_script.collector(0.002, None, None):
+        assert before[:2] == (exploration.CORNER_Z_M, phase1.TARGET_Z_M)
     with pytest.raises(ValueError, match="step_m"), collector_script.collector(0.0, None, None):
         pass
     assert phase1.PaperExplorationPolicy is before[2]
@@ -36,7 +36,20 @@ def test_the_collector_what_if_steps_and_heights_apply_and_are_undone():
 def test_it_prints_the_fidelity_table_of_the_changed_collection_and_refuses_bad_values():
     small = ["--trajectories", "6", "--resolution", "640", "360"]
     result = subprocess.run(
-        [sys.executable, str(SCRIPT), "--step-mm", "2", "--corner-mm", "5", "--target-mm", "1", *small],
+        [
+            sys.executable,
+            str(SCRIPT),
+            "--step-mm",
+            "1",
+            "--corner-mm",
+            "2.6",
+            "--target-mm",
+            "2.6",
+            "--no-search-box",
+            "--miss-probability",
+            "0.29",
+            *small,
+        ],
         cwd=ROOT,
         capture_output=True,
         text=True,
@@ -45,13 +58,46 @@ def test_it_prints_the_fidelity_table_of_the_changed_collection_and_refuses_bad_
     assert result.returncode == 0, result.stderr[-2000:]
     first = result.stdout.splitlines()[0]
     height = float(first.split("report ")[1].split(" mm")[0])
-    assert -160.0 < height < -145.0 and "step 2 mm, corners 5.0, targets 1.0" in first
-    assert "statistics within target" in result.stdout.splitlines()[-1]
-    for bad in (["--step-mm", "0"], ["--corner-mm", "nan"], ["--target-mm", "50"]):
+    assert -160.0 < height < -145.0 and "step 1 mm, corners 2.6, targets 2.6" in first
+    lines = result.stdout.splitlines()
+    assert lines[1] == "the tape detector searches the whole image and misses 0.29 of the images"
+    assert "statistics within target" in lines[-2]
+    assert lines[-1].startswith("kept rows outside the authors' search boxes: real 0.000, simulated ")
+    for bad in (["--step-mm", "0"], ["--corner-mm", "nan"], ["--target-mm", "50"], ["--miss-probability", "1"], ["--out", "x"]):
         refused = subprocess.run([sys.executable, str(SCRIPT), *bad], cwd=ROOT, capture_output=True, text=True, timeout=120)
-        assert refused.returncode == 2 and "must be in" in refused.stderr, bad
+        assert refused.returncode == 2 and ("must be in" in refused.stderr or "give --calibrate" in refused.stderr), bad
 
 
-def test_the_pushed_jaws_lie_where_the_phase2_corrections_put_them():
-    height = collector_script.pushed_jaws_height(0, (640, 360))
-    assert np.isfinite(height) and -0.16 < height < -0.145
+def test_the_collectors_paper_is_where_the_identified_instrument_reports_its_pushed_jaws():
+    """The corners' and targets' heights are measured from PAPER_REPORTED_Z_M: instrument 0's
+    pushed jaws lie there (to 0.1 mm), the others' within 0.5 mm."""
+    heights = [collector_script.pushed_jaws_height(seed, (640, 360)) for seed in (0, 1, 2)]
+    assert abs(heights[0] - exploration.PAPER_REPORTED_Z_M) < 1e-4
+    assert all(abs(height - exploration.PAPER_REPORTED_Z_M) < 5e-4 for height in heights)
+    assert abs(exploration.CORNER_Z_M - exploration.PAPER_REPORTED_Z_M - 0.005) < 1e-12
+    assert abs(phase1.TARGET_Z_M - exploration.PAPER_REPORTED_Z_M - 0.001) < 1e-12
+
+
+def test_the_detector_what_if_searches_the_whole_image_and_is_undone():
+    with collector_script.detector(False, 0.29):
+        world = collector_script.DvrkWorld(collector_script.WorldConfig(camera_resolution=(320, 180)))
+        try:
+            assert world.config.marker_noise.search_boxes_px is None and world.config.marker_noise.miss_probability == 0.29
+        finally:
+            world.close()
+    world = collector_script.DvrkWorld(collector_script.WorldConfig(camera_resolution=(320, 180)))
+    try:
+        assert world.config.marker_noise.search_boxes_px == paper.MARKER_SEARCH_BOXES_PX
+        assert world.config.marker_noise.miss_probability == identified.MARKER_DETECTION_NOISE.miss_probability
+    finally:
+        world.close()
+    with pytest.raises(ValueError, match="miss_probability"), collector_script.detector(True, 1.0):
+        pass
+
+
+def test_no_real_row_lies_outside_the_boxes_and_a_row_below_them_does():
+    X, _ = load_paper_phase1()
+    assert collector_script.outside_boxes_share(X) == 0.0
+    beyond = X[:2].copy()
+    beyond[0, 1] += 0.01  # 10 mm along the camera's y: from v = 713 to about 840 px, past the boxes' 800
+    assert collector_script.outside_boxes_share(beyond) == 0.5

@@ -10,6 +10,7 @@ from pybullet_utils import bullet_client
 
 from dvrk_gym import paper
 from dvrk_gym.calibration.datasets import load_paper_phase1
+from dvrk_gym.fidelity.instrument_model import real_pixels
 from dvrk_gym.sim import identified
 from dvrk_gym.sim.endoscope.baseline import TRUE_BASELINE_M, true_baseline_m
 from dvrk_gym.sim.endoscope.camera import (
@@ -384,3 +385,33 @@ def test_the_rows_depth_is_their_median_and_a_bad_shift_is_refused() -> None:
     for bad in (float("nan"), float("inf"), 100.0):
         with pytest.raises(ValueError, match="tape_right_shift_px"):
             true_baseline_m(bad)
+
+
+def test_the_detector_searches_only_strictly_inside_its_boxes_on_the_1080p_grid() -> None:
+    noise = DetectionNoise(core_px=1.0, outlier_px=5.0, outlier_probability=0.2, search_boxes_px=paper.MARKER_SEARCH_BOXES_PX)
+    assert noise.searches("left", np.array([676.0, 51.0])) and noise.searches("left", np.array([1424.0, 799.0]))
+    assert not noise.searches("left", np.array([675.0, 400.0])) and not noise.searches("left", np.array([1000.0, 800.0]))
+    assert noise.searches("right", np.array([601.0, 76.0])) and not noise.searches("right", np.array([1350.0, 400.0]))
+    # At 640 px wide, the whole pixel 676 of the 1080p grid is 225.0, and 675 is 224.67.
+    at_640 = (np.array([[676.0, 300.0], [675.0, 300.0]]) + 0.5) / 3 - 0.5
+    assert noise.searches("left", at_640[0], 640) and not noise.searches("left", at_640[1], 640)
+    unboxed = DetectionNoise(core_px=1.0, outlier_px=5.0, outlier_probability=0.2)
+    assert unboxed.searches("left", np.array([-5.0, 5000.0]))
+    np.testing.assert_array_equal(noise.sample(np.random.default_rng(4)), unboxed.sample(np.random.default_rng(4)))
+    with pytest.raises(ValueError, match="side"):
+        noise.searches("middle", np.array([700.0, 100.0]))
+    for bad in (((0, 0, 10, 10),), ((0, 0, 10, 0), (0, 0, 10, 10)), ((0, 0, 10, float("nan")), (0, 0, 10, 10)), "box"):
+        with pytest.raises(ValueError, match="search_boxes_px"):
+            DetectionNoise(1.0, 1.0, 0.0, search_boxes_px=bad)  # type: ignore[arg-type]
+
+
+def test_every_real_rows_detection_lies_inside_the_authors_boxes() -> None:
+    """The real rows are what the authors' detector kept, so their detections all lie inside its
+    boxes (the left one exactly; the right one's u to within the row mismatch's share of the
+    disparity, under a pixel) and reach close to the left box's right and bottom edges."""
+    X, _ = load_paper_phase1()
+    u, v, disparity = real_pixels(X).T
+    (lu, lv, lw, lh), (ru, _, rw, _) = paper.MARKER_SEARCH_BOXES_PX
+    assert np.all((lu < u) & (u < lu + lw) & (lv < v) & (v < lv + lh))
+    assert u.max() > lu + lw - 5 and v.max() > lv + lh - 5
+    assert np.all((ru - 1 < u - disparity) & (u - disparity < ru + rw))

@@ -53,16 +53,19 @@ def test_reported_pose_is_the_command_and_truth_differs_under_paper_bias(make_en
     assert 0.008 < nominal_tip_offset < 0.013  # the tip is about a jaw length from the reported point
 
 
-def test_paper_policy_moves_about_a_millimetre_per_pause_with_its_own_and_three_random_rotations():
+def test_paper_policy_moves_2_mm_per_pause_with_its_own_and_three_random_rotations():
     policy = PaperExplorationPolicy(seed=0)
-    start = {"reported_pose": np.array([0.01, 0.02, -0.15, 0, 0, 0], dtype=np.float32)}
+    start = {"reported_pose": np.array([*ex.workspace_corners()[0], 0, 0, 0], dtype=np.float32)}
     policy.reset(start)
     actions = np.array([policy(start) for _ in range(40)])
     positions = actions[:, :3]
     for k in range(1, 4):
         assert np.all(positions[0::4] == positions[k::4])
     steps = np.linalg.norm(np.diff(positions[::4], axis=0), axis=1)
-    assert np.all(steps <= 0.001 + 1e-6) and np.median(steps) == pytest.approx(0.001, abs=1e-6)
+    np.testing.assert_allclose(steps, 0.002, atol=1e-6)  # the authors' collector, and their rows
+    # Straight from the corner (5 mm over the paper) towards a target 1 mm over it.
+    heights = positions[::4, 2] - ex.PAPER_REPORTED_Z_M
+    assert heights[0] == pytest.approx(0.005, abs=1e-6) and np.all(np.diff(heights) < 0) and heights[-1] > 0.001
     # The authors' code records the trajectory's orientation first at every pause.
     np.testing.assert_array_equal(actions[0::4, 3:], np.tile(actions[0, 3:], (10, 1)))
     yaw, pitch, roll = np.degrees(actions[:, 3:]).T
@@ -71,6 +74,27 @@ def test_paper_policy_moves_about_a_millimetre_per_pause_with_its_own_and_three_
     random_yaws = np.delete(yaw, np.s_[0::4])
     assert len(np.unique(random_yaws)) == len(random_yaws)
     assert np.abs(np.diff(yaw)).max() <= 150.0 + 1e-4  # no extreme flips
+
+
+def test_paper_policy_starts_the_next_trajectory_from_a_corner_after_its_target():
+    """As the authors' collector did: the last pause lies within a step of the target, the next
+    at a corner 5 mm over the paper, with the next trajectory's own orientation."""
+    policy = PaperExplorationPolicy(seed=3)
+    corners = ex.workspace_corners()
+    start = {"reported_pose": np.array([*corners[2], 0, 0, 0], dtype=np.float32)}
+    policy.reset(start)
+    actions = np.array([policy(start) for _ in range(4 * 120)])
+    pauses = actions[::4]
+    jumps = np.flatnonzero(np.linalg.norm(np.diff(pauses[:, :3], axis=0), axis=1) > 0.002 + 1e-6)
+    assert len(jumps) >= 2  # 120 pauses reach at least two targets
+    for jump in jumps:
+        after = pauses[jump + 1]
+        assert np.min(np.linalg.norm(corners - after[:3], axis=1)) < 1e-6
+        assert not np.allclose(after[3:], pauses[jump, 3:])  # a new trajectory, its own orientation
+        assert pauses[jump, 2] - ex.PAPER_REPORTED_Z_M < 0.001 + 0.002  # the last pause near its target's height
+    segments = np.split(pauses, jumps + 1)
+    for segment in segments[1:-1]:
+        np.testing.assert_array_equal(segment[:, 3:], np.tile(segment[0, 3:], (len(segment), 1)))
 
 
 def test_cleaning_rule_keeps_pairs_within_12_px_of_the_grid_map():
@@ -97,7 +121,9 @@ def test_collect_phase1_loses_samples_to_the_wrist_like_the_paper(make_env, tmp_
     data = collect_phase1(env, PaperExplorationPolicy(seed=0), n_trajectories=12, progress=False)
     assert data.n_raw == 360
     kept = data.n_kept / data.n_raw
-    assert 0.20 < kept < 0.60  # the paper kept 37% (57 trajectories here: 36%); the wrist hides it otherwise
+    # The paper kept 37% (57 trajectories of 93 poses here: 37%); the wrist hides the tape, or it
+    # falls outside the authors' search boxes, which these short paths near the corners meet more often.
+    assert 0.10 < kept < 0.50
     clean = data.cleaned()
     assert np.isfinite(clean.X).all() and clean.X.shape == (data.n_kept, 6)
     assert clean.y.shape == (data.n_kept, 3)

@@ -134,11 +134,15 @@ def test_repeatability_takes_what_the_model_and_detector_leave_of_the_jitter():
     assert repeatability_from_jitter(0.5, 0.6, 0.1) == 0.0
 
 
-def test_the_settle_lag_is_the_first_of_the_grid_whose_share_falls_to_the_real_one():
+def test_the_settle_lag_is_where_the_share_first_falls_to_the_real_one_between_the_grids_lags():
     lags = (0.1, 0.2, 0.3)
-    assert first_crossing(lags, (0.09, 0.03, 0.02), 0.0304) == 0.2
+    assert first_crossing(lags, (0.09, 0.03, 0.02), 0.0304) == 0.2  # 0.1993, to 0.01
+    assert first_crossing(lags, (0.09, 0.05, 0.03), 0.04) == 0.25  # halfway between 0.2 and 0.3
     assert first_crossing(lags, (0.09, 0.04, 0.0304), 0.0304) == 0.3  # at most the target
     assert first_crossing(lags, (0.01, 0.04, 0.02), 0.0304) == 0.1  # the first, not the closest
+    # The identification's own shares (benchmarks/identify_instrument.py): 0.0306 at 0.20 is a
+    # hair over the real 0.0304, so the crossing lies just past 0.20, not at 0.25.
+    assert first_crossing((0.15, 0.20, 0.25), (0.0455, 0.0306, 0.0223), 0.0304) == 0.2
     with pytest.raises(ValueError, match="extend the grid"):
         first_crossing(lags, (0.09, 0.05, 0.04), 0.0304)
     with pytest.raises(ValueError, match="increase"):
@@ -154,7 +158,8 @@ def test_settle_lag_match_collects_at_each_lag_and_a_larger_lag_reports_fewer_re
     assert match.lags == (0.0, 0.6) and len(match.sim_shares) == len(match.sim_pitch_autocorrelations) == 2
     assert match.real_share == pytest.approx(0.0304, abs=5e-4)
     assert match.sim_shares[0] > 0.2 > match.sim_shares[1]
-    assert match.wrist_settle_lag == 0.6
+    expected = first_crossing(match.lags, match.sim_shares, match.real_share)
+    assert match.wrist_settle_lag == expected and 0.0 < expected <= 0.6
 
 
 def test_the_identified_lag_is_the_paper_presets_and_within_the_grid():
@@ -162,4 +167,4 @@ def test_the_identified_lag_is_the_paper_presets_and_within_the_grid():
     from dvrk_gym.sim.robot.bias import BIAS_PRESETS
 
     assert BIAS_PRESETS["paper"].wrist_settle_lag == identified.WRIST_SETTLE_LAG
-    assert identified.WRIST_SETTLE_LAG in SETTLE_LAG_GRID
+    assert SETTLE_LAG_GRID[0] <= identified.WRIST_SETTLE_LAG <= SETTLE_LAG_GRID[-1]

@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 
+from dvrk_gym import paper
 from dvrk_gym.envs.exploration import sample_paper_poses
 from dvrk_gym.sim.endoscope.baseline import true_baseline_m
 from dvrk_gym.sim.endoscope.noise import DetectionNoise, whole_pixels
@@ -257,5 +258,29 @@ def test_the_tape_detector_shifts_the_right_image_only_and_the_camera_keeps_its_
         assert checked >= 5
         _, right = world.camera.project(grid_circle_centers())
         assert np.abs(np.array([d.right_uv for d in world.observe_grid()]) - right).max() < 0.5
+    finally:
+        world.close()
+
+
+def test_the_tape_detector_finds_nothing_outside_its_search_boxes():
+    """With the detector's error off, a detection whose whole pixels fall outside the authors'
+    box is no detection, and one inside is the exact centroid in whole pixels; the exact path
+    (no generator) searches the whole image."""
+    noise = DetectionNoise(core_px=0.0, outlier_px=0.0, outlier_probability=0.0, search_boxes_px=paper.MARKER_SEARCH_BOXES_PX)
+    world = DvrkWorld(WorldConfig(bias="none", camera_resolution=(640, 360), marker_noise=noise))
+    try:
+        rng, verdicts = np.random.default_rng(0), []
+        for pose in _paper_poses(60, seed=7):
+            world.move_to(pose)
+            exact, seen = world.observe_marker(), world.observe_marker(noise_rng=rng)
+            if not exact.seen_left:
+                continue
+            inside = noise.searches("left", whole_pixels(exact.left_uv, 640), 640)
+            verdicts.append(inside)
+            if inside:
+                np.testing.assert_array_equal(seen.left_uv, whole_pixels(exact.left_uv, 640))
+            else:
+                assert not seen.seen_left and not seen.seen_both
+        assert any(verdicts) and not all(verdicts)  # the paper's poses put the tape on both sides of the box
     finally:
         world.close()

@@ -1,11 +1,13 @@
 """Phase I data collection: the paper's random exploration and its cleaning rule.
 
-The paper ran 57 trajectories from the four workspace corners, pausing about every
-millimetre to take three random rotations (yaw U[-90, 90], pitch U[-15, 25], roll
+The paper ran 57 trajectories from the four workspace corners, pausing "about every
+millimetre" to take three random rotations (yaw U[-90, 90], pitch U[-15, 25], roll
 U[-180, -150] degrees), and kept the samples where both cameras saw the red marker at the
 same place: 1,939 of 5,256 (37%); the rest the wrist hid. The authors' code
-(:data:`dvrk_gym.paper.AUTHORS_CODE`) gives the details followed here: at each pause it
-records the trajectory's own orientation first and then the three random ones, a new yaw
+(:data:`dvrk_gym.paper.AUTHORS_CODE`) gives the details followed here: each trajectory runs
+straight from a corner 5 mm over the paper towards a random target 1 mm over it, pausing
+every 2 mm (as their real rows confirm: :data:`dvrk_gym.paper.PHASE1_STEP_M`); at each pause
+it records the trajectory's own orientation first and then the three random ones, a new yaw
 at most 150 degrees from the last; and "the same place" means that the right camera's
 detection lies less than 12 px from where an affine map, fitted to the grid circles seen by
 both cameras, sends the left one (:func:`clean_mask`).
@@ -21,7 +23,15 @@ from tqdm.auto import tqdm
 
 from dvrk_gym import paper
 from dvrk_gym.calibration.records import ArrayRecord
-from dvrk_gym.envs.exploration import PITCH_RANGE_RAD, ROLL_RANGE_RAD, SAFE_X_M, SAFE_Y_M, SAFE_Z_M, YAW_RANGE_RAD
+from dvrk_gym.envs.exploration import (
+    PITCH_RANGE_RAD,
+    ROLL_RANGE_RAD,
+    SAFE_X_M,
+    SAFE_Y_M,
+    TARGET_Z_M,
+    YAW_RANGE_RAD,
+    workspace_corners,
+)
 from dvrk_gym.sim.robot.bias import BiasConfig
 
 MAX_YAW_STEP_RAD = float(np.deg2rad(150.0))
@@ -31,14 +41,19 @@ MAX_YAW_STEP_RAD = float(np.deg2rad(150.0))
 class PaperExplorationPolicy:
     """The paper's Phase I protocol, as the authors' code ran it, as a policy from observation to action.
 
-    Each trajectory draws its own orientation and a random target in the safe ranges, and
-    heads for the target in steps of about ``step_m``. At every pause it commands the
-    trajectory's orientation, then ``rotations_per_pause`` random ones, each yaw within
-    150 degrees of the one before. On reaching a target it draws another.
+    Each trajectory draws its own orientation and a random target 1 mm over the paper
+    (x and y uniform in the safe ranges, at :data:`~dvrk_gym.envs.exploration.TARGET_Z_M`),
+    and heads for it from where the episode started (a corner 5 mm over the paper) in steps
+    of ``step_m``. At every pause it commands the trajectory's orientation, then
+    ``rotations_per_pause`` random ones, each yaw within 150 degrees of the one before. The
+    last pause lies within ``step_m`` of the target; then, as the authors' collector began
+    its next trajectory, it moves to a random corner with a new orientation and target (at
+    the paper's 93 poses an episode, 23 pauses 2 mm apart, about a third of the episodes
+    get that far: the corners lie 49 mm from a random target on average).
 
     Args:
         seed: seeds the policy's own generator (targets and rotations).
-        step_m: distance between pauses, metres (the paper: about 1 mm).
+        step_m: distance between pauses, metres (the authors' collector: 2 mm).
         rotations_per_pause: random orientations commanded at each pause after the
             trajectory's own (the paper: 3).
     """
@@ -86,13 +101,14 @@ class PaperExplorationPolicy:
         return np.array([yaw, self.rng.uniform(*PITCH_RANGE_RAD), self.rng.uniform(*ROLL_RANGE_RAD)])
 
     def _draw_target(self) -> np.ndarray:
-        return np.array([self.rng.uniform(*SAFE_X_M), self.rng.uniform(*SAFE_Y_M), self.rng.uniform(*SAFE_Z_M)])
+        return np.array([self.rng.uniform(*SAFE_X_M), self.rng.uniform(*SAFE_Y_M), TARGET_Z_M])
 
     def _advance(self) -> None:
         offset = self._target - self._position
         distance = float(np.linalg.norm(offset))
-        if distance <= self.step_m:
-            self._position = self._target
+        if distance <= self.step_m:  # the authors' next trajectory: from a corner, with its own orientation
+            self._position = workspace_corners()[self.rng.integers(4)]
+            self._home_rotation = self._draw_rotation(None)
             self._target = self._draw_target()
         else:
             self._position = self._position + offset * (self.step_m / distance)

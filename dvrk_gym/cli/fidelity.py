@@ -60,7 +60,7 @@ def add_commands(subparsers: argparse._SubParsersAction) -> None:
         default=None,
         metavar="FRACTION",
         help="the preset with wrist motors that stop this fraction of each step short, in [0, 1), instead of its "
-        "own: the reported pose lags the command (default: the preset's; paper's is 0.25, matched to the real rows)",
+        "own: the reported pose lags the command (default: the preset's; paper's is 0.19, matched to the real rows)",
     )
     add_progress_option(fidelity)
     fidelity.set_defaults(func=_run_fidelity)

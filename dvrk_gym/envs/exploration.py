@@ -26,6 +26,14 @@ SAFE_Y_M = paper.REAL_PHASE1_Y_RANGE_M
 """The paper's safe exploration ranges in the base frame, metres (its data span these)."""
 SAFE_Z_M = (-0.153, -0.147)
 """Heights of the reported point that keep the 10 mm jaws 1-8 mm above the paper, metres."""
+PAPER_REPORTED_Z_M = -0.1526
+"""Where the identified instrument reports its jaws pushed onto the paper (the grid's middle,
+yaw 0, GridTouch-v0's simulated person's push; instruments 1 to 3 within 0.5 mm of it), base
+frame z in metres: the plane the authors' collector measured its heights from."""
+CORNER_Z_M = PAPER_REPORTED_Z_M + paper.PHASE1_CORNER_HEIGHT_M
+TARGET_Z_M = PAPER_REPORTED_Z_M + paper.PHASE1_TARGET_HEIGHT_M
+"""Height of the four corners where Phase I trajectories start (5 mm over the paper), and of
+the targets they head for (1 mm over it), metres."""
 YAW_RANGE_RAD = kin.PAPER_YAW_RANGE_RAD
 PITCH_RANGE_RAD = kin.PAPER_PITCH_RANGE_RAD
 ROLL_RANGE_RAD = kin.PAPER_ROLL_RANGE_RAD
@@ -40,9 +48,8 @@ CAMERA_BOX_HIGH_M = np.array([0.2, 0.2, 0.5])
 
 
 def workspace_corners() -> np.ndarray:
-    """The four corners where Phase I trajectories start, (4, 3) base frame, metres."""
-    z = float(np.mean(SAFE_Z_M))
-    return np.array([[x, y, z] for y in SAFE_Y_M for x in SAFE_X_M])
+    """The four corners where Phase I trajectories start, (4, 3) base frame, metres (at :data:`CORNER_Z_M`)."""
+    return np.array([[x, y, CORNER_Z_M] for y in SAFE_Y_M for x in SAFE_X_M])
 
 
 def sample_paper_poses(rng: np.random.Generator, n: int) -> list[np.ndarray]:

@@ -166,7 +166,7 @@ def run_fidelity(
         bias_seed: which instrument.
         wrist_settle_lag: the preset with this ``BiasConfig.wrist_settle_lag`` instead
             of its own (the fraction of each wrist step the motors leave undone, in
-            [0, 1); ``paper``'s is 0.25); None: the preset's.
+            [0, 1); ``paper``'s is 0.19); None: the preset's.
         n_trajectories: Phase I trajectories (the paper: 57; about 35-50 s at 1920 x 1080).
         seed: seeds the exploration and the episodes, and the cross-validated forest.
         camera_resolution: the endoscope's image size (width, height), pixels.

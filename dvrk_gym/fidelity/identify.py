@@ -250,9 +250,10 @@ def match_miss_probability(
 
     Collects the paper's Phase I on the identified instrument (without repeatability;
     with the ``paper`` preset's settle lag, or ``wrist_settle_lag`` when given) with a
-    detector that never misses. A miss in either camera loses a row, so the kept share
-    goes as (1 - miss)^2: miss = 1 - sqrt(real share / simulated share). (The rows cannot
-    tell a missed detection from one the 12 px gate threw out.)
+    detector that never misses (but searches only its boxes, as the authors' did). A miss
+    in either camera loses a row, so the kept share goes as (1 - miss)^2: miss = 1 -
+    sqrt(real share / simulated share). (The rows cannot tell a missed detection from one
+    the 12 px gate threw out.)
     """
     config = dataclasses.replace(BIAS_PRESETS["paper"], repeatability_m=0.0)
     if wrist_settle_lag is not None:
@@ -282,7 +283,7 @@ class SettleLagMatch:
     """The wrist's settle lag matched to the real rows' same-position share.
 
     Attributes:
-        wrist_settle_lag: the first lag of the grid whose simulated share falls to the real one.
+        wrist_settle_lag: where the simulated share first falls to the real one (:func:`first_crossing`).
         real_share: the real rows' same-position share.
         lags: the lags collected at.
         sim_shares: the simulated same-position share at each lag.
@@ -298,7 +299,9 @@ class SettleLagMatch:
 
 
 def first_crossing(lags: tuple[float, ...], shares: tuple[float, ...], target: float) -> float:
-    """The first of ``lags`` (increasing) whose share is at most ``target``.
+    """The lag where ``shares`` first fall to ``target``: linear between the two lags of the
+    grid (increasing) around the crossing, to 0.01 (the first lag if its share is already
+    at most the target).
 
     Raises:
         ValueError: lags and shares differ in length, lags do not increase, or no share
@@ -308,9 +311,12 @@ def first_crossing(lags: tuple[float, ...], shares: tuple[float, ...], target: f
         raise ValueError(f"expected one share per lag, got {len(lags)} lags and {len(shares)} shares")
     if any(b <= a for a, b in zip(lags, lags[1:])):
         raise ValueError(f"lags must increase, got {lags}")
-    for lag, share in zip(lags, shares):
+    for index, share in enumerate(shares):
         if share <= target:
-            return float(lag)
+            if index == 0:
+                return float(lags[0])
+            above, lag_above = shares[index - 1], lags[index - 1]
+            return round(float(lag_above + (lags[index] - lag_above) * (above - target) / (above - share)), 2)
     raise ValueError(f"no lag in {lags} brings the share to {target:.4f} (the last gives {shares[-1]:.4f}); extend the grid")
 
 
@@ -321,10 +327,11 @@ def match_settle_lag(
 
     A robot that reports its command reports the same position whenever the protocol
     pauses at one position for several orientations (a simulated Phase I without a lag:
-    0.44 of consecutive kept rows); the real rows do so 3% of the time, because the wrist
+    0.52 of consecutive kept rows); the real rows do so 3% of the time, because the wrist
     stops short of each new orientation and the reported tip moves with it. Collects the
     paper's Phase I on the ``paper`` instrument (its detector and repeatability included)
-    at each lag and returns the first whose same-position share is at most the real one.
+    at each lag and returns the lag where the same-position share falls to the real one,
+    linear between the grid's lags around it (:func:`first_crossing`).
     """
     real_X, real_y = load_paper_phase1()
     real_share = fidelity_statistics(real_X, real_y, cross_validation=False).same_position_share

@@ -71,7 +71,7 @@ JITTER_MAX_STEP_M = 0.010
 """Consecutive rows count for the jitter when their reported base positions are this close, m."""
 SAME_POSITION_M = 0.0002
 """Consecutive rows whose reported base positions lie this close count as one position, m
-(the real rows' steps between pauses are about 1 mm)."""
+(the real rows' steps between pauses are 2 mm: :data:`dvrk_gym.paper.PHASE1_STEP_M`)."""
 CV_FOLDS = 10
 """Folds of the authors' cross-validation (contiguous, unshuffled)."""
 CV_FOREST_TREES = 100

@@ -307,14 +307,15 @@ class DvrkWorld:
         """``blob`` in the ``side`` image as a real detector reports it (``blob`` itself without a
         generator): the tape detector's own misses and error (``config.marker_noise``, drawn per
         camera) and its right image's shift, the configured extra pixel noise, then whole
-        pixels of the paper's 1080p grid."""
+        pixels of the paper's 1080p grid; None outside the image's search box (after the
+        draws, so the box leaves the random streams as they are)."""
         if blob is None or noise_rng is None or self.config.marker_noise.misses(noise_rng):
             return None if noise_rng is not None else blob
         width = self.camera.intrinsics.width
         noise = self.config.marker_noise
         centroid = blob.centroid + noise.sample(noise_rng, width) + noise.shift(side, width)
         centroid = whole_pixels(self.pixel_noise.apply(centroid, noise_rng), width)
-        return Blob(centroid, blob.area_px, blob.touches_border)
+        return Blob(centroid, blob.area_px, blob.touches_border) if noise.searches(side, centroid, width) else None
 
     def marker_visible_fraction(self, side: str) -> float:
         """Geometric visibility of the marker from one camera, without rendering: the fraction

@@ -1,5 +1,6 @@
 """Pixel noise of the endoscope's detections: a Gaussian model for every detector, the red
-tape detector's own error and its right image's bias (:class:`DetectionNoise`) and its whole pixels (:func:`whole_pixels`).
+tape detector's own error, its right image's bias and the boxes it searches
+(:class:`DetectionNoise`) and its whole pixels (:func:`whole_pixels`).
 
 A detection's noise is given as a standard deviation in pixels of the paper's 1920 x 1080
 images (:data:`~dvrk_gym.paper.ENDOSCOPE_RESOLUTION_PX`), so one setting means the
@@ -108,6 +109,9 @@ class DetectionNoise:
             lies, px at 1080p, in [-MAX_RIGHT_SHIFT_PX, MAX_RIGHT_SHIFT_PX]: a bias, not
             noise (nothing is drawn for it). It widens every disparity by that much, so the
             thing is triangulated nearer than it is (positive) or farther (negative).
+        search_boxes_px: the regions (u, v, width, height) of the left and the right image
+            the detector searches, px at 1080p: a detection whose whole-pixel centroid does
+            not lie strictly inside its image's box is no detection (None: the whole image).
     """
 
     core_px: float
@@ -115,6 +119,7 @@ class DetectionNoise:
     outlier_probability: float
     miss_probability: float = 0.0
     right_shift_px: float = 0.0
+    search_boxes_px: tuple[tuple[float, float, float, float], tuple[float, float, float, float]] | None = None
 
     def __post_init__(self) -> None:
         for name in ("core_px", "outlier_px"):
@@ -130,6 +135,25 @@ class DetectionNoise:
                 f"DetectionNoise.right_shift_px = {self.right_shift_px}; expected a finite value in "
                 f"[-{MAX_RIGHT_SHIFT_PX:g}, {MAX_RIGHT_SHIFT_PX:g}] px"
             )
+        if self.search_boxes_px is not None:
+            boxes = np.asarray(self.search_boxes_px, dtype=float) if _box_shaped(self.search_boxes_px) else None
+            if boxes is None or not np.all(np.isfinite(boxes)) or np.any(boxes[:, 2:] <= 0):
+                raise ValueError(
+                    f"DetectionNoise.search_boxes_px = {self.search_boxes_px!r}; expected two boxes (u, v, width, height) "
+                    "of finite pixels with positive sizes, or None"
+                )
+
+    def searches(self, side: str, uv: np.ndarray, width_px: int = PAPER_WIDTH_PX) -> bool:
+        """Whether a detection at ``uv`` (pixels of the ``side`` image, ``width_px`` wide) lies
+        strictly inside that image's search box, measured in pixels of the paper's 1920 x 1080
+        grid (always, without boxes)."""
+        if side not in ("left", "right"):
+            raise ValueError(f"side must be 'left' or 'right', got {side!r}")
+        if self.search_boxes_px is None:
+            return True
+        u0, v0, width, height = self.search_boxes_px[0 if side == "left" else 1]
+        u, v = (np.asarray(uv, dtype=float).reshape(2) + 0.5) * (PAPER_WIDTH_PX / width_px) - 0.5
+        return bool(u0 < u < u0 + width and v0 < v < v0 + height)
 
     def shift(self, side: str, width_px: int = PAPER_WIDTH_PX) -> np.ndarray:
         """The bias (du, dv) of a centroid in the ``side`` ("left" or "right") image, pixels of an
@@ -154,14 +178,24 @@ class DetectionNoise:
         return rng.normal(0.0, sigma, size=2) * (width_px / PAPER_WIDTH_PX)
 
 
+def _box_shaped(value: object) -> bool:
+    return (
+        isinstance(value, (tuple, list))
+        and len(value) == 2
+        and all(isinstance(box, (tuple, list)) and len(box) == 4 and all(isinstance(x, (int, float)) for x in box) for box in value)
+    )
+
+
 IDENTIFIED_MARKER_NOISE = DetectionNoise(
     identified.MARKER_DETECTION_NOISE.core_px,
     identified.MARKER_DETECTION_NOISE.outlier_px,
     identified.MARKER_DETECTION_NOISE.outlier_probability,
     identified.MARKER_DETECTION_NOISE.miss_probability,
     identified.TAPE_RIGHT_SHIFT_PX,
+    paper.MARKER_SEARCH_BOXES_PX,
 )
-"""The red-tape detector's error identified from the real rows (:data:`dvrk_gym.sim.identified.MARKER_DETECTION_NOISE`)."""
+"""The red-tape detector's error identified from the real rows (:data:`dvrk_gym.sim.identified.MARKER_DETECTION_NOISE`),
+searching the authors' boxes of each image (:data:`dvrk_gym.paper.MARKER_SEARCH_BOXES_PX`)."""
 
 
 def whole_pixels(uv: np.ndarray, width_px: int) -> np.ndarray:

@@ -93,7 +93,7 @@ class BiasConfig:
             (previous motors - q_cmd)``, the cables follow the motors, and the encoders
             report the motors, so the reported pose lags the command. 0: the motors reach
             the command. ``paper`` and ``severe``: the lag matched to the real rows
-            (:data:`dvrk_gym.sim.identified.WRIST_SETTLE_LAG`, 0.25); a fraction, not a
+            (:data:`dvrk_gym.sim.identified.WRIST_SETTLE_LAG`, 0.19); a fraction, not a
             magnitude, so ``scaled`` leaves it.
     """
 
