@@ -37,6 +37,7 @@ from pathlib import Path
 import numpy as np
 
 from dvrk_gym.calibration.datasets import load_paper_phase1
+from dvrk_gym.calibration.phase1 import Phase1Data
 from dvrk_gym.fidelity.statistics import JITTER_MAX_STEP_M, lag_one_correlation
 from dvrk_gym.sim.robot.cables import play_update
 
@@ -78,7 +79,8 @@ def pause_steps(angles_rad: np.ndarray, positions_m: np.ndarray, max_rows: int =
     pairs = []
     for row in range(len(angles_rad)):
         for later in range(row + 1, min(len(angles_rad), row + max_rows + 1)):
-            if np.all(np.abs(angles_rad[later] - angles_rad[row]) < tolerance):
+            difference = np.angle(np.exp(1j * (angles_rad[later] - angles_rad[row])))  # roll wraps at +-180 degrees
+            if np.all(np.abs(difference) < tolerance):
                 pairs.append((later - row, float(np.linalg.norm(positions_m[later, :2] - positions_m[row, :2]))))
                 break
     return np.array(pairs, dtype=float).reshape(-1, 2)
@@ -87,7 +89,12 @@ def pause_steps(angles_rad: np.ndarray, positions_m: np.ndarray, max_rows: int =
 def print_pause_steps(name: str, angles_rad: np.ndarray, positions_m: np.ndarray) -> None:
     """The median of :func:`pause_steps` for each number of rows on, mm."""
     steps = pause_steps(angles_rad, positions_m)
-    medians = [f"{1e3 * np.median(steps[steps[:, 0] == rows, 1]):.2f} ({int(np.sum(steps[:, 0] == rows))})" for rows in range(1, 5)]
+    medians = [
+        f"{1e3 * np.median(steps[steps[:, 0] == rows, 1]):.2f} ({int(np.sum(steps[:, 0] == rows))})"
+        if np.any(steps[:, 0] == rows)
+        else "- (0)"
+        for rows in range(1, 5)
+    ]
     print(f"{name}: the step between pauses, median mm (pairs) for the next pause 1 / 2 / 3 / 4 rows on: {' / '.join(medians)}")
 
 
@@ -144,8 +151,6 @@ if __name__ == "__main__":
     X, y = load_paper_phase1()
     print_pause_steps("real rows", X[:, 3:], y)
     if args.phase1 is not None:
-        from dvrk_gym.calibration.phase1 import Phase1Data
-
         simulated = Phase1Data.load(args.phase1).cleaned()
         print_pause_steps(f"simulated kept rows ({args.phase1})", simulated.orientation, simulated.reported_position)
     angles = np.rad2deg(X[:, 3:])

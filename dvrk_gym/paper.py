@@ -44,14 +44,17 @@ rounded up (the paper gives only the totals); 57 x 93 = 5,301 poses."""
 PHASE1_STEP_M = 0.002
 """Phase I: the tool pauses every 2 mm along a trajectory, metres. The paper's text says
 about every millimetre; the authors' collector (``scripts/automatic_trajectory_collector.py``
-of :data:`AUTHORS_CODE`) pauses every 20 interpolation steps of 0.1 mm, and their real rows
-agree: a trajectory's own orientation, commanded first at every pause, recurs 1.96 to 2.02 mm
+of :data:`AUTHORS_CODE`, as of its last change, commit 410b8c2) pauses every 20 interpolation
+steps of 0.1 mm, and their real rows
+agree: a trajectory's own orientation, commanded first at every pause, recurs 1.96 to 2.00 mm
 (median, 1 to 4 rows later) from where it was last reported."""
 PHASE1_CORNER_HEIGHT_M = 0.005
+"""Phase I (the authors' collector): each trajectory starts at a corner of the workspace this
+high over the paper (the plane through the four corners where the arm was put on the paper
+by hand), metres."""
 PHASE1_TARGET_HEIGHT_M = 0.001
-"""Phase I (the authors' collector): each trajectory runs from a corner of the workspace 5 mm
-over the paper towards a random target 1 mm over it, heights over the plane through the four
-corners where the arm was put on the paper by hand, metres."""
+"""Phase I (the authors' collector): each trajectory heads for a random target this high over
+the paper, metres."""
 PHASE1_ROTATIONS_PER_PAUSE = 3
 """Phase I: random rotations commanded at each pause."""
 PHASE1_YAW_RANGE_DEG = (-90.0, 90.0)

@@ -63,9 +63,17 @@ def test_it_prints_the_fidelity_table_of_the_changed_collection_and_refuses_bad_
     assert lines[1] == "the tape detector searches the whole image and misses 0.29 of the images"
     assert "statistics within target" in lines[-2]
     assert lines[-1].startswith("kept rows outside the authors' search boxes: real 0.000, simulated ")
-    for bad in (["--step-mm", "0"], ["--corner-mm", "nan"], ["--target-mm", "50"], ["--miss-probability", "1"], ["--out", "x"]):
+    refusals = (
+        (["--step-mm", "0"], "--step-mm must be in"),
+        (["--corner-mm", "nan"], "--corner-mm must be in"),
+        (["--target-mm", "50"], "--target-mm must be in"),
+        (["--miss-probability", "1"], "--miss-probability must be in"),
+        (["--out", "x"], "give --calibrate too"),
+        (["--calibrate", "--out", str(ROOT)], "is not empty"),
+    )
+    for bad, message in refusals:
         refused = subprocess.run([sys.executable, str(SCRIPT), *bad], cwd=ROOT, capture_output=True, text=True, timeout=120)
-        assert refused.returncode == 2 and ("must be in" in refused.stderr or "give --calibrate" in refused.stderr), bad
+        assert refused.returncode == 2 and message in refused.stderr, bad
 
 
 def test_the_collectors_paper_is_where_the_identified_instrument_reports_its_pushed_jaws():
@@ -79,7 +87,7 @@ def test_the_collectors_paper_is_where_the_identified_instrument_reports_its_pus
 
 
 def test_the_detector_what_if_searches_the_whole_image_and_is_undone():
-    with collector_script.detector(False, 0.29):
+    with collector_script.detector(search_boxes=False, miss_probability=0.29):
         world = collector_script.DvrkWorld(collector_script.WorldConfig(camera_resolution=(320, 180)))
         try:
             assert world.config.marker_noise.search_boxes_px is None and world.config.marker_noise.miss_probability == 0.29
@@ -91,7 +99,7 @@ def test_the_detector_what_if_searches_the_whole_image_and_is_undone():
         assert world.config.marker_noise.miss_probability == identified.MARKER_DETECTION_NOISE.miss_probability
     finally:
         world.close()
-    with pytest.raises(ValueError, match="miss_probability"), collector_script.detector(True, 1.0):
+    with pytest.raises(ValueError, match="miss_probability"), collector_script.detector(search_boxes=True, miss_probability=1.0):
         pass
 
 

@@ -392,17 +392,30 @@ def test_the_detector_searches_only_strictly_inside_its_boxes_on_the_1080p_grid(
     assert noise.searches("left", np.array([676.0, 51.0])) and noise.searches("left", np.array([1424.0, 799.0]))
     assert not noise.searches("left", np.array([675.0, 400.0])) and not noise.searches("left", np.array([1000.0, 800.0]))
     assert noise.searches("right", np.array([601.0, 76.0])) and not noise.searches("right", np.array([1350.0, 400.0]))
-    # At 640 px wide, the whole pixel 676 of the 1080p grid is 225.0, and 675 is 224.67.
-    at_640 = (np.array([[676.0, 300.0], [675.0, 300.0]]) + 0.5) / 3 - 0.5
-    assert noise.searches("left", at_640[0], 640) and not noise.searches("left", at_640[1], 640)
+    # At other widths the whole pixels of the 1080p grid come back to it with rounding errors:
+    # 676 and 1424 are inside, 675 and 1425 (the edges) are not, at any width.
+    for width in (184, 200, 400, 640, 800, 1280, 1600):
+        scale = 1920 / width
+        u = (np.array([676.0, 1424.0, 675.0, 1425.0]) + 0.5) / scale - 0.5
+        verdicts = [noise.searches("left", np.array([value, (300.0 + 0.5) / scale - 0.5]), width) for value in u]
+        assert verdicts == [True, True, False, False], width
     unboxed = DetectionNoise(core_px=1.0, outlier_px=5.0, outlier_probability=0.2)
     assert unboxed.searches("left", np.array([-5.0, 5000.0]))
     np.testing.assert_array_equal(noise.sample(np.random.default_rng(4)), unboxed.sample(np.random.default_rng(4)))
     with pytest.raises(ValueError, match="side"):
         noise.searches("middle", np.array([700.0, 100.0]))
-    for bad in (((0, 0, 10, 10),), ((0, 0, 10, 0), (0, 0, 10, 10)), ((0, 0, 10, float("nan")), (0, 0, 10, 10)), "box"):
+    bad_boxes = (
+        ((0, 0, 10, 10),),
+        ((0, 0, 10, 0), (0, 0, 10, 10)),
+        ((0, 0, 10, float("nan")), (0, 0, 10, 10)),
+        ((True, 0, 10, 10), (0, 0, 10, 10)),
+        "box",
+    )
+    for bad in bad_boxes:
         with pytest.raises(ValueError, match="search_boxes_px"):
-            DetectionNoise(1.0, 1.0, 0.0, search_boxes_px=bad)  # type: ignore[arg-type]
+            DetectionNoise(core_px=1.0, outlier_px=1.0, outlier_probability=0.0, search_boxes_px=bad)  # type: ignore[arg-type]
+    as_arrays = DetectionNoise(core_px=1.0, outlier_px=1.0, outlier_probability=0.0, search_boxes_px=np.array(paper.MARKER_SEARCH_BOXES_PX))  # type: ignore[arg-type]
+    assert as_arrays.search_boxes_px == paper.MARKER_SEARCH_BOXES_PX and hash(as_arrays)  # stored as tuples, hashable
 
 
 def test_every_real_rows_detection_lies_inside_the_authors_boxes() -> None:

@@ -140,9 +140,14 @@ def test_the_settle_lag_is_where_the_share_first_falls_to_the_real_one_between_t
     assert first_crossing(lags, (0.09, 0.05, 0.03), 0.04) == 0.25  # halfway between 0.2 and 0.3
     assert first_crossing(lags, (0.09, 0.04, 0.0304), 0.0304) == 0.3  # at most the target
     assert first_crossing(lags, (0.01, 0.04, 0.02), 0.0304) == 0.1  # the first, not the closest
-    # The identification's own shares (benchmarks/identify_instrument.py): 0.0306 at 0.20 is a
-    # hair over the real 0.0304, so the crossing lies just past 0.20, not at 0.25.
+    # A detector searching the whole image (benchmarks/identify_instrument.py before the search
+    # boxes): 0.0306 at 0.20 is a hair over the real 0.0304, so the crossing lies just past 0.20,
+    # not at 0.25 as the first grid point under the target would have it.
     assert first_crossing((0.15, 0.20, 0.25), (0.0455, 0.0306, 0.0223), 0.0304) == 0.2
+    # With the boxes (identified.WRIST_SETTLE_LAG): 0.0461 at 0.15, 0.0257 at 0.20.
+    assert first_crossing((0.15, 0.20, 0.25), (0.0461, 0.0257, 0.0249), 0.0304) == 0.19
+    # Rounded to 0.01, never outside the two lags around the crossing.
+    assert first_crossing((0.101, 0.102), (0.05, 0.01), 0.0499) == 0.101
     with pytest.raises(ValueError, match="extend the grid"):
         first_crossing(lags, (0.09, 0.05, 0.04), 0.0304)
     with pytest.raises(ValueError, match="increase"):
@@ -158,8 +163,9 @@ def test_settle_lag_match_collects_at_each_lag_and_a_larger_lag_reports_fewer_re
     assert match.lags == (0.0, 0.6) and len(match.sim_shares) == len(match.sim_pitch_autocorrelations) == 2
     assert match.real_share == pytest.approx(0.0304, abs=5e-4)
     assert match.sim_shares[0] > 0.2 > match.sim_shares[1]
-    expected = first_crossing(match.lags, match.sim_shares, match.real_share)
-    assert match.wrist_settle_lag == expected and 0.0 < expected <= 0.6
+    above, below = match.sim_shares
+    expected = round(0.6 * (above - match.real_share) / (above - below), 2)
+    assert match.wrist_settle_lag == pytest.approx(expected) and 0.0 < expected <= 0.6
 
 
 def test_the_identified_lag_is_the_paper_presets_and_within_the_grid():

@@ -3,7 +3,8 @@
 The paper ran 57 trajectories from the four workspace corners, pausing "about every
 millimetre" to take three random rotations (yaw U[-90, 90], pitch U[-15, 25], roll
 U[-180, -150] degrees), and kept the samples where both cameras saw the red marker at the
-same place: 1,939 of 5,256 (37%); the rest the wrist hid. The authors' code
+same place: 1,939 of 5,256 (37%); the rest the wrist hid, or the detector missed, or it
+appeared outside the detector's search boxes. The authors' code
 (:data:`dvrk_gym.paper.AUTHORS_CODE`) gives the details followed here: each trajectory runs
 straight from a corner 5 mm over the paper towards a random target 1 mm over it, pausing
 every 2 mm (as their real rows confirm: :data:`dvrk_gym.paper.PHASE1_STEP_M`); at each pause
@@ -48,8 +49,8 @@ class PaperExplorationPolicy:
     ``rotations_per_pause`` random ones, each yaw within 150 degrees of the one before. The
     last pause lies within ``step_m`` of the target; then, as the authors' collector began
     its next trajectory, it moves to a random corner with a new orientation and target (at
-    the paper's 93 poses an episode, 23 pauses 2 mm apart, about a third of the episodes
-    get that far: the corners lie 49 mm from a random target on average).
+    the paper's 93 poses an episode, 23 pauses 2 mm apart, over a third of the episodes get
+    that far: the corners lie 49 mm from a random target on average).
 
     Args:
         seed: seeds the policy's own generator (targets and rotations).
@@ -126,7 +127,8 @@ class Phase1Data(ArrayRecord):
         areas_px: (N, 2) the marker's blob area in the left and right images, px (0 unseen).
         camera_position: (N, 3) triangulated marker position, left camera frame, m (NaN
             unless both cameras saw it).
-        trajectory: (N,) which trajectory each row came from.
+        trajectory: (N,) which episode each row came from (one of the protocol's
+            trajectories, or more: :class:`PaperExplorationPolicy`).
         kept: (N,) whether the row passes the cleaning rule (:func:`clean_mask`).
     """
 

@@ -1,6 +1,9 @@
 """CalibrationExploration-v0: the paper's Phase I, random exploration with a red marker.
 
-An episode is one trajectory. It starts at one of the four workspace corners; each step
+An episode is one trajectory of the paper's protocol, or more when the policy reaches its
+target and begins the next from a corner, as the authors' collector went on
+(:class:`dvrk_gym.calibration.phase1.PaperExplorationPolicy`). It starts at one of the four
+workspace corners; each step
 commands the next tool pose ``(bx, by, bz, yaw, pitch, roll)`` (base frame, metres and
 radians, the dVRK's Euler convention) and observes what the robot reports and what the
 endoscope sees of the red marker on the wrist.
@@ -31,9 +34,9 @@ PAPER_REPORTED_Z_M = -0.1526
 yaw 0, GridTouch-v0's simulated person's push; instruments 1 to 3 within 0.5 mm of it), base
 frame z in metres: the plane the authors' collector measured its heights from."""
 CORNER_Z_M = PAPER_REPORTED_Z_M + paper.PHASE1_CORNER_HEIGHT_M
+"""Height of the four corners where Phase I trajectories start, 5 mm over the paper, metres."""
 TARGET_Z_M = PAPER_REPORTED_Z_M + paper.PHASE1_TARGET_HEIGHT_M
-"""Height of the four corners where Phase I trajectories start (5 mm over the paper), and of
-the targets they head for (1 mm over it), metres."""
+"""Height of the targets Phase I trajectories head for, 1 mm over the paper, metres."""
 YAW_RANGE_RAD = kin.PAPER_YAW_RANGE_RAD
 PITCH_RANGE_RAD = kin.PAPER_PITCH_RANGE_RAD
 ROLL_RANGE_RAD = kin.PAPER_ROLL_RANGE_RAD

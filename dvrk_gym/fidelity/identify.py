@@ -316,7 +316,8 @@ def first_crossing(lags: tuple[float, ...], shares: tuple[float, ...], target: f
             if index == 0:
                 return float(lags[0])
             above, lag_above = shares[index - 1], lags[index - 1]
-            return round(float(lag_above + (lags[index] - lag_above) * (above - target) / (above - share)), 2)
+            crossing = round(float(lag_above + (lags[index] - lag_above) * (above - target) / (above - share)), 2)
+            return min(max(crossing, float(lag_above)), float(lags[index]))
     raise ValueError(f"no lag in {lags} brings the share to {target:.4f} (the last gives {shares[-1]:.4f}); extend the grid")
 
 

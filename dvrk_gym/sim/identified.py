@@ -77,8 +77,8 @@ its settle lag, :data:`WRIST_SETTLE_LAG`, the authors' collector, a pause every 
 :data:`dvrk_gym.paper.PHASE1_STEP_M`, and the authors' search boxes,
 :data:`dvrk_gym.paper.MARKER_SEARCH_BOXES_PX`) whose detector never misses keeps 50.9% of
 its rows, the real one kept 37% (1939 of 5256), and a miss in either camera loses the row,
-so each camera misses 1 - sqrt(0.369 / 0.509) = 14.9% of the time. The boxes lose a third
-of the rows a detector searching the whole image keeps (73.2% of them without misses, so
+so each camera misses 1 - sqrt(0.369 / 0.509) = 14.9% of the time. The boxes lose 30% of
+the rows a detector searching the whole image keeps (73.2% of them without misses, so
 29.0% misses; 30.0% with the simulator's earlier collector, a pause every millimetre; 30.4%
 before the tape's right-image shift, :data:`TAPE_RIGHT_SHIFT_PX`: the 12 px gate, which
 measures the right detection against where the grid's map sends the left one, drops a

@@ -36,10 +36,11 @@ class WorldConfig:
         pixel_noise_px: standard deviation of the noise added to every detected pixel
             coordinate, at 1920 x 1080 (scaled with the resolution), on top of
             ``marker_noise`` for the red marker.
-        marker_noise: the red-tape detector's own error in each camera and its
-            right-image shift (the identified ones by default:
+        marker_noise: the red-tape detector's own error in each camera, its right-image
+            shift and the boxes it searches (the identified ones by default:
             :data:`dvrk_gym.sim.identified.MARKER_DETECTION_NOISE`,
-            :data:`~dvrk_gym.sim.identified.TAPE_RIGHT_SHIFT_PX`). The shift also sets the
+            :data:`~dvrk_gym.sim.identified.TAPE_RIGHT_SHIFT_PX`, and the authors' boxes,
+            :data:`dvrk_gym.paper.MARKER_SEARCH_BOXES_PX`). The shift also sets the
             baseline the endoscope renders with
             (:func:`dvrk_gym.sim.endoscope.baseline.true_baseline_m`), when the world is made,
             so that the tape is seen where the real rows put it.

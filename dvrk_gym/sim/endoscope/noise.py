@@ -112,6 +112,8 @@ class DetectionNoise:
         search_boxes_px: the regions (u, v, width, height) of the left and the right image
             the detector searches, px at 1080p: a detection whose whole-pixel centroid does
             not lie strictly inside its image's box is no detection (None: the whole image).
+            Like the misses, the boxes act on the noisy path only; exact detections (no
+            generator) see the whole image.
     """
 
     core_px: float
@@ -142,6 +144,8 @@ class DetectionNoise:
                     f"DetectionNoise.search_boxes_px = {self.search_boxes_px!r}; expected two boxes (u, v, width, height) "
                     "of finite pixels with positive sizes, or None"
                 )
+            left, right = (tuple(float(x) for x in box) for box in boxes)
+            object.__setattr__(self, "search_boxes_px", (left, right))  # frozen: stored as tuples of floats
 
     def searches(self, side: str, uv: np.ndarray, width_px: int = PAPER_WIDTH_PX) -> bool:
         """Whether a detection at ``uv`` (pixels of the ``side`` image, ``width_px`` wide) lies
@@ -153,7 +157,9 @@ class DetectionNoise:
             return True
         u0, v0, width, height = self.search_boxes_px[0 if side == "left" else 1]
         u, v = (np.asarray(uv, dtype=float).reshape(2) + 0.5) * (PAPER_WIDTH_PX / width_px) - 0.5
-        return bool(u0 < u < u0 + width and v0 < v < v0 + height)
+        # Strictly inside, with the rounding of a whole pixel brought back to 1080p allowed for.
+        tolerance = 1e-6
+        return bool(u0 + tolerance < u < u0 + width - tolerance and v0 + tolerance < v < v0 + height - tolerance)
 
     def shift(self, side: str, width_px: int = PAPER_WIDTH_PX) -> np.ndarray:
         """The bias (du, dv) of a centroid in the ``side`` ("left" or "right") image, pixels of an
@@ -179,20 +185,26 @@ class DetectionNoise:
 
 
 def _box_shaped(value: object) -> bool:
+    """Whether ``value`` is two sequences of four real numbers (not booleans)."""
     return (
-        isinstance(value, (tuple, list))
+        isinstance(value, (tuple, list, np.ndarray))
         and len(value) == 2
-        and all(isinstance(box, (tuple, list)) and len(box) == 4 and all(isinstance(x, (int, float)) for x in box) for box in value)
+        and all(
+            isinstance(box, (tuple, list, np.ndarray))
+            and len(box) == 4
+            and all(isinstance(x, (int, float, np.integer, np.floating)) and not isinstance(x, (bool, np.bool_)) for x in box)
+            for box in value
+        )
     )
 
 
 IDENTIFIED_MARKER_NOISE = DetectionNoise(
-    identified.MARKER_DETECTION_NOISE.core_px,
-    identified.MARKER_DETECTION_NOISE.outlier_px,
-    identified.MARKER_DETECTION_NOISE.outlier_probability,
-    identified.MARKER_DETECTION_NOISE.miss_probability,
-    identified.TAPE_RIGHT_SHIFT_PX,
-    paper.MARKER_SEARCH_BOXES_PX,
+    core_px=identified.MARKER_DETECTION_NOISE.core_px,
+    outlier_px=identified.MARKER_DETECTION_NOISE.outlier_px,
+    outlier_probability=identified.MARKER_DETECTION_NOISE.outlier_probability,
+    miss_probability=identified.MARKER_DETECTION_NOISE.miss_probability,
+    right_shift_px=identified.TAPE_RIGHT_SHIFT_PX,
+    search_boxes_px=paper.MARKER_SEARCH_BOXES_PX,
 )
 """The red-tape detector's error identified from the real rows (:data:`dvrk_gym.sim.identified.MARKER_DETECTION_NOISE`),
 searching the authors' boxes of each image (:data:`dvrk_gym.paper.MARKER_SEARCH_BOXES_PX`)."""
