@@ -30,7 +30,6 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import dataclasses
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
@@ -38,6 +37,7 @@ from unittest import mock
 
 import gymnasium as gym
 import numpy as np
+from fidelity_table_runs import marker_noise_replaced
 
 from dvrk_gym import paper
 from dvrk_gym.calibration import phase1
@@ -48,7 +48,6 @@ from dvrk_gym.envs.grid_touch import HOME_POSITION_M
 from dvrk_gym.fidelity.comparison import run_fidelity
 from dvrk_gym.fidelity.instrument_model import pixels_of_camera_points
 from dvrk_gym.fidelity.report import format_table as format_fidelity_table
-from dvrk_gym.sim.world import DvrkWorld, WorldConfig
 
 
 def pushed_jaws_height(bias_seed: int, resolution: tuple[int, int]) -> float:
@@ -94,18 +93,10 @@ def detector(search_boxes: bool, miss_probability: float | None) -> Iterator[Non
     ``miss_probability`` (None keeps the identified one). Undone on exit."""
     if miss_probability is not None and not 0.0 <= miss_probability < 1.0:
         raise ValueError(f"miss_probability must be in [0, 1), got {miss_probability}")
-    original = DvrkWorld.__init__
-
-    def init(self: DvrkWorld, config: WorldConfig | None = None) -> None:
-        config = config or WorldConfig()
-        noise = config.marker_noise
-        if not search_boxes:
-            noise = dataclasses.replace(noise, search_boxes_px=None)
-        if miss_probability is not None:
-            noise = dataclasses.replace(noise, miss_probability=miss_probability)
-        original(self, dataclasses.replace(config, marker_noise=noise))
-
-    with mock.patch.object(DvrkWorld, "__init__", init):
+    changes: dict[str, object] = {} if search_boxes else {"search_boxes_px": None}
+    if miss_probability is not None:
+        changes["miss_probability"] = miss_probability
+    with marker_noise_replaced(**changes):
         yield
 
 

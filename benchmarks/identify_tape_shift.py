@@ -30,13 +30,11 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import dataclasses
 from collections.abc import Iterator
-from unittest import mock
 
 import gymnasium as gym
 import numpy as np
-from fidelity_table_runs import FIXED_YAWS, real_table, simulated_table
+from fidelity_table_runs import FIXED_YAWS, marker_noise_replaced, real_table, simulated_table
 
 from dvrk_gym import paper
 from dvrk_gym.calibration.datasets import load_paper_table_runs
@@ -46,8 +44,6 @@ from dvrk_gym.calibration.policy import CalibratedPolicy
 from dvrk_gym.sim import identified
 from dvrk_gym.sim.endoscope.baseline import true_baseline_m
 from dvrk_gym.sim.endoscope.noise import MAX_RIGHT_SHIFT_PX
-from dvrk_gym.sim.world import DvrkWorld
-from dvrk_gym.sim.world_config import WorldConfig
 
 AS_EVALUATE = [(None, 0.0)] * len(paper.CALIBRATION_SETTINGS)
 """No band and no lift at any setting: the touches as ``dvrk-gym evaluate`` makes them."""
@@ -58,14 +54,7 @@ def tape_shift(pixels: float) -> Iterator[None]:
     """While open, every new simulated world's red-tape detector has the right-image shift
     ``pixels`` (px at 1080p) instead of the identified one, and its endoscope the true
     baseline that goes with it. Undone on exit. (Nested, the outer shift wins.)"""
-    original = DvrkWorld.__init__
-
-    def init(self: DvrkWorld, config: WorldConfig | None = None) -> None:
-        config = config or WorldConfig()
-        noise = dataclasses.replace(config.marker_noise, right_shift_px=pixels)
-        original(self, dataclasses.replace(config, marker_noise=noise))
-
-    with mock.patch.object(DvrkWorld, "__init__", init):
+    with marker_noise_replaced(right_shift_px=pixels):
         yield
 
 

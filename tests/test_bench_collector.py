@@ -11,6 +11,7 @@ from dvrk_gym.calibration import phase1
 from dvrk_gym.calibration.datasets import load_paper_phase1
 from dvrk_gym.envs import exploration
 from dvrk_gym.sim import identified
+from dvrk_gym.sim.world import DvrkWorld, WorldConfig
 
 collector_script = load_script("fidelity_collector")
 SCRIPT = script_path("fidelity_collector")
@@ -88,12 +89,12 @@ def test_the_collectors_paper_is_where_the_identified_instrument_reports_its_pus
 
 def test_the_detector_what_if_searches_the_whole_image_and_is_undone():
     with collector_script.detector(search_boxes=False, miss_probability=0.29):
-        world = collector_script.DvrkWorld(collector_script.WorldConfig(camera_resolution=(320, 180)))
+        world = DvrkWorld(WorldConfig(camera_resolution=(320, 180)))
         try:
             assert world.config.marker_noise.search_boxes_px is None and world.config.marker_noise.miss_probability == 0.29
         finally:
             world.close()
-    world = collector_script.DvrkWorld(collector_script.WorldConfig(camera_resolution=(320, 180)))
+    world = DvrkWorld(WorldConfig(camera_resolution=(320, 180)))
     try:
         assert world.config.marker_noise.search_boxes_px == paper.MARKER_SEARCH_BOXES_PX
         assert world.config.marker_noise.miss_probability == identified.MARKER_DETECTION_NOISE.miss_probability
