@@ -34,7 +34,9 @@ them: for the rigid body's touches sent more than 1 mm under the pushed jaws, ho
 the sent height the robot reported itself after the move (the real arm gave way to part of
 the depth; the simulated descent stops where the jaws meet the paper, so it reports all of
 it); where the Phase I kept rows lie over the pushed jaws, real (the first round of
-pushes, the nearest in time) and simulated; and, per yaw, the mean of the Phase II pushes
+pushes, the nearest in time) and simulated; how the paper's plane tilts in each robot's
+frame (through the pushes, and through the Phase I rows, which followed the authors' plane
+fitted through four corners); and, per yaw, the mean of the Phase II pushes
 (how far a person moved the jaws from the network's prediction onto the circle, in the
 robot's x and y), real (both rounds) and simulated (the calibration run's Phase II), with
 how far the mean y spreads over the yaws.
@@ -71,6 +73,7 @@ from dvrk_gym.calibration.phase1 import Phase1Data
 from dvrk_gym.calibration.phase2 import Phase2Data
 from dvrk_gym.calibration.pipeline import BENCHMARK_SEED_OFFSET, PipelineConfig, read_pipeline_settings
 from dvrk_gym.calibration.policy import CalibratedPolicy
+from dvrk_gym.fidelity.statistics import plane_slope
 from dvrk_gym.sim.world import DvrkWorld
 from dvrk_gym.sim.world_config import WorldConfig
 
@@ -173,6 +176,13 @@ def rows_over_pushes(positions: np.ndarray, yaws: np.ndarray, pushed: np.ndarray
         rows, at_yaw = nearest == index, np.isclose(pushed_yaws, yaw)
         heights[rows] = over_plane(positions[rows], pushed[at_yaw])
     return heights
+
+
+def plane_tilt(positions: np.ndarray) -> str:
+    """The tilt (deg) and slopes along x and y (mm per mm) of the least-squares plane through
+    ``positions`` (n, 3) m, as a line of text (:func:`~dvrk_gym.fidelity.statistics.plane_slope`)."""
+    slope_x, slope_y = plane_slope(positions)
+    return f"{np.rad2deg(np.arctan(np.hypot(slope_x, slope_y))):5.1f} deg   x {slope_x:+.3f}   y {slope_y:+.3f}"
 
 
 def push_means(yaws: np.ndarray, moves: np.ndarray) -> np.ndarray:
@@ -343,6 +353,15 @@ def _print_comparison(
     for who, values in (("real", real_heights), ("sim", heights)):
         low, middle, high = np.percentile(1e3 * values, [5, 50, 95])
         print(f"Phase I kept rows over the pushed jaws, {who}: {low:.1f} / {middle:.1f} / {high:.1f} mm (5th / 50th / 95th percentile)")
+    print("the paper's plane in the robot's frame: tilt from the base xy-plane (deg), and its slopes along x and y (mm per mm)")
+    planes = [(f"real Phase II pushes, round {k}", runs.push_after[runs.push_round == k]) for k in sorted(set(runs.push_round.tolist()))]
+    planes += [
+        ("real Phase I kept rows", real_y),
+        ("sim Phase II pushes", phase2.corrected),
+        ("sim Phase I kept rows", phase1.reported_position[kept]),
+    ]
+    for who, positions in planes:
+        print(f"  {who:<34s}" + plane_tilt(positions))
     _print_push_means(runs, phase2)
 
 

@@ -23,6 +23,8 @@ REFERENCE = FidelityStatistics(
     jitter_pairs=90,
     same_position_share=0.03,
     pitch_autocorrelation=0.27,
+    plane_tilt_deg=7.2,
+    plane_slope=(-0.126, 0.009),
     kept_fraction_per_yaw=(0.1, 0.3, 0.3, 0.2, 0.1),
     pitch_p5_deg=-10.0,
     pitch_p95_deg=20.0,
@@ -44,7 +46,15 @@ def test_ratios_within_25_percent_and_shares_within_006_pass():
         "kept share of raw rows",
     ):
         assert verdicts_near[name] and not verdicts_far[name], name
-    assert len(verdicts_near) == 21 and all(verdicts_near.values())
+    assert len(verdicts_near) == 22 and all(verdicts_near.values())
+
+
+def test_a_level_plane_misses_the_real_rows_tilt_by_ratio():
+    level = dataclasses.replace(REFERENCE, plane_tilt_deg=0.5, plane_slope=(0.002, 0.009))
+    near = dataclasses.replace(REFERENCE, plane_tilt_deg=7.2 * 0.76)
+    name = "tilt of the rows' plane in the base frame (deg)"
+    assert not {row.name: row for row in compare(REFERENCE, level, 0.37, 0.37)}[name].passed
+    assert {row.name: row for row in compare(REFERENCE, near, 0.37, 0.37)}[name].passed
 
 
 def test_median_pitch_per_yaw_passes_within_5_degrees_absolute():
@@ -71,7 +81,7 @@ def test_pitch_autocorrelation_passes_within_01_and_same_position_within_006():
 def test_cross_validation_rows_are_left_out_when_not_run():
     sim = dataclasses.replace(REFERENCE, cv_linear_mm2=None, cv_forest_mm2=None)
     names = [row.name for row in compare(REFERENCE, sim, 0.37, 0.37)]
-    assert len(names) == 19 and not any("CV" in name for name in names)
+    assert len(names) == 20 and not any("CV" in name for name in names)
 
 
 def test_atomic_write_replaces_whole_or_keeps_the_old_file(tmp_path):

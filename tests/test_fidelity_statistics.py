@@ -8,7 +8,14 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from dvrk_gym.calibration.datasets import load_paper_phase1
-from dvrk_gym.fidelity.statistics import PAPER_YAWS_DEG, SAME_POSITION_M, fidelity_statistics, lag_one_correlation, rigid_residuals_camera
+from dvrk_gym.fidelity.statistics import (
+    PAPER_YAWS_DEG,
+    SAME_POSITION_M,
+    fidelity_statistics,
+    lag_one_correlation,
+    plane_slope,
+    rigid_residuals_camera,
+)
 
 
 @pytest.mark.slow
@@ -21,6 +28,7 @@ def test_real_rows_give_the_issues_real_robot_column():
     assert round(stats.image_plane_jitter_mm, 1) == 1.0
     assert round(stats.same_position_share, 2) == 0.03
     assert round(stats.pitch_autocorrelation, 2) == 0.27
+    assert round(stats.plane_tilt_deg, 1) == 7.2 and [round(a, 3) for a in stats.plane_slope] == [-0.126, 0.009]
     assert [round(f, 2) for f in stats.kept_fraction_per_yaw] == [0.13, 0.30, 0.28, 0.20, 0.09]
     assert (round(stats.pitch_p5_deg), round(stats.pitch_p95_deg)) == (-11, 21)
     assert [round(p, 1) for p in stats.pitch_median_per_yaw_deg] == [11.7, 7.6, -1.0, -3.0, -1.1]
@@ -82,6 +90,30 @@ def test_yaw_fractions_and_pitch_percentiles_are_in_the_reports_units():
     assert stats.kept_fraction_per_yaw == pytest.approx((0.1, 0.2, 0.3, 0.3, 0.1))
     assert stats.pitch_p5_deg == pytest.approx(-8.5, abs=0.05)
     assert stats.pitch_p95_deg == pytest.approx(18.5, abs=0.05)
+
+
+def test_rows_on_a_plane_tilted_about_base_y_give_its_slope_and_angle():
+    X, y = _synthetic_rows(np.full(3, 0.001))
+    y[:, 2] = -0.16 + np.tan(np.deg2rad(-7.0)) * (y[:, 0] - 0.04) + 0.01 * (y[:, 1] - 0.04)
+    stats = fidelity_statistics(X, y, cross_validation=False)
+    assert stats.plane_slope == pytest.approx((np.tan(np.deg2rad(-7.0)), 0.01))
+    assert stats.plane_tilt_deg == pytest.approx(np.rad2deg(np.arctan(np.hypot(np.tan(np.deg2rad(7.0)), 0.01))))
+    y[:, 2] = -0.16  # level
+    assert fidelity_statistics(X, y, cross_validation=False).plane_tilt_deg == pytest.approx(0.0, abs=1e-9)
+
+
+@pytest.mark.parametrize(
+    ("positions", "message"),
+    [
+        (np.zeros((2, 3)), "N >= 3"),
+        (np.zeros((5, 2)), "N >= 3"),
+        (np.array([[0.0, 0.0, 0.0], [0.01, 0.01, 0.0], [np.nan, 0.0, 0.0]]), "finite"),
+        (np.column_stack([np.linspace(0, 0.05, 6), np.linspace(0, 0.05, 6), np.zeros(6)]), "one line"),
+    ],
+)
+def test_plane_slope_refuses_what_defines_no_plane(positions, message):
+    with pytest.raises(ValueError, match=message):
+        plane_slope(positions)
 
 
 def test_cross_validation_of_an_exactly_linear_map_is_zero_for_the_linear_model():

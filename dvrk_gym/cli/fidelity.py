@@ -45,8 +45,8 @@ def add_commands(subparsers: argparse._SubParsersAction) -> None:
         help="how close the simulated robot is to the real one: Phase I statistics side by side with the authors' rows",
         description="Collect Phase I in simulation for an instrument (--bias, --bias-seed) and print, side by side with "
         "the authors' 1939 real rows, the statistics that tell them apart (rigid residual and its direction, "
-        "sample-to-sample jitter, kept rows per yaw and their pitches, contiguous 10-fold CV), each against its "
-        "target; write fidelity.json and fidelity.png to --out.",
+        "sample-to-sample jitter, kept rows per yaw and their pitches, the tilt of their plane, contiguous 10-fold CV), "
+        "each against its target; write fidelity.json and fidelity.png to --out.",
     )
     fidelity.add_argument("--out", type=Path, default=Path("dvrk_gym_out/fidelity"), help="output folder (default: %(default)s)")
     fidelity.add_argument(

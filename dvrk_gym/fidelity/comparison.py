@@ -102,6 +102,7 @@ def compare(real: FidelityStatistics, sim: FidelityStatistics, real_kept_share: 
         _row("jitter in image plane (mm)", real.image_plane_jitter_mm, sim.image_plane_jitter_mm, False),
         _row("same reported position, consecutive rows (share)", real.same_position_share, sim.same_position_share, True),
         _row("pitch autocorrelation, consecutive rows", real.pitch_autocorrelation, sim.pitch_autocorrelation, True, CORRELATION_TOLERANCE),
+        _row("tilt of the rows' plane in the base frame (deg)", real.plane_tilt_deg, sim.plane_tilt_deg, False),
     ]
     for yaw, real_fraction, sim_fraction in zip(PAPER_YAWS_DEG, real.kept_fraction_per_yaw, sim.kept_fraction_per_yaw):
         rows.append(_row(f"kept rows at yaw {yaw:+.0f} (share)", real_fraction, sim_fraction, True))

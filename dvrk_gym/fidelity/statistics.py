@@ -8,7 +8,8 @@ position in metres; rows are in collection order.
 
 Definitions (the issue 15 table; on the authors' 1939 rows they give 6.6 mm, 0.89, 5.2 mm,
 1.0 mm, .13/.30/.28/.20/.09, -11 to 21 deg and 3.76 / 5.0 mm^2; beyond the table, a same
-reported position for 0.03 of consecutive pairs and a pitch autocorrelation of 0.27):
+reported position for 0.03 of consecutive pairs, a pitch autocorrelation of 0.27 and rows
+whose plane is tilted 7.2 degrees in the robot's frame):
 
 - Rigid residual: for each nearest paper yaw (-90, -45, 0, 45, 90 deg) a least-squares
   rigid transform ``b ~= R c + t`` (:class:`RigidBodyCalibrator`, the paper's RBT); the
@@ -27,6 +28,11 @@ reported position for 0.03 of consecutive pairs and a pitch autocorrelation of 0
   position up to three times a pause; the real rows do so for 3% of their pairs.
 - Pitch autocorrelation: the correlation of consecutive rows' pitch (lag 1). The protocol
   draws each random orientation afresh; the real rows' consecutive pitches are correlated.
+- Tilt of the rows' plane: the angle between the base frame's xy-plane and the
+  least-squares plane ``bz = a bx + b by + c`` through the rows' reported positions,
+  ``atan(hypot(a, b))`` in degrees; ``(a, b)`` are kept too. The authors' collector ran
+  each trajectory between heights over a plane it fitted through four corners where the
+  arm touched the paper, so the rows' plane is the paper as the robot reported it.
 - Kept rows per nearest yaw: the fraction of rows whose yaw is nearest each paper yaw.
 - Pitch of kept rows: the 5th and 95th percentiles, degrees in the report.
 - Cross-validation as the authors ran it: ``CV_FOLDS`` contiguous, unshuffled folds
@@ -62,6 +68,7 @@ __all__ = [
     "FidelityStatistics",
     "consecutive_pairs",
     "lag_one_correlation",
+    "plane_slope",
     "contiguous_cv_mse_mm2",
     "fidelity_statistics",
     "rigid_residuals_camera",
@@ -102,6 +109,10 @@ class FidelityStatistics:
             lie within ``SAME_POSITION_M`` of each other, in [0, 1].
         pitch_autocorrelation: correlation of consecutive rows' pitch (lag 1), in [-1, 1]
             (0 when the pitch does not vary).
+        plane_tilt_deg: tilt of the least-squares plane through the reported positions
+            from the base xy-plane, degrees, in [0, 90).
+        plane_slope: ``(a, b)`` of that plane, ``bz = a bx + b by + c``: metres of height
+            per metre along base x and y.
         kept_fraction_per_yaw: fraction of rows nearest each of ``PAPER_YAWS_DEG``.
         pitch_p5_deg: 5th percentile of the rows' pitch, degrees.
         pitch_p95_deg: 95th percentile of the rows' pitch, degrees.
@@ -121,6 +132,8 @@ class FidelityStatistics:
     jitter_pairs: int
     same_position_share: float
     pitch_autocorrelation: float
+    plane_tilt_deg: float
+    plane_slope: tuple[float, float]
     kept_fraction_per_yaw: tuple[float, ...]
     pitch_p5_deg: float
     pitch_p95_deg: float
@@ -132,6 +145,7 @@ class FidelityStatistics:
         """The fields as a JSON-ready dict (tuples as lists)."""
         values = asdict(self)
         values["kept_fraction_per_yaw"] = list(self.kept_fraction_per_yaw)
+        values["plane_slope"] = list(self.plane_slope)
         # A yaw without rows has no median: None (JSON null), not NaN (not JSON).
         values["pitch_median_per_yaw_deg"] = [None if math.isnan(p) else p for p in self.pitch_median_per_yaw_deg]
         return values
@@ -163,6 +177,24 @@ def rigid_residuals_camera(X: np.ndarray, y: np.ndarray) -> np.ndarray:
     base_residual = y - model.predict(X)
     # b - (R c + t) = -R (c - R^T (b - t)): rotate back and flip the sign.
     return -np.einsum("nji,nj->ni", model.rotations_[groups], base_residual)
+
+
+def plane_slope(positions: np.ndarray) -> tuple[float, float]:
+    """The slopes ``(a, b)`` of the least-squares plane ``z = a x + b y + c`` through
+    ``positions`` (N, 3), N >= 3, in metres: metres of height per metre along x and y.
+
+    Raises:
+        ValueError: on a shape other than (N, 3) with N >= 3, values not finite, or points
+            that do not span the xy-plane (all on one line seen from above).
+    """
+    positions = np.asarray(positions, dtype=float)
+    if positions.ndim != 2 or positions.shape[1] != 3 or positions.shape[0] < 3 or not np.isfinite(positions).all():
+        raise ValueError(f"positions must be (N, 3) finite metres with N >= 3, got shape {positions.shape}")
+    design = np.column_stack([positions[:, 0], positions[:, 1], np.ones(positions.shape[0])])
+    coefficients, _, rank, _ = np.linalg.lstsq(design, positions[:, 2], rcond=None)
+    if rank < 3:
+        raise ValueError("the positions lie on one line seen from above; they define no plane")
+    return float(coefficients[0]), float(coefficients[1])
 
 
 def consecutive_pairs(y: np.ndarray, max_step_m: float = JITTER_MAX_STEP_M) -> np.ndarray:
@@ -228,6 +260,7 @@ def fidelity_statistics(
     jumps = residual[pairs + 1] - residual[pairs]
     groups = nearest_yaw_index(X[:, 3])
     pitch_deg = np.rad2deg(X[:, 4])
+    slope = plane_slope(y)
     linear = forest = None
     if cross_validation:
         linear = contiguous_cv_mse_mm2(LinearRegression, X, y, folds)
@@ -243,6 +276,8 @@ def fidelity_statistics(
         jitter_pairs=int(pairs.size),
         same_position_share=float(np.mean(steps <= SAME_POSITION_M)),
         pitch_autocorrelation=lag_one_correlation(X[:, 4]),
+        plane_tilt_deg=float(np.rad2deg(np.arctan(math.hypot(*slope)))),
+        plane_slope=slope,
         kept_fraction_per_yaw=tuple(float(f) for f in np.bincount(groups, minlength=len(PAPER_YAWS_RAD)) / X.shape[0]),
         pitch_p5_deg=float(np.percentile(pitch_deg, PITCH_PERCENTILES[0])),
         pitch_p95_deg=float(np.percentile(pitch_deg, PITCH_PERCENTILES[1])),
