@@ -24,20 +24,31 @@ the fidelity statistics' own models (:mod:`dvrk_gym.fidelity.statistics`):
    for ``dvrk-gym fidelity``'s default collection (seed 0, 1920 x 1080) with no cable bias (``bias="none"``, about 40 s more),
    which keeps the simulated geometry (the tape on the jaws, the reported point) alone; and
    the forest's CV on the simulated rows with the real rows' yaw terms swapped in for their
-   own after the fact (base positions moved by the difference of the two fits' terms).
+   own after the fact (base positions moved by the difference of the two fits' terms);
+6. with ``--wrist-yaw-homing-deg D [D ...]``, a what-if: ``dvrk-gym fidelity``'s default
+   collection (seed 0) of the identified instrument with a homing offset of D degrees on
+   the wrist-yaw joint, which the identification does not fit (about 45 s each). It turns
+   the jaws, and the tape with them, about the wrist-yaw axis: the simulated tape lies on
+   the jaws' +x side, where the real rows' kept orientations put it, 1.85 mm across the
+   jaws from where the identification's pixels put its centre
+   (:data:`dvrk_gym.sim.identified.MARKER_OFFSET_M`, -1.27 mm), and 13 degrees at 8 mm
+   along the jaws spans that. Printed: the yaw terms, the forest's CV, the kept share and
+   how many of the fidelity statistics meet their target.
 
 About a minute after the calibration (its Phase I is ``dvrk-gym fidelity``'s collection,
 same seed and instrument):
 
     dvrk-gym calibrate --out runs/cal
-    python benchmarks/fidelity_forest.py --phase1 runs/cal/phase1.npz [--unbiased]
+    python benchmarks/fidelity_forest.py --phase1 runs/cal/phase1.npz [--unbiased] [--wrist-yaw-homing-deg 13]
 """
 
 from __future__ import annotations
 
 import argparse
-from collections.abc import Callable
+import dataclasses
+from collections.abc import Callable, Sequence
 from pathlib import Path
+from unittest import mock
 
 import numpy as np
 from sklearn.ensemble import RandomForestRegressor
@@ -46,7 +57,9 @@ from sklearn.model_selection import KFold
 
 from dvrk_gym.calibration.datasets import load_paper_phase1
 from dvrk_gym.calibration.phase1 import Phase1Data, run_paper_phase1
+from dvrk_gym.fidelity.comparison import FidelityRun, run_fidelity
 from dvrk_gym.fidelity.statistics import CV_FOLDS, CV_FOREST_TREES, plane_slope
+from dvrk_gym.sim import identified
 
 DISTANCE_BINS_MM = (0.0, 1.0, 2.0, 3.0, 5.0, np.inf)
 """Edges of the bins of distance (base x and y) from a held-out row to the nearest training row, mm."""
@@ -131,7 +144,17 @@ def report(name: str, X: np.ndarray, y: np.ndarray) -> None:
     )
 
 
-def main(phase1: Path, unbiased: bool = False) -> None:
+def with_wrist_yaw_homing(degrees: float) -> FidelityRun:
+    """``dvrk-gym fidelity``'s default run of the identified instrument with its wrist-yaw
+    homing offset set to ``degrees`` (the package's instrument is left as it was)."""
+    offsets = list(identified.INSTRUMENT.homing_offsets)
+    offsets[5] = float(np.deg2rad(degrees))
+    instrument = dataclasses.replace(identified.INSTRUMENT, homing_offsets=tuple(offsets))
+    with mock.patch.object(identified, "INSTRUMENT", instrument):
+        return run_fidelity(progress=False)
+
+
+def main(phase1: Path, unbiased: bool = False, wrist_yaw_homing_deg: Sequence[float] = ()) -> None:
     real_X, real_y = load_paper_phase1()
     sim = Phase1Data.load(phase1).cleaned()
     report("real", real_X, real_y)
@@ -157,11 +180,23 @@ def main(phase1: Path, unbiased: bool = False) -> None:
         print_yaw_terms("sim, no cable bias (seed 0)", none.X, none.y)
         trees, _ = held_out_errors(forest, none.X, none.y)
         print(f"   its forest contiguous CV {trees.sum(axis=1).mean() * _M2_TO_MM2:.2f} mm^2")
+    for degrees in wrist_yaw_homing_deg:
+        run = with_wrist_yaw_homing(degrees)
+        print(f"6. a wrist-yaw homing offset of {degrees:+g} degrees (the identified instrument's is 0):")
+        print_yaw_terms("sim", run.sim_X, run.sim_y)
+        assert run.sim.cv_forest_mm2 is not None
+        print(
+            f"   forest contiguous CV {run.sim.cv_forest_mm2:.2f} mm^2 (real {run.real.cv_forest_mm2:.2f}); kept share "
+            f"{len(run.sim_y) / run.sim_raw_rows:.2f}; {run.passed} of {len(run.rows)} statistics within target"
+        )
 
 
 if __name__ == "__main__":
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--phase1", type=Path, required=True, help="a Phase I file (phase1.npz of dvrk-gym calibrate --out DIR)")
     parser.add_argument("--unbiased", action="store_true", help="also collect Phase I with no cable bias (about 40 s)")
+    parser.add_argument(
+        "--wrist-yaw-homing-deg", type=float, nargs="+", default=(), help="what-if wrist-yaw homing offsets, degrees (about 45 s each)"
+    )
     args = parser.parse_args()
-    main(args.phase1, unbiased=args.unbiased)
+    main(args.phase1, unbiased=args.unbiased, wrist_yaw_homing_deg=args.wrist_yaw_homing_deg)
