@@ -18,9 +18,11 @@ from dvrk_gym.baselines.comparison import agent_row, benchmark_agent, calibratio
 from dvrk_gym.baselines.training import make_agent_env
 from dvrk_gym.baselines.wrappers import GoalScaling, TargetYawAction, TrainingYaws
 from dvrk_gym.calibration.benchmark import YAW_SETTINGS, CircleErrors, save_table
+from dvrk_gym.calibration.pipeline import SETTINGS_STAMP
 from dvrk_gym.cli.baselines import add_commands
 from dvrk_gym.envs.grid_touch import ACTION_HIGH, ACTION_LOW, N_CIRCLES
 from dvrk_gym.sim.robot.kinematics import PAPER_YAWS_RAD
+from dvrk_gym.utils.run_folder import RunFolder
 
 TINY = (320, 180)
 FAST_NETWORK = {"learning_starts": 40, "batch_size": 64, "gradient_steps": 1, "policy_kwargs": {"net_arch": [32, 32]}}
@@ -148,7 +150,8 @@ def _fake_calibration_run(folder, mm_by_method):
         "seed": 0,
         "steps_per_trajectory": 93,
     }
-    (folder / "pipeline_config.json").write_text(json.dumps(config))
+    with RunFolder(folder, config, stamp=SETTINGS_STAMP):  # stamped as run_calibration stamps it, with the source fingerprint
+        pass
 
 
 def test_calibration_rows_count_phase1_poses_and_phase2_touches(tmp_path):

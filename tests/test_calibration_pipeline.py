@@ -8,13 +8,16 @@ import numpy as np
 import pytest
 
 from dvrk_gym.calibration.benchmark import YAW_SETTINGS, format_table, touch_grid
+from dvrk_gym.calibration.loading import load_calibrator
+from dvrk_gym.calibration.models.rigid import RigidBodyCalibrator
 from dvrk_gym.calibration.phase2 import Phase2Data, collect_phase2
-from dvrk_gym.calibration.pipeline import PipelineConfig, run_calibration
+from dvrk_gym.calibration.pipeline import SETTINGS_STAMP, PipelineConfig, read_pipeline_settings, run_calibration
 from dvrk_gym.calibration.policy import CalibratedPolicy, calibrator_input
 from dvrk_gym.cli.main import main
 from dvrk_gym.evaluation.episodes import as_policy, load_policy_factory, run_episodes, summarize
 from dvrk_gym.sim.robot import kinematics as kin
 from dvrk_gym.sim.robot.bias import BIAS_PRESETS
+from dvrk_gym.utils.run_folder import SOURCE_KEY, RunFolder
 
 SMALL = (640, 360)
 
@@ -157,6 +160,26 @@ def test_pipeline_runs_end_to_end_resumes_and_refuses_other_settings(tmp_path):
     assert "paper" in format_table(first["table"])
     with pytest.raises(ValueError, match="other settings"):
         run_calibration(tmp_path, PipelineConfig(n_trajectories=4, camera_resolution=SMALL), progress=False)
+
+
+def test_a_calibration_folders_stamp_reads_back_as_its_config_and_another_versions_is_refused(tmp_path):
+    config = PipelineConfig(n_trajectories=3, steps_per_trajectory=30, dnn_epochs=5, bias="none", camera_resolution=SMALL)
+    with RunFolder(tmp_path, dataclasses.asdict(config), stamp=SETTINGS_STAMP):  # as run_calibration stamps it
+        pass
+    assert SOURCE_KEY in json.loads((tmp_path / SETTINGS_STAMP).read_text())
+    assert PipelineConfig.from_settings(read_pipeline_settings(tmp_path)) == config  # the readers: evaluate, debride, benchmarks
+    rng = np.random.default_rng(0)
+    X = np.column_stack([rng.uniform(-0.05, 0.05, (60, 3)), np.repeat(np.deg2rad([-90.0, 0.0, 90.0]), 20), np.zeros((60, 2))])
+    RigidBodyCalibrator().fit(X, X[:, :3] + 0.01).save(tmp_path / "rbt.zip")
+    _, settings = load_calibrator(tmp_path, "rbt")
+    assert PipelineConfig.from_settings(settings) == config
+    stamp = json.loads((tmp_path / SETTINGS_STAMP).read_text())
+    stamp[SOURCE_KEY]["sha256"] = "f" * 64  # made by another version
+    (tmp_path / SETTINGS_STAMP).write_text(json.dumps(stamp))
+    with pytest.raises(ValueError, match=r"another version of dvrk_gym's simulator .*use another --out, or delete the folder"):
+        run_calibration(tmp_path, config, progress=False)
+    assert not (tmp_path / "phase1.npz").exists()  # refused before any stage ran
+    assert PipelineConfig.from_settings(read_pipeline_settings(tmp_path)) == config  # still read
 
 
 def test_cli_evaluates_any_policy_from_a_factory(tmp_path, capsys):

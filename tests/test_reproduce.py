@@ -10,7 +10,9 @@ from dvrk_gym import paper
 from dvrk_gym.cli.main import main
 from dvrk_gym.parallel.task_graph import Task, TaskError, run_tasks
 from dvrk_gym.reproduce import TINY, Profile, ReproduceConfig, build_tasks, run_reproduce
-from dvrk_gym.utils.run_folder import RunFolder, read_settings
+from dvrk_gym.reproduce.run import SETTINGS_STAMP
+from dvrk_gym.utils.run_folder import SOURCE_KEY, RunFolder, read_settings
+from dvrk_gym.utils.source_fingerprint import source_fingerprint
 
 
 @pytest.fixture(scope="module")
@@ -161,9 +163,21 @@ def test_a_run_folder_makes_each_result_once_and_refuses_other_settings(tmp_path
     again = RunFolder(tmp_path, {**settings, "profile": {"name": "tiny", "camera_resolution": [480, 270]}}, stamp="config.json")
     assert cached(again) == {"x": 1.5} and again.made_s == {} and len(made) == 1  # loaded, not made again
     assert read_settings(tmp_path, "config.json") == {"seed": 0, "profile": {"name": "tiny", "camera_resolution": [480, 270]}}
+    assert json.loads((tmp_path / "config.json").read_text())[SOURCE_KEY] == source_fingerprint().to_json()  # which dvrk_gym made it
     with pytest.raises(ValueError, match=r"other settings \(profile.name: 'tiny' there, 'full' here; seed: 0 there, 1 here"):
         RunFolder(tmp_path, {"seed": 1, "profile": {"name": "full", "camera_resolution": (480, 270)}}, stamp="config.json")
     assert RunFolder(tmp_path).has("result.json")  # without settings: no check
+
+
+def test_reproduce_refuses_a_folder_made_by_an_older_dvrk_gym_before_running_anything(tmp_path):
+    config = ReproduceConfig(out=tmp_path, profile=TINY, progress=False)
+    with RunFolder(tmp_path, config.settings(), stamp=SETTINGS_STAMP):
+        pass
+    stamp = tmp_path / SETTINGS_STAMP
+    stamp.write_text(json.dumps(read_settings(tmp_path, SETTINGS_STAMP)))  # as stamped before the fingerprint
+    with pytest.raises(ValueError, match=f"made by an older dvrk_gym: its stamp \\({SETTINGS_STAMP}\\) has no source fingerprint"):
+        run_reproduce(config)
+    assert not (tmp_path / "tasks").exists() and SOURCE_KEY not in json.loads(stamp.read_text())
 
 
 # ---------------------------------------------------------------- the paper's numbers

@@ -26,7 +26,10 @@ from dvrk_gym.sweep import (
     run_sweep,
     run_unit,
 )
+from dvrk_gym.sweep.run import SETTINGS_STAMP
 from dvrk_gym.sweep.table import TIME_COLUMNS
+from dvrk_gym.utils.run_folder import SOURCE_KEY
+from dvrk_gym.utils.source_fingerprint import source_fingerprint
 
 TINY = PipelineConfig(n_trajectories=3, steps_per_trajectory=30, dnn_epochs=5, camera_resolution=(640, 360))
 """A budget that makes a unit take seconds (its numbers mean nothing, but they are real)."""
@@ -150,6 +153,20 @@ def test_a_folder_made_with_other_settings_is_refused(tmp_path):
     with pytest.raises(ValueError, match="other settings.*dnn_epochs"):
         run_sweep(SweepSettings(bias_seeds=(0,), pipeline=PipelineConfig(n_trajectories=3, dnn_epochs=6)), tmp_path, other, progress=False)
     assert other.submitted == []
+
+
+def test_a_folder_made_by_another_version_of_the_simulator_is_refused_and_its_units_kept(tmp_path):
+    settings = SweepSettings(bias_seeds=(0,), pipeline=TINY)
+    run_sweep(settings, tmp_path, StandInExecutor(), progress=False)
+    stamp = json.loads((tmp_path / SETTINGS_STAMP).read_text())
+    assert stamp == {**json.loads(json.dumps(settings.stamp())), SOURCE_KEY: source_fingerprint().to_json()}
+    stamp[SOURCE_KEY] = {"version": "0.0.9", "sha256": "0" * 64}  # as an older install stamped it
+    (tmp_path / SETTINGS_STAMP).write_text(json.dumps(stamp))
+    unit = (tmp_path / "units" / "bias0-seed0.json").read_bytes()
+    other = StandInExecutor()
+    with pytest.raises(ValueError, match=r"another version of dvrk_gym's simulator \(dvrk_gym 0\.0\.9, source sha256 000000000000;"):
+        run_sweep(settings, tmp_path, other, progress=False)
+    assert other.submitted == [] and (tmp_path / "units" / "bias0-seed0.json").read_bytes() == unit
 
 
 def test_failed_units_are_named_the_rest_kept_and_a_rerun_retries_only_them(tmp_path):

@@ -1,6 +1,8 @@
 """The authors' records of their calibration table's runs: converted without unpickling, loaded
 as documented, and compared with the simulated robot by benchmarks/fidelity_table_runs.py."""
 
+import argparse
+import dataclasses
 import io
 import subprocess
 import sys
@@ -15,6 +17,8 @@ from dvrk_gym import paper
 from dvrk_gym.calibration import datasets
 from dvrk_gym.calibration.datasets import load_paper_phase1, load_paper_table_runs
 from dvrk_gym.calibration.models.rigid import RigidBodyCalibrator
+from dvrk_gym.calibration.pipeline import SETTINGS_STAMP, PipelineConfig
+from dvrk_gym.utils.run_folder import RunFolder
 
 convert = load_script("convert_authors_table_runs")
 table_runs = load_script("fidelity_table_runs")
@@ -254,6 +258,13 @@ def test_it_prints_the_real_and_simulated_rows(small_calibration, tmp_path):
         timeout=120,
     )
     assert missing.returncode == 2 and "not a calibration run folder" in missing.stderr
+
+
+def test_read_calibration_gives_the_config_a_calibration_folder_was_stamped_with(tmp_path):
+    config = PipelineConfig(n_trajectories=2, dnn_epochs=20, camera_resolution=(640, 360))
+    with RunFolder(tmp_path, dataclasses.asdict(config), stamp=SETTINGS_STAMP):  # as run_calibration stamps it, fingerprint and all
+        pass
+    assert table_runs.read_calibration(argparse.ArgumentParser(), tmp_path) == config
 
 
 def test_the_give_counts_the_deep_touches_and_their_reported_rise():

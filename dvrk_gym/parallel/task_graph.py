@@ -8,9 +8,13 @@ Dask cluster), each call through :func:`call_task`. Each result, a JSON-able dic
 cached in ``cache_dir/<name>.json`` (a :class:`~dvrk_gym.utils.run_folder.RunFolder`, written
 by this process) with the wall time it took; a re-run loads the cached results and runs only
 the rest, so an interrupted run resumes (a cached result cut short is moved aside and its
-task run again). Results do not depend on the executor: every task seeds itself and runs
-with one torch thread. Local workers end with the process that started them, even when it
-is killed (:func:`~dvrk_gym.utils.parent_watch.end_with_parent`).
+task run again). The cache knows results by task name only, not by the tasks' arguments or
+code nor by which dvrk_gym made them: the caller puts it inside a run folder stamped with what
+the results depend on, as ``dvrk-gym reproduce`` does (``<out>/tasks`` in its stamped ``<out>``,
+whose stamp also holds dvrk_gym's source fingerprint and is checked before the graph runs).
+Results do not depend on the executor: every task seeds itself and runs with one torch
+thread. Local workers end with the process that started them, even when it is killed
+(:func:`~dvrk_gym.utils.parent_watch.end_with_parent`).
 """
 
 from __future__ import annotations
@@ -135,7 +139,7 @@ def run_tasks(
 
     Args:
         tasks: the graph (needs must name tasks in the list; no cycles).
-        cache_dir: where results are cached as JSON.
+        cache_dir: where results are cached as JSON, by task name only (see the module docstring).
         workers: without ``executor``, local processes to run tasks in; 1 runs them here,
             one after another.
         progress: show a bar over the tasks.

@@ -1,1 +1,1 @@
-"""Small helpers with no simulator knowledge: torch thread counts, cached run folders."""
+"""Small helpers with no simulator knowledge: torch thread counts, cached run folders, the package's source fingerprint."""

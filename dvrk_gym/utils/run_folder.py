@@ -2,7 +2,12 @@
 
 A folder opened with settings is stamped with them (a JSON file in the folder); opening it
 again with other settings is refused with an error that names what differs, so results
-made with one set of settings are never mixed with another's. Each result is a file in the
+made with one set of settings are never mixed with another's. The stamp also records which
+dvrk_gym made the results (:func:`~dvrk_gym.utils.source_fingerprint.source_fingerprint`: the
+version and a digest of the package's files, under the reserved key :data:`SOURCE_KEY`): a
+folder stamped by another version of the simulator, or by one from before stamps had it, is
+refused too, since the simulator's code (its identified instrument, its collector...) changes
+between versions and its cached results would be mixed with this one's. Each result is a file in the
 folder: :meth:`RunFolder.cached` loads it when it is there, else makes and saves it, and a
 result that cannot be read back (cut short by a full disk, edited by hand) is named in a
 warning, moved aside as ``<name>.corrupt`` and made again.
@@ -31,6 +36,7 @@ from typing import Any, TypeVar
 from filelock import FileLock, Timeout
 
 from dvrk_gym.utils.atomic import atomic_path, atomic_write_json, remove_partial_files
+from dvrk_gym.utils.source_fingerprint import SourceFingerprint, source_fingerprint
 
 logger = logging.getLogger(__name__)
 
@@ -42,6 +48,10 @@ CORRUPT_SUFFIX = ".corrupt"
 """A result that could not be read back is renamed to its name plus this."""
 UNREADABLE = (ValueError, OSError, EOFError, KeyError, TypeError, zipfile.BadZipFile)
 """What a loader raises on a file cut short or tampered with (JSON and model-file errors are ValueErrors)."""
+SOURCE_KEY = "dvrk_gym_source"
+"""The key of a settings stamp that holds the fingerprint of the dvrk_gym that made the folder's
+results (:meth:`SourceFingerprint.to_json`); reserved: no setting may be called so, and
+:func:`read_settings` leaves it out."""
 
 
 class RunFolderBusy(RuntimeError):
@@ -69,22 +79,27 @@ def settings_differences(found: Any, wanted: Any) -> list[str]:
     ]
 
 
+def _read_stamp(path: Path) -> dict[str, Any] | None:
+    """A stamp file's JSON object as written (settings and source fingerprint), or None when there is none."""
+    if not path.exists():
+        return None
+    try:
+        stamp = json.loads(path.read_text())
+    except (ValueError, OSError) as error:
+        raise ValueError(f"{path} is unreadable ({error}); delete it, or the folder, to start the run again") from None
+    if not isinstance(stamp, dict):
+        raise ValueError(f"{path} holds {type(stamp).__name__}, not the settings object this tool writes; delete it or the folder")
+    return stamp
+
+
 def read_settings(folder: str | os.PathLike, stamp: str) -> dict[str, Any] | None:
-    """The settings a folder was stamped with, or None when it has no stamp.
+    """The settings a folder was stamped with (without its source fingerprint), or None when it has no stamp.
 
     Raises:
         ValueError: the stamp is not a JSON object (the message names the file).
     """
-    path = Path(folder) / stamp
-    if not path.exists():
-        return None
-    try:
-        settings = json.loads(path.read_text())
-    except (ValueError, OSError) as error:
-        raise ValueError(f"{path} is unreadable ({error}); delete it, or the folder, to start the run again") from None
-    if not isinstance(settings, dict):
-        raise ValueError(f"{path} holds {type(settings).__name__}, not the settings object this tool writes; delete it or the folder")
-    return settings
+    found = _read_stamp(Path(folder) / stamp)
+    return None if found is None else {key: value for key, value in found.items() if key != SOURCE_KEY}
 
 
 def _owner_pid(text: str) -> int | None:
@@ -103,13 +118,16 @@ class RunFolder:
 
     Args:
         path: the folder (created if missing).
-        settings: what the results depend on, JSON-able; None opens the folder without a
-            stamp (any caller may use its files).
+        settings: what the results depend on, JSON-able, without the key :data:`SOURCE_KEY`;
+            the stamp adds this dvrk_gym's source fingerprint to them. None opens the folder
+            without a stamp or any check (any caller may use its files).
         stamp: the name of the file holding the settings.
 
     Raises:
         RunFolderBusy: another process owns the folder.
-        ValueError: the folder is stamped with other settings (the message lists them).
+        ValueError: the folder is stamped with other settings (the message lists them), or by
+            another version of dvrk_gym or one whose stamps had no source fingerprint (the
+            message gives both); its results and stamp are left as they were.
         OSError: the folder cannot be made or written (a file of that name, no permission).
     """
 
@@ -182,13 +200,34 @@ class RunFolder:
 
     def _check_and_stamp(self, settings: Mapping[str, Any]) -> None:
         wanted = json.loads(json.dumps(settings))  # tuples become lists, as they come back from the stamp
-        found = read_settings(self.path, self.stamp.name)
-        if found is not None and found != wanted:
-            differences = "; ".join(settings_differences(found, wanted))
+        if SOURCE_KEY in wanted:
+            raise ValueError(f"{SOURCE_KEY!r} is reserved for the stamp's source fingerprint; give the setting another name")
+        here = source_fingerprint()
+        found = _read_stamp(self.stamp)
+        if found is not None:
+            self._check_source(found.pop(SOURCE_KEY, None), here)
+            if found != wanted:
+                differences = "; ".join(settings_differences(found, wanted))
+                raise ValueError(
+                    f"{self.path} holds a run with other settings ({differences}; see {self.stamp}); use another --out or delete it"
+                )
+        atomic_write_json(self.stamp, {**wanted, SOURCE_KEY: here.to_json()}, indent=1, sort_keys=True)
+
+    def _check_source(self, recorded: Any, here: SourceFingerprint) -> None:
+        """Refuse a folder whose results another dvrk_gym made, or whose stamp does not say which one did."""
+        remedy = "use another --out, or delete the folder to make them again with this version"
+        there = SourceFingerprint.from_json(recorded)
+        if there is None:
+            why = "has no source fingerprint" if recorded is None else f"has an unreadable source fingerprint ({str(recorded)[:80]})"
             raise ValueError(
-                f"{self.path} holds a run with other settings ({differences}; see {self.stamp}); use another --out or delete it"
+                f"{self.path} holds results made by an older dvrk_gym: its stamp ({self.stamp.name}) {why}, so which "
+                f"simulator made them is unknown and {here.short()} cannot resume them; {remedy}"
             )
-        atomic_write_json(self.stamp, wanted, indent=1, sort_keys=True)
+        if there.sha256 != here.sha256:
+            raise ValueError(
+                f"{self.path} holds results made by another version of dvrk_gym's simulator ({there.short()}; this is "
+                f"{here.short()}), which would be mixed with this version's; {remedy}"
+            )
 
     def file(self, name: str) -> Path:
         """The path of a result in the folder."""

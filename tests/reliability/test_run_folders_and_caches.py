@@ -17,7 +17,8 @@ from dvrk_gym.calibration.models.dnn import DNNCalibrator
 from dvrk_gym.calibration.phase2 import Phase2Data
 from dvrk_gym.parallel.task_graph import Task, run_tasks
 from dvrk_gym.utils.atomic import atomic_open, atomic_path, atomic_savefig, atomic_write_text, partial_path
-from dvrk_gym.utils.run_folder import LOCK_FILE, RunFolder, RunFolderBusy, read_settings
+from dvrk_gym.utils.run_folder import LOCK_FILE, SOURCE_KEY, RunFolder, RunFolderBusy, read_settings
+from dvrk_gym.utils.source_fingerprint import source_fingerprint
 
 HOLDER = """
 import sys, time
@@ -191,6 +192,51 @@ def test_a_damaged_settings_stamp_is_an_error_naming_it(tmp_path):
     (tmp_path / "settings.json").write_text("[1, 2]")
     with pytest.raises(ValueError, match="holds list, not the settings object"):
         read_settings(tmp_path, "settings.json")
+
+
+def _stamped_by(folder: Path, source) -> dict[str, bytes]:
+    """A run folder with a result, its stamp's source fingerprint replaced by ``source`` (left out
+    when None), as another dvrk_gym would have left it; returns its files' bytes (not the lock)."""
+    with RunFolder(folder, {"seed": 0}) as run:
+        run.write_json("result.json", {"x": 1.5})
+    stamp = json.loads((folder / "settings.json").read_text())
+    del stamp[SOURCE_KEY]
+    if source is not None:
+        stamp[SOURCE_KEY] = source
+    (folder / "settings.json").write_text(json.dumps(stamp))
+    return {path.name: path.read_bytes() for path in folder.iterdir() if path.name != LOCK_FILE}
+
+
+@pytest.mark.parametrize(
+    ("source", "message"),
+    [
+        (
+            {"version": "0.0.9", "sha256": "ab" * 32},
+            r"holds results made by another version of dvrk_gym's simulator \(dvrk_gym 0\.0\.9, source sha256 abababababab; this is "
+            + r"dvrk_gym .*, source sha256 {here}\), which would be mixed",
+        ),
+        (None, r"holds results made by an older dvrk_gym: its stamp \(settings\.json\) has no source fingerprint, so which simulator"),
+        ({"version": "0.0.9"}, r"older dvrk_gym: its stamp \(settings\.json\) has an unreadable source fingerprint \(\{'version'"),
+    ],
+    ids=["another version", "no fingerprint", "unreadable fingerprint"],
+)
+def test_a_folder_of_another_dvrk_gym_is_refused_and_left_as_it_was(tmp_path, source, message):
+    before = _stamped_by(tmp_path, source)
+    with pytest.raises(ValueError, match=message.replace("{here}", source_fingerprint().sha256[:12])) as refused:
+        RunFolder(tmp_path, {"seed": 0})
+    assert str(refused.value).startswith(str(tmp_path)) and str(refused.value).endswith(
+        "use another --out, or delete the folder to make them again with this version"
+    )
+    assert {path.name: path.read_bytes() for path in tmp_path.iterdir() if path.name != LOCK_FILE} == before
+    assert read_settings(tmp_path, "settings.json") == {"seed": 0}  # a reader still reads it
+    with RunFolder(tmp_path) as unchecked:  # without settings: no check, as before
+        assert unchecked.read_json("result.json") == {"x": 1.5}
+
+
+def test_the_stamps_source_key_is_no_setting(tmp_path):
+    with pytest.raises(ValueError, match=f"'{SOURCE_KEY}' is reserved for the stamp's source fingerprint"):
+        RunFolder(tmp_path, {"seed": 0, SOURCE_KEY: "mine"})
+    assert not (tmp_path / "settings.json").exists()
 
 
 def test_a_kill_during_a_write_leaves_the_old_result(tmp_path):
