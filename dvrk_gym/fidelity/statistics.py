@@ -244,7 +244,8 @@ def fidelity_statistics(
 
     Raises:
         ValueError: on bad shapes, non-finite values, units that are not metres and
-            radians, fewer rows than ``folds``, or no consecutive pair for the jitter.
+            radians, fewer rows than ``folds``, no consecutive pair for the jitter, or
+            reported positions on one line seen from above (no plane to tilt).
     """
     X = check_inputs(X)
     y = check_targets(y, X.shape[0])
