@@ -46,6 +46,7 @@ def test_the_fingerprint_is_made_once_per_process_from_the_installed_package():
     for covered in ("__init__.py", "sim/identified.py", "utils/source_fingerprint.py", "py.typed", "data/seita2018_phase1/X_train.npy"):
         assert covered in files
     assert not [name for name in files if "__pycache__" in name or name.endswith((".pyc", ".nbi", ".nbc"))]
+    assert "baselines/README.md" not in files  # in the checkout, not in a wheel
     assert first.short() == f"dvrk_gym {first.version}, source sha256 {first.sha256[:12]}"
     assert SourceFingerprint.from_json(json.loads(json.dumps(first.to_json()))) == first
 
@@ -73,6 +74,10 @@ def test_a_changed_added_or_renamed_file_changes_the_digest_and_caches_do_not(sm
     (small_tree / "utils" / "__pycache__" / "kernels._hypot-117.py311.nbi").write_bytes(b"numba index")
     (small_tree / "utils" / "kernels._hypot-117.py311.1.nbc").write_bytes(b"numba data")
     (small_tree / "utils" / ".checks.py.swp").write_bytes(b"editor")
+    # nor what a wheel would not install: a folder's README, an editor's backup, a merge's leftovers
+    (small_tree / "utils" / "README.md").write_text("notes")
+    (small_tree / "utils" / "checks.py~").write_bytes(text)
+    (small_tree / "utils" / "checks.py.orig").write_bytes(text)
     assert tree_sha256(small_tree) == before
 
 

@@ -45,7 +45,8 @@ def load_calibrator(folder: str | os.PathLike, name: str, bias: str = "paper", b
         bias_seed: which instrument, for a folder without settings.
 
     Raises:
-        ValueError: an unknown calibrator name.
+        ValueError: an unknown calibrator name; or, when the pipeline has to run, a folder
+            stamped with other settings or by another dvrk_gym (:class:`~dvrk_gym.utils.run_folder.RunFolder`).
         ModelFileError: the folder holds the calibrator only in the retired ``.npz`` format (the
             message gives the command that makes it again), or its model file is bad.
     """

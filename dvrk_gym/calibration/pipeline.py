@@ -3,7 +3,8 @@
 Phase I collection -> rigid body and DNN fits -> Phase II corrections -> residual forests
 -> the calibration table. Each stage writes its result into the output folder and a
 re-run loads it instead of recomputing, so an interrupted run resumes. A run refuses to
-resume from a folder made with different settings.
+resume from a folder made with different settings, or by another dvrk_gym (the stamp
+records its source fingerprint: :mod:`dvrk_gym.utils.source_fingerprint`).
 """
 
 from __future__ import annotations

@@ -53,7 +53,8 @@ class ComparisonRow:
         name: the statistic, with its unit (``"rigid residual RMS (mm)"``).
         real: its value on the authors' rows.
         sim: its value on the simulated rows.
-        share: True when it is judged by absolute difference (a share, or an angle); else by ratio.
+        share: True when it is judged by absolute difference (a share, a correlation or a
+            per-yaw median pitch); else by ratio.
         difference: ``sim - real`` for a share, ``sim / real`` otherwise (nan if real is 0).
         passed: whether ``difference`` meets the target.
     """

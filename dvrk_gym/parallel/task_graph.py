@@ -81,7 +81,7 @@ def call_task(
             "on a cluster it must be on a disk every worker sees at the same path"
         )
     start = time.perf_counter()
-    with torch_threads(1):  # the same numbers on any machine, no oversubscription side by side
+    with torch_threads(1):  # the same numbers whatever the cores or workers, no oversubscription side by side
         result = function(**kwargs)
     return result, time.perf_counter() - start
 

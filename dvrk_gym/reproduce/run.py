@@ -193,7 +193,7 @@ def run_reproduce(config: ReproduceConfig, executor: Executor | None = None) -> 
             must see ``config.out`` at the same path; None: ``config.workers`` local ones.
 
     Raises:
-        ValueError: ``config.out`` holds a run made with other settings.
+        ValueError: ``config.out`` holds a run made with other settings or by another dvrk_gym.
         RunFolderBusy: another process is running in ``config.out``.
         TaskError: a task failed (the others are cached: the same call resumes).
     """

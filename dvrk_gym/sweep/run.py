@@ -1,7 +1,8 @@
 """Run a sweep: every unit of the grid on an executor, each result kept as it finishes.
 
 The output folder holds ``sweep_settings.json`` (what every unit shares: the budget and
-the world; a folder made with other settings is refused), ``units/<unit>.json`` (each
+the world, and which dvrk_gym made the units; a folder made with other settings or by
+another dvrk_gym is refused), ``units/<unit>.json`` (each
 finished unit's numbers, written atomically as it finishes), ``sweep.csv`` (one row per
 cell) and ``sweep_errors.png``. A re-run loads the finished units and runs only the rest,
 so a killed sweep loses at most the units that were running; the grid may grow between
@@ -95,7 +96,7 @@ def run_sweep(settings: SweepSettings, out: str | os.PathLike, executor: Executo
         progress: show a bar over the units.
 
     Raises:
-        ValueError: ``out`` holds a sweep made with other settings.
+        ValueError: ``out`` holds a sweep made with other settings or by another dvrk_gym.
         SweepError: some units failed; the others are written and tabled first, and the
             same call retries only the failed ones.
     """

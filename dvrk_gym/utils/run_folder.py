@@ -126,8 +126,8 @@ class RunFolder:
     Raises:
         RunFolderBusy: another process owns the folder.
         ValueError: the folder is stamped with other settings (the message lists them), or by
-            another version of dvrk_gym or one whose stamps had no source fingerprint (the
-            message gives both); its results and stamp are left as they were.
+            another version of dvrk_gym (the message gives both fingerprints) or one whose
+            stamps had no source fingerprint; its results and stamp are left as they were.
         OSError: the folder cannot be made or written (a file of that name, no permission).
     """
 

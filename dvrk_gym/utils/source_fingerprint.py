@@ -6,19 +6,21 @@ detector, the calibrators...), and a run folder resumed by another version would
 new results with the old ones. So every stamped :class:`~dvrk_gym.utils.run_folder.RunFolder`
 records :func:`source_fingerprint`, and a folder with another one is refused.
 
-What it covers: every file under the ``dvrk_gym`` package directory, the Python modules and
-the packaged data (the authors' data files, their READMEs and licences, ``py.typed``), each by
-its path relative to the package directory and its bytes, hashed in the order of the sorted
-paths with SHA-256; and the version installed (:func:`importlib.metadata.version`; None where
-the package has no metadata, e.g. run from a bare checkout). Only the digest decides whether two
-fingerprints are the same: an editable install keeps its version number while its code
-changes, and the same code installed under another number makes the same results.
+What it covers: the files a wheel of the package installs (``pyproject.toml``'s packages and
+package data), so that an editable checkout and a wheel built from it agree: every Python
+module (``*.py``), ``py.typed``, and every file under ``data/`` (the authors' data files,
+their READMEs and licences); each by its path relative to the package directory and its
+bytes, hashed in the order of the sorted paths with SHA-256; and the version installed
+(:func:`importlib.metadata.version`; None where the package has no metadata, e.g. run from a
+bare checkout). Only the digest decides whether two fingerprints are the same: an editable
+install keeps its version number while its code changes, and the same code installed under
+another number makes the same results.
 
-What it skips, because Python and numba write them while the package runs and the
-code does not depend on them: ``__pycache__`` folders (bytecode, and numba's on-disk
-caches of ``sim/compiled/kernels.py``), ``*.pyc``/``*.pyo`` files and numba cache files
-(``*.nbi``, ``*.nbc``) wherever they lie, and hidden files and folders (names starting with
-``.``: editor swap files, ``.DS_Store``), which are never packaged.
+What it skips: every other file of a checkout (a folder's README, an editor's backup
+``foo.py~`` or swap file, a merge's ``*.orig``), which a wheel would not install and the
+code does not read; ``__pycache__`` folders (bytecode, and numba's on-disk caches of
+``sim/compiled/kernels.py``), numba cache files (``*.nbi``, ``*.nbc``) wherever they lie,
+and hidden files and folders (names starting with ``.``).
 
 What it does not cover: the versions of the dependencies (numpy, torch, PyBullet, numba),
 Python's and the machine's, which may move a result's last bits too.
@@ -44,6 +46,12 @@ SKIPPED_FOLDERS = frozenset({"__pycache__"})
 """Folders never hashed, wherever they lie (bytecode and numba's caches)."""
 SKIPPED_SUFFIXES = (".pyc", ".pyo", ".nbi", ".nbc")
 """File endings never hashed: bytecode and numba's cache index and data files."""
+MODULE_SUFFIX = ".py"
+"""Python modules, hashed wherever they lie in the package."""
+TYPED_MARKER = "py.typed"
+"""The package's typing marker, package data at its root."""
+DATA_FOLDER = "data"
+"""The package-data folder: every file under it is hashed."""
 SHORT_DIGEST_CHARS = 12
 """Hex digits of the digest shown in messages (48 bits)."""
 
@@ -83,6 +91,11 @@ def _hashed(name: str) -> bool:
     return not name.startswith(".") and not name.endswith(SKIPPED_SUFFIXES)
 
 
+def _installed(relative: str) -> bool:
+    """Whether a wheel installs the file at ``relative`` (``/``-separated, from the package directory)."""
+    return relative.endswith(MODULE_SUFFIX) or relative == TYPED_MARKER or relative.startswith(DATA_FOLDER + "/")
+
+
 def package_files(root: str | os.PathLike) -> list[str]:
     """The files a fingerprint of ``root`` covers: paths relative to it, ``/``-separated, sorted."""
     root = Path(root)
@@ -90,7 +103,7 @@ def package_files(root: str | os.PathLike) -> list[str]:
     for folder, folders, files in os.walk(root):
         folders[:] = [name for name in folders if name not in SKIPPED_FOLDERS and _hashed(name)]  # not walked into
         relative = Path(folder).relative_to(root)
-        found.extend((relative / name).as_posix() for name in files if _hashed(name))
+        found.extend(path for path in ((relative / name).as_posix() for name in files if _hashed(name)) if _installed(path))
     return sorted(found)
 
 

@@ -164,10 +164,10 @@ def retired_format_message(path: PathLike) -> str:
     """What to do with a model file of the retired ``.npz`` format."""
     return (
         f"{path} is a model file of dvrk_gym's retired .npz format (version 1), which this version no longer "
-        "reads (models are now files of skops and safetensors). Make it again: "
-        f"`dvrk-gym calibrate --out {os.path.dirname(path) or '.'}` (with the settings in that folder's "
-        "pipeline_config.json) refits a calibration run's rbt, dnn and two-phase models from its cached "
-        "Phase I and II data; a model of your own, fit it again and save it."
+        "reads (models are now files of skops and safetensors). Make the calibration run again in a new folder: "
+        f"`dvrk-gym calibrate --out NEW_FOLDER` with the settings in {os.path.join(os.path.dirname(path) or '.', 'pipeline_config.json')} "
+        "(that folder's cached Phase I and II data were made by an older dvrk_gym, whose run folders this version "
+        "does not resume); a model of your own, fit it again and save it."
     )
 
 
