@@ -213,3 +213,22 @@ def test_cli_collect_writes_phase1_data(tmp_path, capsys):
     assert main(["collect", "--trajectories", "1", "--resolution", "640", "360", "--out", str(tmp_path)]) == 0
     assert (tmp_path / "phase1.npz").exists()
     assert "kept" in capsys.readouterr().out
+
+
+def test_collect_stamps_its_folder_as_calibrate_does_and_refuses_other_settings(tmp_path, capsys):
+    tiny = ["--trajectories", "1", "--resolution", "640", "360", "--no-progress"]
+    assert main(["collect", *tiny, "--out", str(tmp_path)]) == 0
+    collected = (tmp_path / "phase1.npz").read_bytes()
+    settings = read_pipeline_settings(tmp_path)
+    assert settings is not None and settings["n_trajectories"] == 1 and settings["camera_resolution"] == [640, 360]
+    same = PipelineConfig(n_trajectories=1, camera_resolution=(640, 360))  # what calibrate with the same options stamps
+    with RunFolder(tmp_path, dataclasses.asdict(same), stamp=SETTINGS_STAMP) as folder:  # accepted: it resumes from this Phase I
+        assert folder.has("phase1.npz")
+    capsys.readouterr()
+    # another collection's settings (here its seed) in the same folder: refused before collecting, the data kept
+    assert main(["collect", *tiny, "--seed", "1", "--force", "--out", str(tmp_path)]) == 2
+    assert "seed: 0 there, 1 here" in capsys.readouterr().err
+    # a calibration with other settings would have trained on this Phase I: refused too
+    assert main(["calibrate", "--trajectories", "2", "--resolution", "640", "360", "--no-progress", "--out", str(tmp_path)]) == 2
+    assert "n_trajectories: 1 there, 2 here" in capsys.readouterr().err
+    assert (tmp_path / "phase1.npz").read_bytes() == collected and not (tmp_path / "rbt.zip").exists()

@@ -35,20 +35,24 @@ def _config(args: argparse.Namespace):
 
 
 def _run_collect(args: argparse.Namespace) -> int:
-    from dvrk_gym.calibration.phase1 import run_paper_phase1
+    """Phase I into ``--out``, stamped as ``dvrk-gym calibrate`` with the same options stamps its
+    folder (calibrate's default epochs): a calibrate there resumes from it, and a folder stamped
+    with other settings, or by another dvrk_gym, is refused before anything is collected."""
+    import dataclasses
 
-    path = writable_folder(args.out) / "phase1.npz"
-    if path.exists() and not args.force:
-        raise FileExistsError(f"{path} exists; give --force to replace it, or another --out")
-    data = run_paper_phase1(
-        args.trajectories,
-        args.seed,
-        bias=args.bias,
-        bias_seed=args.bias_seed,
-        camera_resolution=tuple(args.resolution),
-        progress=not args.no_progress,
-    )
-    data.save(path)
+    from dvrk_gym.calibration.phase1 import run_paper_phase1
+    from dvrk_gym.calibration.pipeline import SETTINGS_STAMP
+    from dvrk_gym.utils.run_folder import RunFolder
+
+    config = _config(args)
+    with RunFolder(writable_folder(args.out), dataclasses.asdict(config), stamp=SETTINGS_STAMP) as folder:
+        path = folder.file("phase1.npz")
+        if path.exists() and not args.force:
+            raise FileExistsError(f"{path} exists; give --force to replace it, or another --out")
+        data = run_paper_phase1(
+            config.n_trajectories, config.seed, config.steps_per_trajectory, **config.env_kwargs(), progress=not args.no_progress
+        )
+        data.save(path)
     raw, kept = paper.PHASE1_RAW_SAMPLES, paper.PHASE1_KEPT_SAMPLES
     print(
         f"Phase I: {args.trajectories} trajectories, {data.n_raw} raw samples, {data.n_kept} kept "
@@ -153,7 +157,7 @@ def add_commands(subparsers: argparse._SubParsersAction) -> None:
     collect.add_argument("--force", action="store_true", help="replace a phase1.npz already in --out")
     _add_world_options(collect)
     add_progress_option(collect)
-    collect.set_defaults(func=_run_collect)
+    collect.set_defaults(func=_run_collect, epochs=paper.DNN_EPOCHS)  # no --epochs: its stamp holds calibrate's default
 
     calibrate = subparsers.add_parser("calibrate", help="Phase I and II: fit the rigid body, DNN and DNN+RF calibrators (cached stages)")
     calibrate.add_argument("--out", type=Path, default=Path("dvrk_gym_out/calibration"), help="output folder (default: %(default)s)")
