@@ -66,6 +66,11 @@ DISTANCE_BINS_MM = (0.0, 1.0, 2.0, 3.0, 5.0, np.inf)
 _M2_TO_MM2 = 1e6
 
 
+def mean_mm2(errors: np.ndarray) -> float:
+    """The mean over rows of squared errors (N, 3) m^2 summed over the axes: the fidelity CV's measure, mm^2."""
+    return float(errors.sum(axis=1).mean() * _M2_TO_MM2)
+
+
 def forest(seed: int = 0) -> RandomForestRegressor:
     """The fidelity statistics' cross-validated forest (:data:`CV_FOREST_TREES` trees)."""
     return RandomForestRegressor(n_estimators=CV_FOREST_TREES, random_state=seed, n_jobs=1)
@@ -126,22 +131,16 @@ def report(name: str, X: np.ndarray, y: np.ndarray) -> None:
     print(f"{name}: {len(y)} rows")
     print(f"  1. CV per base axis x / y / z (mm^2): linear {axes(f'{v:.2f}' for v in linear.mean(axis=0) * _M2_TO_MM2)}", end="")
     print(f"; forest {axes(f'{v:.2f}' for v in trees.mean(axis=0) * _M2_TO_MM2)}", end="")
-    print(f"; sums {linear.sum(axis=1).mean() * _M2_TO_MM2:.2f} / {trees.sum(axis=1).mean() * _M2_TO_MM2:.2f}")
+    print(f"; sums {mean_mm2(linear):.2f} / {mean_mm2(trees):.2f}")
     print("  2. held-out rows by distance to the nearest training row: rows, forest / linear (mm^2)")
     for low, high in zip(DISTANCE_BINS_MM[:-1], DISTANCE_BINS_MM[1:], strict=True):
         mine = (distance * 1e3 >= low) & (distance * 1e3 < high)
         label = f"{low:.0f}-{high:.0f} mm" if np.isfinite(high) else f">= {low:.0f} mm"
         if mine.any():
-            print(
-                f"     {label:<9s} {mine.sum():5d}  {trees[mine].sum(axis=1).mean() * _M2_TO_MM2:6.2f} / "
-                f"{linear[mine].sum(axis=1).mean() * _M2_TO_MM2:.2f}"
-            )
+            print(f"     {label:<9s} {mine.sum():5d}  {mean_mm2(trees[mine]):6.2f} / {mean_mm2(linear[mine]):.2f}")
     shuffled, _ = held_out_errors(forest, X, y, shuffle=True)
     camera_only, _ = held_out_errors(forest, X[:, :3], y)
-    print(
-        f"  3. forest, shuffled folds {shuffled.sum(axis=1).mean() * _M2_TO_MM2:.2f} mm^2; "
-        f"contiguous on the camera position alone {camera_only.sum(axis=1).mean() * _M2_TO_MM2:.2f}"
-    )
+    print(f"  3. forest, shuffled folds {mean_mm2(shuffled):.2f} mm^2; contiguous on the camera position alone {mean_mm2(camera_only):.2f}")
 
 
 def with_wrist_yaw_homing(degrees: float) -> FidelityRun:
@@ -165,7 +164,7 @@ def main(phase1: Path, unbiased: bool = False, wrist_yaw_homing_deg: Sequence[fl
     sim_slope = plane_slope(sim.y)
     print(
         f"4. sim rows tilted from slopes x {sim_slope[0]:+.3f} y {sim_slope[1]:+.3f} to the real rows' "
-        f"x {slope[0]:+.3f} y {slope[1]:+.3f}: forest contiguous CV {trees.sum(axis=1).mean() * _M2_TO_MM2:.2f} mm^2"
+        f"x {slope[0]:+.3f} y {slope[1]:+.3f}: forest contiguous CV {mean_mm2(trees):.2f} mm^2"
     )
     print("5. the base position's cosine and sine terms of the yaw, mm (per base axis: cos, sin)")
     print_yaw_terms("real", real_X, real_y)
@@ -173,13 +172,13 @@ def main(phase1: Path, unbiased: bool = False, wrist_yaw_homing_deg: Sequence[fl
     turning = np.column_stack([np.cos(sim.X[:, 3]), np.sin(sim.X[:, 3])])
     swapped = sim.y + turning @ (yaw_terms(real_X, real_y) - yaw_terms(sim.X, sim.y)).T
     trees, _ = held_out_errors(forest, sim.X, swapped)
-    swapped_cv = trees.sum(axis=1).mean() * _M2_TO_MM2
+    swapped_cv = mean_mm2(trees)
     print(f"   the sim rows with the real rows' yaw terms in place of their own: forest contiguous CV {swapped_cv:.2f} mm^2")
     if unbiased:
         none = run_paper_phase1(seed=0, bias="none", progress=False).cleaned()  # dvrk-gym fidelity's default collection
         print_yaw_terms("sim, no cable bias (seed 0)", none.X, none.y)
         trees, _ = held_out_errors(forest, none.X, none.y)
-        print(f"   its forest contiguous CV {trees.sum(axis=1).mean() * _M2_TO_MM2:.2f} mm^2")
+        print(f"   its forest contiguous CV {mean_mm2(trees):.2f} mm^2")
     for degrees in wrist_yaw_homing_deg:
         run = with_wrist_yaw_homing(degrees)
         print(f"6. a wrist-yaw homing offset of {degrees:+g} degrees (the identified instrument's is 0):")

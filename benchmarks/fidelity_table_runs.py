@@ -73,7 +73,7 @@ from dvrk_gym.calibration.phase1 import Phase1Data
 from dvrk_gym.calibration.phase2 import Phase2Data
 from dvrk_gym.calibration.pipeline import BENCHMARK_SEED_OFFSET, PipelineConfig, read_pipeline_settings
 from dvrk_gym.calibration.policy import CalibratedPolicy
-from dvrk_gym.fidelity.statistics import plane_slope
+from dvrk_gym.fidelity.statistics import plane_slope, tilt_deg
 from dvrk_gym.sim.world import DvrkWorld
 from dvrk_gym.sim.world_config import WorldConfig
 
@@ -182,7 +182,7 @@ def plane_tilt(positions: np.ndarray) -> str:
     """The tilt (deg) and slopes along x and y (mm per mm) of the least-squares plane through
     ``positions`` (n, 3) m, as a line of text (:func:`~dvrk_gym.fidelity.statistics.plane_slope`)."""
     slope_x, slope_y = plane_slope(positions)
-    return f"{np.rad2deg(np.arctan(np.hypot(slope_x, slope_y))):5.1f} deg   x {slope_x:+.3f}   y {slope_y:+.3f}"
+    return f"{tilt_deg((slope_x, slope_y)):5.1f} deg   x {slope_x:+.3f}   y {slope_y:+.3f}"
 
 
 def push_means(yaws: np.ndarray, moves: np.ndarray) -> np.ndarray:

@@ -69,6 +69,7 @@ __all__ = [
     "consecutive_pairs",
     "lag_one_correlation",
     "plane_slope",
+    "tilt_deg",
     "contiguous_cv_mse_mm2",
     "fidelity_statistics",
     "rigid_residuals_camera",
@@ -197,6 +198,11 @@ def plane_slope(positions: np.ndarray) -> tuple[float, float]:
     return float(coefficients[0]), float(coefficients[1])
 
 
+def tilt_deg(slope: tuple[float, float]) -> float:
+    """The angle (degrees) between the xy-plane and a plane of slopes ``(a, b)`` (:func:`plane_slope`)."""
+    return float(np.rad2deg(np.arctan(math.hypot(*slope))))
+
+
 def consecutive_pairs(y: np.ndarray, max_step_m: float = JITTER_MAX_STEP_M) -> np.ndarray:
     """Indices ``i`` such that rows ``i`` and ``i + 1`` are within ``max_step_m`` in base position."""
     return np.flatnonzero(_steps(y) <= max_step_m)
@@ -277,7 +283,7 @@ def fidelity_statistics(
         jitter_pairs=int(pairs.size),
         same_position_share=float(np.mean(steps <= SAME_POSITION_M)),
         pitch_autocorrelation=lag_one_correlation(X[:, 4]),
-        plane_tilt_deg=float(np.rad2deg(np.arctan(math.hypot(*slope)))),
+        plane_tilt_deg=tilt_deg(slope),
         plane_slope=slope,
         kept_fraction_per_yaw=tuple(float(f) for f in np.bincount(groups, minlength=len(PAPER_YAWS_RAD)) / X.shape[0]),
         pitch_p5_deg=float(np.percentile(pitch_deg, PITCH_PERCENTILES[0])),
