@@ -13,8 +13,6 @@ import tempfile
 import time
 from pathlib import Path
 
-import torch
-
 import dvrk_gym  # noqa: F401
 from dvrk_gym import paper
 from dvrk_gym.calibration.benchmark import format_table
@@ -27,7 +25,6 @@ def main() -> None:
     parser.add_argument("--trajectories", type=int, default=paper.PHASE1_TRAJECTORIES, help="Phase I trajectories (default: %(default)s)")
     parser.add_argument("--epochs", type=int, default=paper.DNN_EPOCHS, help="DNN epochs (default: %(default)s)")
     args = parser.parse_args()
-    torch.set_num_threads(1)
     out = args.out or Path(tempfile.mkdtemp(prefix="dvrk_gym_calibration_"))
     start = time.perf_counter()
     result = run_calibration(out, PipelineConfig(n_trajectories=args.trajectories, dnn_epochs=args.epochs), progress=False)

@@ -8,8 +8,8 @@ Run: python benchmarks/bench_models.py            (chosen net, linear, forest; ~
 
 Prints the 10-fold CV table (mean squared L2 error, mm^2; the paper: chosen 3 x 300 ReLU net
 2.06, the authors' code on these rows about 1.74, linear 3.76, forest 5.03) and the wall and
-CPU time of training the chosen net on all 1,939 rows for 1,000 epochs, on one thread by
-default (``--threads``).
+CPU time of training the chosen net on all 1,939 rows for 1,000 epochs, on one thread (the
+network always trains on one: :mod:`dvrk_gym.calibration.models.dnn`).
 """
 
 from __future__ import annotations
@@ -88,7 +88,6 @@ def _chosen_specs(args: argparse.Namespace) -> list[ModelSpec]:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--threads", type=int, default=1, help="torch threads (default: %(default)s)")
     parser.add_argument("--folds", type=int, default=10, help="CV folds (default: %(default)s)")
     parser.add_argument("--epochs", type=int, default=PAPER_EPOCHS, help="epochs of every net (default: %(default)s)")
     parser.add_argument(
@@ -110,7 +109,7 @@ def main() -> None:
     )
     args = parser.parse_args()
     logging.basicConfig(level=logging.WARNING)
-    torch.set_num_threads(args.threads)
+    torch.set_num_threads(1)  # the network trains on one thread; --throughput's plain product too, like with like
     X, y = load_paper_phase1()
     print(f"authors' Phase I data: {X.shape[0]} rows; torch {torch.__version__}, {torch.get_num_threads()} thread(s)")
     if args.throughput:

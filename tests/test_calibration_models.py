@@ -47,13 +47,6 @@ def _smooth_map(X: np.ndarray) -> np.ndarray:
     return base + np.array([0.03, 0.04, 0.0])
 
 
-@pytest.fixture(scope="module", autouse=True)
-def one_torch_thread():
-    """Tiny networks train several times faster on one thread than on contended cores."""
-    with torch_threads(1):
-        yield
-
-
 @pytest.fixture(scope="module")
 def data() -> tuple[np.ndarray, np.ndarray]:
     X = _inputs(np.random.default_rng(0), 400)
@@ -273,6 +266,21 @@ def test_dnn_same_seed_gives_identical_predictions_and_other_seed_differs(data) 
     other = _small_dnn(seed=8, epochs=5).fit(X, y).predict(X)
     assert np.array_equal(first, again)
     assert not np.array_equal(first, other)
+
+
+def test_dnn_weights_and_predictions_do_not_depend_on_the_callers_torch_threads() -> None:
+    # The paper's 3 x 300 net on 2,000 rows: wide enough that 2 threads split its products
+    # (and change their last bits) where 1 does not; the fit and predict pin one thread.
+    X = _inputs(np.random.default_rng(5), 2000)
+    y = _smooth_map(X)
+    runs = []
+    for threads in (1, 2):
+        with torch_threads(threads):
+            model = DNNCalibrator(epochs=30, seed=0, progress=False).fit(X, y)
+            runs.append((model.loss_history_, model.predict(X), np.concatenate([model.predict(X[i : i + 1]) for i in range(50)])))
+            assert torch.get_num_threads() == threads  # restored after each call
+    for single, double in zip(runs[0], runs[1], strict=True):
+        assert np.array_equal(single, double)
 
 
 def test_forests_same_seed_gives_identical_predictions(data) -> None:

@@ -24,7 +24,6 @@ from dvrk_gym.calibration.search import (
 )
 from dvrk_gym.cli.main import main
 from dvrk_gym.paper import AUTHORS_CV_MM2, REAL_PHASE1_ROWS
-from dvrk_gym.utils.torch_threads import torch_threads
 
 CHOSEN_NET_MAX_MM2 = 2.2
 LINEAR_RANGE_MM2 = (3.4, 4.0)
@@ -36,12 +35,6 @@ TEST_EPOCHS = 150
 @pytest.fixture(scope="module")
 def paper_data() -> tuple[np.ndarray, np.ndarray]:
     return load_paper_phase1()
-
-
-@pytest.fixture(scope="module", autouse=True)
-def one_torch_thread():
-    with torch_threads(1):
-        yield
 
 
 def test_paper_data_loads_in_si_units(paper_data) -> None:

@@ -11,10 +11,10 @@ def torch_threads(n: int) -> Iterator[None]:
     """Run the block with ``n`` torch intra-op threads, then restore the previous number.
 
     One thread is what the RL baselines, ``dvrk-gym reproduce``'s tasks and ``dvrk-gym sweep``'s
-    units train with (``dvrk-gym calibrate`` trains with torch's default): on 2 shared cores, two threads made a
-    256 x 256 update 12 times slower, and a fixed count gives the same numbers whatever the
-    machine's cores (not whatever its CPU: MKL picks its kernels by instruction set; README: the
-    network's figures depend on the machine's arithmetic).
+    units train with, and the calibration network always (:mod:`dvrk_gym.calibration.models.dnn`):
+    on 2 shared cores, two threads made a 256 x 256 update 12 times slower, and a fixed count
+    gives the same numbers whatever the machine's cores (not whatever its CPU: MKL picks its
+    kernels by instruction set; README: the network's figures depend on the machine's arithmetic).
     """
     import torch
 

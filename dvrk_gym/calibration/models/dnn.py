@@ -3,8 +3,17 @@
 Inputs are encoded as position plus sine and cosine of each angle, then standardised;
 outputs are centred and divided by one common scale, so the training loss is the squared
 L2 distance in (scaled) metres, the paper's loss. Training is Adam on shuffled mini-batches,
-in float32 on the CPU, with every random draw from a ``torch.Generator`` seeded by ``seed``:
-the same seed, data and thread count give bit-identical weights.
+in float32 on the CPU, with every random draw from a ``torch.Generator`` seeded by ``seed``.
+Training and prediction run on one torch thread whatever the caller's count
+(:func:`~dvrk_gym.utils.torch_threads.torch_threads`): how many threads split a matrix
+product changes its last bits, and the chaotic training carries them to different weights
+(on the paper's 1939 rows, 2 threads ended at a training loss 0.0020, 1 thread at 0.0036),
+so ``dvrk-gym calibrate``, ``reproduce`` and ``sweep`` would otherwise train different
+networks from the same data and seed. One thread costs nothing here (30 s either way for
+the paper's 3 x 300 net on 2 cores). The same seed and data then give bit-identical weights
+on one CPU; another CPU may still differ (MKL picks its kernels by instruction set, and
+``MKL_CBWR=COMPATIBLE``, which would pin them, trains 3.8 times slower: README, *The
+network's figures depend on the machine's arithmetic*).
 """
 
 from __future__ import annotations
@@ -23,6 +32,7 @@ from dvrk_gym import paper
 from dvrk_gym.calibration.models.features import EULER_FEATURES, calibrator_layout, check_inputs, check_targets, encode_euler
 from dvrk_gym.calibration.models.serialization import ModelParts, SavableModel, require_array, require_names
 from dvrk_gym.utils.checks import check_bool, check_choice, check_float, check_int
+from dvrk_gym.utils.torch_threads import torch_threads
 
 __all__ = ["ACTIVATIONS", "DEFAULT_BATCH_SIZE", "DEFAULT_LEARNING_RATE", "DNNCalibrator"]
 
@@ -157,7 +167,8 @@ class DNNCalibrator(SavableModel):
         network = _build_network(self.hidden_layers, self.units, self.activation)
         _initialise(network, generator)
         self.network_ = network
-        self.loss_history_ = self._train(network, inputs, targets, generator)
+        with torch_threads(1):  # the same weights whatever the caller's thread count (module docstring)
+            self.loss_history_ = self._train(network, inputs, targets, generator)
         return self
 
     def _train(self, network: nn.Sequential, inputs: torch.Tensor, targets: torch.Tensor, generator: torch.Generator) -> np.ndarray:
@@ -197,7 +208,7 @@ class DNNCalibrator(SavableModel):
             raise ValueError("DNNCalibrator.predict called before fit")
         features = encode_euler(check_inputs(X))
         inputs = torch.from_numpy(((features - self.x_mean_) / self.x_scale_).astype(np.float32))
-        with torch.inference_mode():
+        with torch_threads(1), torch.inference_mode():  # one row's product changes in its last bits with the count
             outputs = self.network_(inputs).numpy().astype(np.float64)
         return outputs * self.y_scale_ + self.y_mean_
 
