@@ -9,6 +9,10 @@ touches the table as ``dvrk-gym evaluate`` does (the run's benchmark seed). It p
 seed, the DNN's and the DNN+RF's mean error per setting (mm) and over all, then per setting
 the mean, standard deviation, minimum and maximum over the seeds, and how many seeds meet
 issue 15's per-cell targets (every DNN cell at most 3.0 mm, every DNN+RF cell at most 1.6).
+Then, per seed, the two figures of the Phase II pushes (how far a person moved the jaws from
+the network's prediction onto the circle) that the README compares with the real robot's:
+how far their mean y spreads over the yaws (``fidelity_table_runs.py``) and the x after the
+move to the next row minus after a move along a row (``tour_order.py``, part 2).
 The run's own seed gives back its network and forests (a test checks it), so its table too.
 
 About 35 s per seed (30 s of training, then Phase II and the touches; 4.5 min for eight):
@@ -20,17 +24,19 @@ About 35 s per seed (30 s of training, then Phase II and the touches; 4.5 min fo
 from __future__ import annotations
 
 import argparse
+from dataclasses import dataclass
 
 import gymnasium as gym
 import numpy as np
-from fidelity_table_runs import add_calibration_argument, read_calibration
+from fidelity_table_runs import add_calibration_argument, push_means, read_calibration, simulated_pushes
+from tour_order import pushes_by_move
 
 import dvrk_gym  # noqa: F401  (registers the envs)
 from dvrk_gym.calibration.benchmark import YAW_SETTINGS, calibration_table
 from dvrk_gym.calibration.models.dnn import DNNCalibrator
 from dvrk_gym.calibration.models.two_phase import TwoPhaseCalibrator
 from dvrk_gym.calibration.phase1 import Phase1Data
-from dvrk_gym.calibration.phase2 import collect_phase2
+from dvrk_gym.calibration.phase2 import Phase2Data, collect_phase2
 from dvrk_gym.calibration.pipeline import BENCHMARK_SEED_OFFSET, PipelineConfig
 from dvrk_gym.calibration.policy import Calibrator
 
@@ -40,35 +46,59 @@ MAX_SEEDS = 64
 """The most seeds one run takes (about 35 s each)."""
 
 
-def seed_calibrators(grid: gym.Env, phase1: Phase1Data, config: PipelineConfig, seed: int) -> dict[str, Calibrator]:
-    """The DNN trained on ``phase1``'s kept rows with ``seed``, and the DNN+RF whose Phase II it
-    collected in ``grid`` (a fresh GridTouch-v0, as ``dvrk-gym calibrate`` collects in one) and whose
-    forests are seeded so; the rest as ``dvrk-gym calibrate`` runs with ``config``."""
+@dataclass(frozen=True)
+class SeedResult:
+    """One network seed's calibration, touched.
+
+    Attributes:
+        cells: ``{"DNN": (6,), "DNN+RF": (6,)}``, the mean touch error per setting of YAW_SETTINGS, mm.
+        push_y_spread_mm: how far the Phase II pushes' mean y spreads over the five yaws, mm
+            (the real robot's: 1.0 and 0.7 in its two rounds).
+        push_x_gap_mm: the pushes' mean x after the move to the next row minus after a move
+            along a row, mean over the yaws, mm (the real robot's: -1.0 and -0.4).
+    """
+
+    cells: dict[str, np.ndarray]
+    push_y_spread_mm: float
+    push_x_gap_mm: float
+
+
+def seed_calibrators(grid: gym.Env, phase1: Phase1Data, config: PipelineConfig, seed: int) -> tuple[dict[str, Calibrator], Phase2Data]:
+    """The DNN trained on ``phase1``'s kept rows with ``seed``, the Phase II it collected in ``grid``
+    (a fresh GridTouch-v0, as ``dvrk-gym calibrate`` collects in one), and the DNN+RF whose forests
+    learned from it, seeded so; the rest as ``dvrk-gym calibrate`` runs with ``config``."""
     clean = phase1.cleaned()
     dnn = DNNCalibrator(epochs=config.dnn_epochs, seed=seed, progress=False).fit(clean.X, clean.y)
     phase2 = collect_phase2(grid, dnn, seed=config.seed, progress=False)
-    return {"DNN": dnn, "DNN+RF": TwoPhaseCalibrator(dnn=dnn, seed=seed).fit_phase2(phase2.X, phase2.corrected)}
+    return {"DNN": dnn, "DNN+RF": TwoPhaseCalibrator(dnn=dnn, seed=seed).fit_phase2(phase2.X, phase2.corrected)}, phase2
 
 
-def seed_cells(phase1: Phase1Data, config: PipelineConfig, seed: int) -> dict[str, np.ndarray]:
-    """The mean touch error per setting of YAW_SETTINGS, (6,) mm, of each of :func:`seed_calibrators`,
-    touched as ``dvrk-gym evaluate`` touches (the run's benchmark seed)."""
+def seed_result(phase1: Phase1Data, config: PipelineConfig, seed: int) -> SeedResult:
+    """:func:`seed_calibrators` touched as ``dvrk-gym evaluate`` touches (the run's benchmark seed),
+    and their Phase II's pushes."""
     grid = gym.make("dvrk_gym/GridTouch-v0", **config.env_kwargs())
     try:
-        calibrators = seed_calibrators(grid, phase1, config, seed)
+        calibrators, phase2 = seed_calibrators(grid, phase1, config, seed)
         table = calibration_table(grid, calibrators, seed=config.seed + BENCHMARK_SEED_OFFSET, progress=False)
     finally:
         grid.close()
-    return {method: np.array([table[method][label].mm.mean() for label, _ in YAW_SETTINGS]) for method in table}
+    sent, pushes, yaws = simulated_pushes(phase2)
+    by_move = pushes_by_move(sent, pushes, yaws)
+    return SeedResult(
+        cells={method: np.array([table[method][label].mm.mean() for label, _ in YAW_SETTINGS]) for method in table},
+        push_y_spread_mm=1e3 * float(np.ptp(push_means(yaws, pushes)[:, 1])),
+        push_x_gap_mm=1e3 * float(np.nanmean(by_move[:, 1, 0] - by_move[:, 0, 0])),
+    )
 
 
 def _row(name: str, values: np.ndarray) -> str:
     return f"  {name:<14s}" + "".join(f"{v:9.2f}" for v in values)
 
 
-def print_spread(cells: dict[int, dict[str, np.ndarray]]) -> None:
+def print_spread(results: dict[int, SeedResult]) -> None:
     """Each seed's cells and mean, then per setting the mean, sd, min and max over the seeds, and
-    the seeds that meet :data:`CELL_TARGETS_MM` (``cells[seed][method]``: (6,) mm per setting)."""
+    the seeds that meet :data:`CELL_TARGETS_MM`; then each seed's pushes."""
+    cells = {seed: result.cells for seed, result in results.items()}
     header = "".join(f"{label:>9s}" for label, _ in YAW_SETTINGS) + f"{'all':>9s}"
     for method, target in CELL_TARGETS_MM.items():
         print(f"{method}: mean touch error (mm) per setting")
@@ -80,6 +110,14 @@ def print_spread(cells: dict[int, dict[str, np.ndarray]]) -> None:
             print(_row(name, reduce(per_seed, axis=0)))
         meeting = [seed for seed in cells if cells[seed][method].max() <= target]
         print(f"  every cell at most {target} mm: {len(meeting)} of {len(cells)} seeds {meeting}")
+    print("Phase II pushes (mm): the mean y's spread over the yaws; x after the move to the next row minus along a row")
+    print(f"  {'seed':<14s}{'y spread':>9s}{'x gap':>9s}")
+    rows = np.array([[result.push_y_spread_mm, result.push_x_gap_mm] for result in results.values()])
+    for seed, row in zip(results, rows, strict=True):
+        print(_row(str(seed), row))
+    for name, reduce in (("mean", np.mean), ("sd", np.std), ("min", np.min), ("max", np.max)):
+        print(_row(name, reduce(rows, axis=0)))
+    print("  real, rounds 0 and 1: y spread 1.0 and 0.7, x gap -1.0 and -0.4 (python benchmarks/tour_order.py, fidelity_table_runs.py)")
 
 
 def main() -> None:
@@ -94,7 +132,7 @@ def main() -> None:
     print(
         f"{args.calibration}: {phase1.n_kept} kept Phase I rows, bias {config.bias}, bias_seed {config.bias_seed}, run seed {config.seed}"
     )
-    print_spread({seed: seed_cells(phase1, config, seed) for seed in args.seeds})
+    print_spread({seed: seed_result(phase1, config, seed) for seed in args.seeds})
 
 
 if __name__ == "__main__":

@@ -16,11 +16,13 @@ def script_path(name: str) -> Path:
 def load_script(name: str) -> ModuleType:
     """benchmarks/<name>.py imported as the module ``name`` (its ``main`` is not run). The
     scripts import each other as a script run from benchmarks/ does, so that folder goes on
-    the import path."""
+    the import path. The module is registered in ``sys.modules`` before it runs, as an import
+    would register it (a dataclass looks its module up there)."""
     if str(ROOT / "benchmarks") not in sys.path:
         sys.path.insert(0, str(ROOT / "benchmarks"))
     spec = importlib.util.spec_from_file_location(name, script_path(name))
     assert spec is not None and spec.loader is not None
     module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module
     spec.loader.exec_module(module)
     return module

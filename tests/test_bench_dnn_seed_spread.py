@@ -10,6 +10,7 @@ from benchmark_scripts import ROOT, load_script, script_path
 
 from dvrk_gym.calibration.loading import load_calibrator
 from dvrk_gym.calibration.phase1 import Phase1Data
+from dvrk_gym.calibration.phase2 import Phase2Data
 from dvrk_gym.calibration.pipeline import PipelineConfig, read_pipeline_settings
 
 dnn_seed_spread = load_script("dnn_seed_spread")
@@ -21,12 +22,20 @@ def _run(*args: str) -> subprocess.CompletedProcess:
 
 
 def test_the_spread_is_printed_per_setting_with_the_seeds_that_meet_the_targets(capsys):
-    cells = {
-        0: {"DNN": np.array([1.0, 1.0, 1.0, 1.0, 3.5, 1.0]), "DNN+RF": np.full(6, 0.9)},
-        4: {"DNN": np.array([1.0, 1.0, 1.0, 1.0, 2.5, 1.0]), "DNN+RF": np.full(6, 1.7)},
+    results = {
+        0: dnn_seed_spread.SeedResult({"DNN": np.array([1.0, 1.0, 1.0, 1.0, 3.5, 1.0]), "DNN+RF": np.full(6, 0.9)}, 4.0, 0.5),
+        4: dnn_seed_spread.SeedResult({"DNN": np.array([1.0, 1.0, 1.0, 1.0, 2.5, 1.0]), "DNN+RF": np.full(6, 1.7)}, 2.0, -0.5),
     }
-    dnn_seed_spread.print_spread(cells)
+    dnn_seed_spread.print_spread(results)
     lines = capsys.readouterr().out.splitlines()
+    pushes = lines.index("Phase II pushes (mm): the mean y's spread over the yaws; x after the move to the next row minus along a row")
+    assert [line.split() for line in lines[pushes + 2 : pushes + 5]] == [
+        ["0", "4.00", "0.50"],
+        ["4", "2.00", "-0.50"],
+        ["mean", "3.00", "0.00"],
+    ]
+    assert lines[-1].startswith("  real, rounds 0 and 1: y spread 1.0 and 0.7, x gap -1.0 and -0.4")
+    lines = lines[:pushes]
     dnn = lines[: lines.index("DNN+RF: mean touch error (mm) per setting")]
     rows = {line.split()[0]: [float(v) for v in line.split()[1:]] for line in dnn[2:8]}
     assert rows["0"][4] == 3.5 and rows["0"][-1] == pytest.approx(8.5 / 6, abs=0.005)
@@ -55,7 +64,10 @@ def test_the_runs_own_seed_gives_back_its_network_and_forests_and_another_seed_d
     for seed in (config.seed, config.seed + 1):
         grid = gym.make("dvrk_gym/GridTouch-v0", **config.env_kwargs())
         try:
-            remade[seed] = {name: model.predict(X) for name, model in dnn_seed_spread.seed_calibrators(grid, phase1, config, seed).items()}
+            calibrators, phase2 = dnn_seed_spread.seed_calibrators(grid, phase1, config, seed)
+            remade[seed] = {name: model.predict(X) for name, model in calibrators.items()}
+            if seed == config.seed:
+                assert np.array_equal(phase2.corrected, Phase2Data.load(small_calibration / "phase2.npz").corrected)
         finally:
             grid.close()
     for name, method in (("dnn", "DNN"), ("dnn+rf", "DNN+RF")):
