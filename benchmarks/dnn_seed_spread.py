@@ -4,10 +4,11 @@ The network's training is chaotic: its seed (the weights' initialisation and the
 shuffles) moves its touch errors as much as a different machine's arithmetic does (README,
 *The network's figures depend on the machine's arithmetic*). For a calibration run, this
 script trains the network again on the run's Phase I rows with each of ``--seeds``, collects
-a Phase II with each (the pushes depend on the network), fits its residual forests, and
-touches the table as ``dvrk-gym evaluate`` does (the run's benchmark seed). It prints, per
-seed, the DNN's and the DNN+RF's mean error per setting (mm) and over all, then per setting
-the mean, standard deviation, minimum and maximum over the seeds, and how many seeds meet
+a Phase II with each (the pushes depend on the network), fits its residual forests (with
+the run's forest seed: only the network's differs), and touches the table as ``dvrk-gym
+evaluate`` does (the run's benchmark seed). It prints, per seed, the DNN's and the DNN+RF's
+mean error per setting (mm) and over all, then per setting the mean, standard deviation (of
+the seeds as a population: ddof 0), minimum and maximum over the seeds, and how many meet
 issue 15's per-cell targets (every DNN cell at most 3.0 mm, every DNN+RF cell at most 1.6).
 Then, per seed, the two figures of the Phase II pushes (how far a person moved the jaws from
 the network's prediction onto the circle) that the README compares with the real robot's:
@@ -44,6 +45,8 @@ CELL_TARGETS_MM = {"DNN": 3.0, "DNN+RF": 1.6}
 """Issue 15's bound on every per-setting cell of each method, mm (the paper's worst: 2.5 and 1.3)."""
 MAX_SEEDS = 64
 """The most seeds one run takes (about 35 s each)."""
+MAX_SEED = 2**32 - 1
+"""The largest network seed (what the DNN takes; the forests' bound)."""
 
 
 @dataclass(frozen=True)
@@ -66,11 +69,13 @@ class SeedResult:
 def seed_calibrators(grid: gym.Env, phase1: Phase1Data, config: PipelineConfig, seed: int) -> tuple[dict[str, Calibrator], Phase2Data]:
     """The DNN trained on ``phase1``'s kept rows with ``seed``, the Phase II it collected in ``grid``
     (a fresh GridTouch-v0, as ``dvrk-gym calibrate`` collects in one), and the DNN+RF whose forests
-    learned from it, seeded so; the rest as ``dvrk-gym calibrate`` runs with ``config``."""
+    learned from it; everything else, the forests' seed too, as ``dvrk-gym calibrate`` runs with
+    ``config``, so only the network's seed differs."""
     clean = phase1.cleaned()
     dnn = DNNCalibrator(epochs=config.dnn_epochs, seed=seed, progress=False).fit(clean.X, clean.y)
     phase2 = collect_phase2(grid, dnn, seed=config.seed, progress=False)
-    return {"DNN": dnn, "DNN+RF": TwoPhaseCalibrator(dnn=dnn, seed=seed).fit_phase2(phase2.X, phase2.corrected)}, phase2
+    forests = TwoPhaseCalibrator(dnn=dnn, seed=config.seed).fit_phase2(phase2.X, phase2.corrected)  # the run's forest seed
+    return {"DNN": dnn, "DNN+RF": forests}, phase2
 
 
 def seed_result(phase1: Phase1Data, config: PipelineConfig, seed: int) -> SeedResult:
@@ -125,9 +130,17 @@ def main() -> None:
     add_calibration_argument(parser)
     parser.add_argument("--seeds", type=int, nargs="+", default=list(range(5)), help="network seeds (default: 0-4)")
     args = parser.parse_args()
-    if not 1 <= len(args.seeds) <= MAX_SEEDS or len(set(args.seeds)) != len(args.seeds) or min(args.seeds) < 0:
-        parser.error(f"--seeds takes 1 to {MAX_SEEDS} distinct seeds >= 0, got {args.seeds}")
+    if (
+        not 1 <= len(args.seeds) <= MAX_SEEDS
+        or len(set(args.seeds)) != len(args.seeds)
+        or not 0 <= min(args.seeds) <= max(args.seeds) <= MAX_SEED
+    ):
+        parser.error(f"--seeds takes 1 to {MAX_SEEDS} distinct seeds in 0-{MAX_SEED}, got {args.seeds}")
     config = read_calibration(parser, args.calibration)
+    if not (args.calibration / "phase1.npz").is_file():
+        parser.error(
+            f"{args.calibration} holds no phase1.npz (a calibration stopped before its Phase I ended); run dvrk-gym calibrate there again"
+        )
     phase1 = Phase1Data.load(args.calibration / "phase1.npz")
     print(
         f"{args.calibration}: {phase1.n_kept} kept Phase I rows, bias {config.bias}, bias_seed {config.bias_seed}, run seed {config.seed}"

@@ -1,5 +1,6 @@
 """benchmarks/dnn_seed_spread.py: the run's own seed gives back its calibrators, other seeds differ, the printout, bad flags."""
 
+import shutil
 import subprocess
 import sys
 
@@ -44,15 +45,23 @@ def test_the_spread_is_printed_per_setting_with_the_seeds_that_meet_the_targets(
     assert lines[-1] == "  every cell at most 1.6 mm: 1 of 2 seeds [0]"
 
 
-@pytest.mark.parametrize("seeds", [["1", "1"], ["-1"]])
+@pytest.mark.parametrize("seeds", [["1", "1"], ["-1"], ["0", "4294967296"]])
 def test_it_refuses_repeated_or_negative_seeds(seeds, tmp_path):
     result = _run("--calibration", str(tmp_path), "--seeds", *seeds)
-    assert result.returncode == 2 and "--seeds takes 1 to 64 distinct seeds >= 0" in result.stderr.splitlines()[-1]
+    assert result.returncode == 2 and "--seeds takes 1 to 64 distinct seeds in 0-4294967295" in result.stderr.splitlines()[-1]
 
 
 def test_it_refuses_a_folder_no_calibration_made(tmp_path):
     result = _run("--calibration", str(tmp_path))
     assert result.returncode == 2 and "not a calibration run folder" in result.stderr.splitlines()[-1]
+
+
+def test_it_refuses_a_calibration_stopped_before_its_phase_i_ended(small_calibration, tmp_path):
+    stopped = tmp_path / "stopped"
+    stopped.mkdir()
+    shutil.copy(small_calibration / "pipeline_config.json", stopped)
+    result = _run("--calibration", str(stopped))
+    assert result.returncode == 2 and "holds no phase1.npz" in result.stderr.splitlines()[-1]
 
 
 def test_the_runs_own_seed_gives_back_its_network_and_forests_and_another_seed_differs(small_calibration):

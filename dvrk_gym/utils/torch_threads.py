@@ -15,6 +15,11 @@ def torch_threads(n: int) -> Iterator[None]:
     on 2 shared cores, two threads made a 256 x 256 update 12 times slower, and a fixed count
     gives the same numbers whatever the machine's cores (not whatever its CPU: MKL picks its
     kernels by instruction set; README: the network's figures depend on the machine's arithmetic).
+
+    The count is torch's setting for the process (a thread that starts later takes it up), so
+    blocks in Python threads that run at once can restore each other's count in the wrong
+    order; the package's executors run one task per process (``dvrk_gym.parallel``, Dask
+    workers with one thread each).
     """
     import torch
 
