@@ -100,6 +100,12 @@ def _row(name: str, values: np.ndarray) -> str:
     return f"  {name:<14s}" + "".join(f"{v:9.2f}" for v in values)
 
 
+def _print_over_seeds(per_seed: np.ndarray) -> None:
+    """The mean, sd (ddof 0), min and max of each column of ``per_seed`` (seeds x figures)."""
+    for name, reduce in (("mean", np.mean), ("sd", np.std), ("min", np.min), ("max", np.max)):
+        print(_row(name, reduce(per_seed, axis=0)))
+
+
 def print_spread(results: dict[int, SeedResult]) -> None:
     """Each seed's cells and mean, then per setting the mean, sd, min and max over the seeds, and
     the seeds that meet :data:`CELL_TARGETS_MM`; then each seed's pushes."""
@@ -111,8 +117,7 @@ def print_spread(results: dict[int, SeedResult]) -> None:
         per_seed = np.array([np.append(cells[seed][method], cells[seed][method].mean()) for seed in cells])
         for seed, row in zip(cells, per_seed, strict=True):
             print(_row(str(seed), row))
-        for name, reduce in (("mean", np.mean), ("sd", np.std), ("min", np.min), ("max", np.max)):
-            print(_row(name, reduce(per_seed, axis=0)))
+        _print_over_seeds(per_seed)
         meeting = [seed for seed in cells if cells[seed][method].max() <= target]
         print(f"  every cell at most {target} mm: {len(meeting)} of {len(cells)} seeds {meeting}")
     print("Phase II pushes (mm): the mean y's spread over the yaws; x after the move to the next row minus along a row")
@@ -120,8 +125,7 @@ def print_spread(results: dict[int, SeedResult]) -> None:
     rows = np.array([[result.push_y_spread_mm, result.push_x_gap_mm] for result in results.values()])
     for seed, row in zip(results, rows, strict=True):
         print(_row(str(seed), row))
-    for name, reduce in (("mean", np.mean), ("sd", np.std), ("min", np.min), ("max", np.max)):
-        print(_row(name, reduce(rows, axis=0)))
+    _print_over_seeds(rows)
     print("  real, rounds 0 and 1: y spread 1.0 and 0.7, x gap -1.0 and -0.4 (python benchmarks/tour_order.py, fidelity_table_runs.py)")
 
 
