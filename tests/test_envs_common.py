@@ -292,7 +292,8 @@ def test_record_video_writes_an_episode_of_every_env(env_id, tmp_path):
     pytest.importorskip("moviepy")
     from gymnasium.wrappers import RecordVideo
 
-    env = RecordVideo(gym.make(env_id, camera_resolution=(160, 96), render_mode="rgb_array"), str(tmp_path), episode_trigger=lambda _: True)
+    folder = tmp_path / "videos"  # a folder RecordVideo makes: it warns when it overwrites one that exists
+    env = RecordVideo(gym.make(env_id, camera_resolution=(160, 96), render_mode="rgb_array"), str(folder), episode_trigger=lambda _: True)
     try:
         env.reset(seed=0)
         done = False
@@ -301,7 +302,7 @@ def test_record_video_writes_an_episode_of_every_env(env_id, tmp_path):
             done = terminated or truncated
     finally:
         env.close()
-    videos = list(tmp_path.glob("*.mp4"))
+    videos = list(folder.glob("*.mp4"))
     assert len(videos) == 1 and videos[0].stat().st_size > 0
 
 
