@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import gymnasium as gym
 import numpy as np
 from fidelity_table_runs import add_calibration_argument, push_means, read_calibration, simulated_pushes
-from tour_order import pushes_by_move
+from tour_order import next_row_gap, pushes_by_move
 
 import dvrk_gym  # noqa: F401  (registers the envs)
 from dvrk_gym.calibration.benchmark import YAW_SETTINGS, calibration_table
@@ -88,11 +88,10 @@ def seed_result(phase1: Phase1Data, config: PipelineConfig, seed: int) -> SeedRe
     finally:
         grid.close()
     sent, pushes, yaws = simulated_pushes(phase2)
-    by_move = pushes_by_move(sent, pushes, yaws)
     return SeedResult(
         cells={method: np.array([table[method][label].mm.mean() for label, _ in YAW_SETTINGS]) for method in table},
         push_y_spread_mm=1e3 * float(np.ptp(push_means(yaws, pushes)[:, 1])),
-        push_x_gap_mm=1e3 * float(np.nanmean(by_move[:, 1, 0] - by_move[:, 0, 0])),
+        push_x_gap_mm=1e3 * next_row_gap(pushes_by_move(sent, pushes, yaws)),
     )
 
 

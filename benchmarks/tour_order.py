@@ -96,6 +96,12 @@ def print_orders(calibration_folder: Path, config: PipelineConfig) -> None:
         env.close()
 
 
+def next_row_gap(by_move: np.ndarray) -> float:
+    """The x after the move to the next row minus after a move along a row, the mean over the yaws
+    that have both, of :func:`pushes_by_move`'s (5, 2, 2) means (in their unit)."""
+    return float(np.nanmean(by_move[:, 1, 0] - by_move[:, 0, 0]))
+
+
 def print_pushes_by_move(runs: PaperTableRuns, phase2: Phase2Data) -> None:
     """Part 2: the pushes after each kind of move (:func:`pushes_by_move`), real (both rounds) and simulated."""
     print("2. Phase II pushes (x, y mm) after a move along a row | after the move to the next row, per yaw")
@@ -107,8 +113,7 @@ def print_pushes_by_move(runs: PaperTableRuns, phase2: Phase2Data) -> None:
             f"{yaw:+4.0f}: {a[0]:+.1f},{a[1]:+.1f} | {b[0]:+.1f},{b[1]:+.1f}"
             for yaw, (a, b) in zip(paper.PHASE2_YAWS_DEG, means, strict=True)
         )
-        gap = np.nanmean(means[:, 1, 0] - means[:, 0, 0])
-        print(f"  {who:<14s}{cells}   x after the next-row move minus along a row: {gap:+.1f}")
+        print(f"  {who:<14s}{cells}   x after the next-row move minus along a row: {next_row_gap(means):+.1f}")
 
 
 def main() -> None:
