@@ -1,9 +1,18 @@
-"""Loading a script of benchmarks/ as a module, so tests can call its functions."""
+"""Loading a script of benchmarks/ as a module (tests call its functions), or running it in this process (tests check its flags)."""
 
+import argparse
+import contextlib
 import importlib.util
+import io
+import os
+import runpy
 import sys
+from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from types import ModuleType
+from typing import Any, NoReturn
+from unittest import mock
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -30,3 +39,62 @@ def load_script(name: str) -> ModuleType:
         del sys.modules[name]  # as importlib leaves no half-loaded module behind
         raise
     return module
+
+
+@dataclass(frozen=True)
+class ScriptRun:
+    """What a script run by :func:`run_script` returned and printed (as a CompletedProcess holds them)."""
+
+    returncode: int
+    stdout: str
+    stderr: str
+
+
+class _Parsed(Exception):
+    """Raised by :func:`run_script` with ``parse_only`` once the script's flags have parsed."""
+
+
+def _parse_then_stop(parser: argparse.ArgumentParser, args: Sequence[str] | None = None, namespace: Any = None) -> NoReturn:
+    _PARSE_ARGS(parser, args, namespace)  # a refused flag exits 2 here, as on the command line
+    raise _Parsed
+
+
+_PARSE_ARGS = argparse.ArgumentParser.parse_args
+
+
+def run_script(path: Path, *arguments: str, parse_only: bool = False) -> ScriptRun:
+    """Run the script ``path`` as ``python path ARGUMENTS`` from the project's root would, but in
+    this process: a new Python process spends about 6 s importing torch, PyBullet and
+    Gymnasium before the script parses its first flag. For flags a script refuses, or its
+    ``--help``; a run that does the work is better run in a process of its own.
+
+    The script runs as ``__main__`` with ``sys.argv``, the current folder and the import path
+    a command line would give it; all three are restored afterwards. Its exit code is 0 when
+    it returns, else what it passed to ``sys.exit`` (1 for a message, as Python exits).
+    With ``parse_only`` the script stops, with exit code 0, once its parser has taken every
+    flag: an unknown flag, a missing one or a value of the wrong type exits 2 as on the
+    command line (``--help`` would not catch an unknown flag: argparse prints the help and
+    exits before it looks at what it did not know).
+    """
+    out, err = io.StringIO(), io.StringIO()
+    argv, cwd = sys.argv, Path.cwd()
+    sys.argv = [str(path), *arguments]
+    sys.path.insert(0, str(path.parent))
+    os.chdir(ROOT)
+    try:
+        with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err), contextlib.ExitStack() as stack:
+            if parse_only:
+                stack.enter_context(mock.patch.object(argparse.ArgumentParser, "parse_args", _parse_then_stop))
+            runpy.run_path(str(path), run_name="__main__")
+        code = 0
+    except _Parsed:
+        code = 0
+    except SystemExit as exit_:
+        code = exit_.code if isinstance(exit_.code, int) else (0 if exit_.code is None else 1)
+        if isinstance(exit_.code, str):
+            err.write(exit_.code + "\n")
+    finally:
+        sys.argv = argv
+        sys.path.remove(str(path.parent))
+        os.chdir(cwd)
+    return ScriptRun(code, out.getvalue(), err.getvalue())

@@ -37,6 +37,17 @@ def json_from_fresh_process(code: str):
 
 
 @pytest.fixture(scope="session")
+def tiny_reproduction(tmp_path_factory):
+    """``dvrk-gym reproduce`` with the tiny profile (:data:`dvrk_gym.reproduce.TINY`: every task
+    of the quick run on budgets that keep the suite short), seed 0, one worker, made once per
+    test process: the reference the tests of workers, executors and resuming compare with.
+    Read it; do not write to it (copy the folder first)."""
+    from dvrk_gym.reproduce import TINY, ReproduceConfig, run_reproduce
+
+    return run_reproduce(ReproduceConfig(out=tmp_path_factory.mktemp("tiny_reproduction") / "run", profile=TINY, workers=1, progress=False))
+
+
+@pytest.fixture(scope="session")
 def small_calibration(tmp_path_factory) -> Path:
     """A ``dvrk-gym calibrate`` folder made once per test process (2 trajectories, 20 epochs,
     640 x 360): for the benchmark scripts that read a calibration run. Read it; do not write to it."""

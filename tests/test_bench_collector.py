@@ -4,7 +4,7 @@ import subprocess
 import sys
 
 import pytest
-from benchmark_scripts import ROOT, load_script, script_path
+from benchmark_scripts import ROOT, load_script, run_script, script_path
 
 from dvrk_gym import paper
 from dvrk_gym.calibration import phase1
@@ -73,7 +73,7 @@ def test_it_prints_the_fidelity_table_of_the_changed_collection_and_refuses_bad_
         (["--calibrate", "--out", str(ROOT)], "is not empty"),
     )
     for bad, message in refusals:
-        refused = subprocess.run([sys.executable, str(SCRIPT), *bad], cwd=ROOT, capture_output=True, text=True, timeout=120)
+        refused = run_script(SCRIPT, *bad)
         assert refused.returncode == 2 and message in refused.stderr, bad
 
 

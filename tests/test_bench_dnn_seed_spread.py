@@ -1,13 +1,11 @@
 """benchmarks/dnn_seed_spread.py: the run's own seed gives back its calibrators, other seeds differ, the printout, bad flags."""
 
 import shutil
-import subprocess
-import sys
 
 import gymnasium as gym
 import numpy as np
 import pytest
-from benchmark_scripts import ROOT, load_script, script_path
+from benchmark_scripts import ScriptRun, load_script, run_script, script_path
 
 from dvrk_gym.calibration.loading import load_calibrator
 from dvrk_gym.calibration.phase1 import Phase1Data
@@ -18,8 +16,8 @@ dnn_seed_spread = load_script("dnn_seed_spread")
 SCRIPT = script_path("dnn_seed_spread")
 
 
-def _run(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, str(SCRIPT), *args], cwd=ROOT, capture_output=True, text=True, timeout=600)
+def _run(*args: str) -> ScriptRun:
+    return run_script(SCRIPT, *args)
 
 
 def test_the_spread_is_printed_per_setting_with_the_seeds_that_meet_the_targets(capsys):

@@ -1,11 +1,8 @@
 """benchmarks/identify_tape_shift.py: its crossing, its patch of the tape detector, its flags."""
 
-import subprocess
-import sys
-
 import numpy as np
 import pytest
-from benchmark_scripts import ROOT, load_script, script_path
+from benchmark_scripts import load_script, run_script, script_path
 
 from dvrk_gym.sim import identified
 from dvrk_gym.sim.endoscope.baseline import true_baseline_m
@@ -50,6 +47,6 @@ def test_the_tape_shift_reaches_every_new_world_and_is_undone():
     ],
 )
 def test_it_refuses_bad_flags_before_any_work(flags, message):
-    result = subprocess.run([sys.executable, str(SCRIPT), *flags], cwd=ROOT, capture_output=True, text=True, timeout=120)
+    result = run_script(SCRIPT, *flags)
     assert result.returncode == 2
     assert message in result.stderr.splitlines()[-1]

@@ -7,7 +7,7 @@ import sys
 
 import numpy as np
 import pytest
-from benchmark_scripts import ROOT, load_script, script_path
+from benchmark_scripts import ROOT, load_script, run_script, script_path
 
 from dvrk_gym.calibration.phase2 import Phase2Data
 from dvrk_gym.envs.grid_touch import N_CIRCLES
@@ -32,9 +32,7 @@ def test_the_pushes_are_split_by_whether_the_move_before_went_to_the_next_row():
 
 
 def test_it_refuses_a_folder_no_calibration_made(tmp_path):
-    result = subprocess.run(
-        [sys.executable, str(SCRIPT), "--calibration", str(tmp_path)], cwd=ROOT, capture_output=True, text=True, timeout=120
-    )
+    result = run_script(SCRIPT, "--calibration", str(tmp_path))
     assert result.returncode == 2 and "not a calibration run folder" in result.stderr.splitlines()[-1]
 
 
@@ -64,7 +62,5 @@ def test_it_refuses_a_phase_ii_made_before_the_authors_tour(small_calibration, t
     row_major = dataclasses.replace(phase2, circle=np.tile(np.arange(N_CIRCLES), len(phase2.circle) // N_CIRCLES))
     assert not row_major.in_authors_tour
     row_major.save(stale / "phase2.npz")
-    result = subprocess.run(
-        [sys.executable, str(SCRIPT), "--calibration", str(stale)], cwd=ROOT, capture_output=True, text=True, timeout=300
-    )
+    result = run_script(SCRIPT, "--calibration", str(stale))
     assert result.returncode == 2 and "made before the authors' tour" in result.stderr.splitlines()[-1]

@@ -3,6 +3,7 @@ the task scheduler."""
 
 import json
 import math
+import shutil
 
 import pytest
 
@@ -15,10 +16,9 @@ from dvrk_gym.utils.run_folder import SOURCE_KEY, RunFolder, read_settings
 from dvrk_gym.utils.source_fingerprint import source_fingerprint
 
 
-@pytest.fixture(scope="module")
-def tiny_run(tmp_path_factory):
-    out = tmp_path_factory.mktemp("reproduce")
-    return run_reproduce(ReproduceConfig(out=out, profile=TINY, workers=1, progress=False))
+@pytest.fixture
+def tiny_run(tiny_reproduction):
+    return tiny_reproduction
 
 
 def _numbers(value):
@@ -61,8 +61,9 @@ def test_tiny_reproduce_writes_report_results_and_figures(tiny_run):
     assert "figures/bias_field.png" in report
 
 
-def test_rerun_resumes_from_the_cache_and_refuses_other_settings(tiny_run):
-    out = tiny_run.report.parent
+def test_rerun_resumes_from_the_cache_and_refuses_other_settings(tiny_run, tmp_path):
+    out = tmp_path / "run"
+    shutil.copytree(tiny_run.report.parent, out)  # the shared run stays as it was made
     again = run_reproduce(ReproduceConfig(out=out, profile=TINY, workers=1, progress=False))
     assert set(again.data["task_cached"]) == {task.name for task in build_tasks(ReproduceConfig(out=out, profile=TINY))}
     assert again.data["calibration"] == tiny_run.data["calibration"]

@@ -75,14 +75,15 @@ def _same_bytes(first: Path, second: Path) -> list[str]:
 
 
 @pytest.mark.slow
-def test_reproduce_on_a_dask_cluster_gives_what_local_processes_give(tmp_path):
+def test_reproduce_on_a_dask_cluster_gives_what_a_local_process_gives(tmp_path, tiny_reproduction):
     """Every stage of a reproduction (the tiny profile: all of the quick run's tasks, on
-    budgets that keep CI short) twice: 2 local processes, then a LocalCluster of 2
-    single-thread workers reached at its address as --scheduler would."""
+    budgets that keep CI short) on a LocalCluster of 2 single-thread workers reached at its
+    address as --scheduler would, against the same run in one local process (2 local
+    processes give the same numbers: test_reproduce.test_two_workers_give_the_same_numbers)."""
     distributed = pytest.importorskip("distributed")
     from dvrk_gym.parallel.dask_executor import DaskExecutor
 
-    local = run_reproduce(ReproduceConfig(out=tmp_path / "local", profile=TINY, workers=2, progress=False))
+    local = tiny_reproduction
     with (
         distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster,
         DaskExecutor(cluster.scheduler_address) as dask,
@@ -90,5 +91,5 @@ def test_reproduce_on_a_dask_cluster_gives_what_local_processes_give(tmp_path):
         on_dask = run_reproduce(ReproduceConfig(out=tmp_path / "dask", profile=TINY, progress=False), dask)
     assert on_dask.data["settings"]["executor"].startswith(f"Dask scheduler {cluster.scheduler_address} (2 workers, 2 threads)")
     assert seeded_results(json.loads(on_dask.results.read_text())) == seeded_results(json.loads(local.results.read_text()))
-    assert _same_bytes(tmp_path / "local", tmp_path / "dask") == []
+    assert _same_bytes(local.report.parent, tmp_path / "dask") == []
     assert len(list((tmp_path / "dask" / "debridement").glob("*.json"))) == 6

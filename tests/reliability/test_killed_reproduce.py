@@ -10,7 +10,7 @@ import psutil
 import pytest
 from faults import ROOT, TINY_PROFILE, cli_command, deterministic, environment, write_profile
 
-from dvrk_gym.reproduce import Profile, ReproduceConfig, run_reproduce
+from dvrk_gym.reproduce import TINY, Profile
 
 pytestmark = pytest.mark.slow
 
@@ -40,7 +40,7 @@ def _wait_for_workers_and_a_result(parent: psutil.Process, out, timeout_s: float
     raise AssertionError(f"no worker and result within {timeout_s} s")
 
 
-def test_sigkill_leaves_no_worker_and_the_rerun_matches_an_uninterrupted_run(tmp_path):
+def test_sigkill_leaves_no_worker_and_the_rerun_matches_an_uninterrupted_run(tmp_path, tiny_reproduction):
     profile_path = write_profile(tmp_path)
     out = tmp_path / "killed"
     with open(tmp_path / "first.log", "w") as log:
@@ -67,5 +67,5 @@ def test_sigkill_leaves_no_worker_and_the_rerun_matches_an_uninterrupted_run(tmp
     assert cached_before <= set(resumed["task_cached"])  # what finished before the kill was not run again
     assert not list(out.rglob(".*.partial*"))
 
-    reference = run_reproduce(ReproduceConfig(out=tmp_path / "reference", profile=Profile.from_dict(TINY_PROFILE), progress=False))
-    assert deterministic(resumed) == deterministic(json.loads(reference.results.read_text()))
+    assert Profile.from_dict(TINY_PROFILE) == TINY  # the profile of the uninterrupted run to compare with
+    assert deterministic(resumed) == deterministic(json.loads(tiny_reproduction.results.read_text()))
