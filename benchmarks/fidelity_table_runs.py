@@ -71,11 +71,12 @@ from dvrk_gym.calibration.loading import load_calibrator
 from dvrk_gym.calibration.models.features import nearest_yaw_index
 from dvrk_gym.calibration.phase1 import Phase1Data
 from dvrk_gym.calibration.phase2 import Phase2Data
-from dvrk_gym.calibration.pipeline import BENCHMARK_SEED_OFFSET, PipelineConfig, read_pipeline_settings
+from dvrk_gym.calibration.pipeline import BENCHMARK_SEED_OFFSET, SETTINGS_STAMP, PipelineConfig, read_pipeline_settings
 from dvrk_gym.calibration.policy import CalibratedPolicy
 from dvrk_gym.fidelity.statistics import plane_slope, tilt_deg
 from dvrk_gym.sim.world import DvrkWorld
 from dvrk_gym.sim.world_config import WorldConfig
+from dvrk_gym.utils.run_folder import check_made_here
 
 FIXED_YAWS = 5
 """The table's first five settings are the fixed yaws, which have Phase II pushes."""
@@ -403,9 +404,14 @@ def add_calibration_argument(parser: argparse.ArgumentParser) -> None:
 
 
 def read_calibration(parser: argparse.ArgumentParser, folder: Path) -> PipelineConfig:
-    """The settings a calibration run ``folder`` was made with; a folder with no settings stamp
+    """The settings a calibration run ``folder`` was made with. A folder with no settings stamp,
+    or one another dvrk_gym made (its rows would be mixed with this version's simulation),
     is a usage error of ``parser`` (exit 2)."""
-    settings = read_pipeline_settings(folder)
+    try:
+        settings = read_pipeline_settings(folder)
+        check_made_here(folder, SETTINGS_STAMP, remedy="make it again with this version: dvrk-gym calibrate --out NEW_FOLDER")
+    except ValueError as error:
+        parser.error(str(error))
     if settings is None:
         parser.error(f"{folder} is not a calibration run folder (no settings stamp); make one with dvrk-gym calibrate --out")
     return PipelineConfig.from_settings(settings)

@@ -1,6 +1,7 @@
 """benchmarks/tour_order.py: the pushes split by the move before them, its flag, a run."""
 
 import dataclasses
+import json
 import shutil
 import subprocess
 import sys
@@ -10,7 +11,9 @@ import pytest
 from benchmark_scripts import ROOT, load_script, run_script, script_path
 
 from dvrk_gym.calibration.phase2 import Phase2Data
+from dvrk_gym.calibration.pipeline import SETTINGS_STAMP
 from dvrk_gym.envs.grid_touch import N_CIRCLES
+from dvrk_gym.utils.run_folder import SOURCE_KEY
 
 tour_order = load_script("tour_order")
 SCRIPT = script_path("tour_order")
@@ -34,6 +37,26 @@ def test_the_pushes_are_split_by_whether_the_move_before_went_to_the_next_row():
 def test_it_refuses_a_folder_no_calibration_made(tmp_path):
     result = run_script(SCRIPT, "--calibration", str(tmp_path))
     assert result.returncode == 2 and "not a calibration run folder" in result.stderr.splitlines()[-1]
+
+
+def test_it_refuses_a_calibration_another_dvrk_gym_made(small_calibration, tmp_path):
+    """Its Phase I rows would be mixed with this version's simulation (every benchmark that reads
+    a calibration does this through fidelity_table_runs.read_calibration)."""
+    other = tmp_path / "other"
+    shutil.copytree(small_calibration, other, ignore=shutil.ignore_patterns("*.lock"))
+    stamp = json.loads((other / SETTINGS_STAMP).read_text())
+    stamp[SOURCE_KEY] = {**stamp[SOURCE_KEY], "sha256": "ab" * 32}
+    (other / SETTINGS_STAMP).write_text(json.dumps(stamp))
+    result = run_script(SCRIPT, "--calibration", str(other))
+    last = result.stderr.splitlines()[-1]
+    assert (
+        result.returncode == 2
+        and "made by another version of dvrk_gym's simulator" in last
+        and last.endswith("dvrk-gym calibrate --out NEW_FOLDER")
+    )
+    del stamp[SOURCE_KEY]
+    (other / SETTINGS_STAMP).write_text(json.dumps(stamp))
+    assert "has no source fingerprint" in run_script(SCRIPT, "--calibration", str(other)).stderr
 
 
 def test_it_prints_both_orders_for_each_method_and_the_pushes_by_move(small_calibration):

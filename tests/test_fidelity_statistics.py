@@ -109,11 +109,21 @@ def test_rows_on_a_plane_tilted_about_base_y_give_its_slope_and_angle():
         (np.zeros((5, 2)), "N >= 3"),
         (np.array([[0.0, 0.0, 0.0], [0.01, 0.01, 0.0], [np.nan, 0.0, 0.0]]), "finite"),
         (np.column_stack([np.linspace(0, 0.05, 6), np.linspace(0, 0.05, 6), np.zeros(6)]), "one line"),
+        (np.full((4, 3), 0.01), "width across it is 0 of"),  # one point, four times
+        # 0.1 mm either side of a 50 mm line: lstsq's rank is 3, but the tilt across the line would be noise
+        (np.column_stack([np.linspace(0, 0.05, 6), [0.0, 1e-4, -1e-4] * 2, np.zeros(6)]), r"width across it is 0\.0046 of .* under 0\.05"),
     ],
 )
 def test_plane_slope_refuses_what_defines_no_plane(positions, message):
     with pytest.raises(ValueError, match=message):
         plane_slope(positions)
+
+
+def test_plane_slope_fits_a_narrow_cloud_that_is_not_one_line():
+    x = np.linspace(0.0, 0.05, 6)
+    across = np.array([0.0, 0.004, -0.004] * 2)  # 4 mm either side of a 50 mm line: width 0.09 of length
+    z = 0.1 * x - 0.2 * across + 0.3
+    assert plane_slope(np.column_stack([x, across, z])) == pytest.approx((0.1, -0.2))
 
 
 def test_cross_validation_of_an_exactly_linear_map_is_zero_for_the_linear_model():

@@ -77,6 +77,11 @@ __all__ = [
 
 JITTER_MAX_STEP_M = 0.010
 """Consecutive rows count for the jitter when their reported base positions are this close, m."""
+PLANE_MIN_WIDTH = 0.05
+"""The narrowest cloud of points :func:`plane_slope` fits a plane to: seen from above, its
+spread across its main line over its spread along it (the singular values of the centred
+x, y). The real Phase I rows give 0.83 (their workspace is nearly square); a collection
+under 0.05 never left one line, and its plane's tilt across that line is noise."""
 SAME_POSITION_M = 0.0002
 """Consecutive rows whose reported base positions lie this close count as one position, m
 (the real rows' steps between pauses are 2 mm: :data:`dvrk_gym.paper.PHASE1_STEP_M`)."""
@@ -186,15 +191,22 @@ def plane_slope(positions: np.ndarray) -> tuple[float, float]:
 
     Raises:
         ValueError: on a shape other than (N, 3) with N >= 3, values not finite, or points
-            that do not span the xy-plane (all on one line seen from above).
+            that do not span the xy-plane: seen from above, their spread across their main
+            line is under :data:`PLANE_MIN_WIDTH` of their spread along it (a plane through
+            nearly collinear points turns on noise, and its tilt means nothing).
     """
     positions = np.asarray(positions, dtype=float)
     if positions.ndim != 2 or positions.shape[1] != 3 or positions.shape[0] < 3 or not np.isfinite(positions).all():
         raise ValueError(f"positions must be (N, 3) finite metres with N >= 3, got shape {positions.shape}")
+    spread = np.linalg.svd(positions[:, :2] - positions[:, :2].mean(axis=0), compute_uv=False)  # along, across the main line
+    if not spread[1] >= PLANE_MIN_WIDTH * spread[0] or spread[1] == 0.0:
+        width = spread[1] / spread[0] if spread[0] > 0.0 else 0.0
+        raise ValueError(
+            f"the positions lie on one line seen from above (their width across it is {width:.2g} of their length, "
+            f"under {PLANE_MIN_WIDTH}); they define no plane"
+        )
     design = np.column_stack([positions[:, 0], positions[:, 1], np.ones(positions.shape[0])])
-    coefficients, _, rank, _ = np.linalg.lstsq(design, positions[:, 2], rcond=None)
-    if rank < 3:
-        raise ValueError("the positions lie on one line seen from above; they define no plane")
+    coefficients = np.linalg.lstsq(design, positions[:, 2], rcond=None)[0]
     return float(coefficients[0]), float(coefficients[1])
 
 

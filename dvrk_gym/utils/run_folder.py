@@ -102,6 +102,47 @@ def read_settings(folder: str | os.PathLike, stamp: str) -> dict[str, Any] | Non
     return None if found is None else {key: value for key, value in found.items() if key != SOURCE_KEY}
 
 
+RESUME_REMEDY = "use another --out, or delete the folder to make them again with this version"
+"""What :class:`RunFolder`'s refusal of another dvrk_gym's folder tells the user to do."""
+
+
+def _refuse_other_source(stamp: Path, recorded: Any, here: SourceFingerprint, remedy: str) -> None:
+    """Refuse (ValueError) results whose stamp says another dvrk_gym made them, or does not say which did."""
+    folder = stamp.parent
+    there = SourceFingerprint.from_json(recorded)
+    if there is None:
+        why = "has no source fingerprint" if recorded is None else f"has an unreadable source fingerprint ({str(recorded)[:80]})"
+        raise ValueError(
+            f"{folder} holds results made by an older dvrk_gym: its stamp ({stamp.name}) {why}, so which "
+            f"simulator made them is unknown and {here.short()} cannot use them with its own; {remedy}"
+        )
+    if there.sha256 != here.sha256:
+        raise ValueError(
+            f"{folder} holds results made by another version of dvrk_gym's simulator ({there.short()}; this is "
+            f"{here.short()}), which would be mixed with this version's; {remedy}"
+        )
+
+
+def check_made_here(folder: str | os.PathLike, stamp: str, remedy: str) -> None:
+    """Refuse a stamped folder that another dvrk_gym made, as :class:`RunFolder` refuses to resume
+    one, for a reader that mixes the folder's results with this version's without writing
+    there (a benchmark that reads a calibration's Phase I and simulates more). A folder
+    without the stamp passes: whether it is a run folder at all is the caller's question.
+
+    Args:
+        folder: the run folder.
+        stamp: the name of its settings stamp.
+        remedy: what the message tells the user to do instead.
+
+    Raises:
+        ValueError: the stamp records another dvrk_gym's source fingerprint, or none, or is
+            not a JSON object (the message names the folder, both fingerprints and ``remedy``).
+    """
+    found = _read_stamp(Path(folder) / stamp)
+    if found is not None:
+        _refuse_other_source(Path(folder) / stamp, found.get(SOURCE_KEY), source_fingerprint(), remedy)
+
+
 def _owner_pid(text: str) -> int | None:
     """The process id a lock file holds, or None when it holds none (a clean release empties it)."""
     try:
@@ -205,29 +246,13 @@ class RunFolder:
         here = source_fingerprint()
         found = _read_stamp(self.stamp)
         if found is not None:
-            self._check_source(found.pop(SOURCE_KEY, None), here)
+            _refuse_other_source(self.stamp, found.pop(SOURCE_KEY, None), here, RESUME_REMEDY)
             if found != wanted:
                 differences = "; ".join(settings_differences(found, wanted))
                 raise ValueError(
                     f"{self.path} holds a run with other settings ({differences}; see {self.stamp}); use another --out or delete it"
                 )
         atomic_write_json(self.stamp, {**wanted, SOURCE_KEY: here.to_json()}, indent=1, sort_keys=True)
-
-    def _check_source(self, recorded: Any, here: SourceFingerprint) -> None:
-        """Refuse a folder whose results another dvrk_gym made, or whose stamp does not say which one did."""
-        remedy = "use another --out, or delete the folder to make them again with this version"
-        there = SourceFingerprint.from_json(recorded)
-        if there is None:
-            why = "has no source fingerprint" if recorded is None else f"has an unreadable source fingerprint ({str(recorded)[:80]})"
-            raise ValueError(
-                f"{self.path} holds results made by an older dvrk_gym: its stamp ({self.stamp.name}) {why}, so which "
-                f"simulator made them is unknown and {here.short()} cannot resume them; {remedy}"
-            )
-        if there.sha256 != here.sha256:
-            raise ValueError(
-                f"{self.path} holds results made by another version of dvrk_gym's simulator ({there.short()}; this is "
-                f"{here.short()}), which would be mixed with this version's; {remedy}"
-            )
 
     def file(self, name: str) -> Path:
         """The path of a result in the folder."""

@@ -17,7 +17,7 @@ from dvrk_gym.calibration.models.dnn import DNNCalibrator
 from dvrk_gym.calibration.phase2 import Phase2Data
 from dvrk_gym.parallel.task_graph import Task, run_tasks
 from dvrk_gym.utils.atomic import atomic_open, atomic_path, atomic_savefig, atomic_write_text, partial_path
-from dvrk_gym.utils.run_folder import LOCK_FILE, SOURCE_KEY, RunFolder, RunFolderBusy, read_settings
+from dvrk_gym.utils.run_folder import LOCK_FILE, SOURCE_KEY, RunFolder, RunFolderBusy, check_made_here, read_settings
 from dvrk_gym.utils.source_fingerprint import source_fingerprint
 
 HOLDER = """
@@ -229,8 +229,18 @@ def test_a_folder_of_another_dvrk_gym_is_refused_and_left_as_it_was(tmp_path, so
     )
     assert {path.name: path.read_bytes() for path in tmp_path.iterdir() if path.name != LOCK_FILE} == before
     assert read_settings(tmp_path, "settings.json") == {"seed": 0}  # a reader still reads it
+    with pytest.raises(ValueError, match=message.replace("{here}", source_fingerprint().sha256[:12])) as refused:
+        check_made_here(tmp_path, "settings.json", remedy="make it again")  # a reader that mixes it with this version's
+    assert str(refused.value).endswith("; make it again")
     with RunFolder(tmp_path) as unchecked:  # without settings: no check, as before
         assert unchecked.read_json("result.json") == {"x": 1.5}
+
+
+def test_a_reader_passes_a_folder_this_dvrk_gym_made_and_one_without_a_stamp(tmp_path):
+    with RunFolder(tmp_path / "made", {"seed": 0}) as run:
+        run.write_json("result.json", {"x": 1.5})
+    check_made_here(tmp_path / "made", "settings.json", remedy="make it again")
+    check_made_here(tmp_path / "bare", "settings.json", remedy="make it again")  # no stamp: not the check's question
 
 
 def test_the_stamps_source_key_is_no_setting(tmp_path):
