@@ -6,6 +6,7 @@ import importlib.util
 import io
 import os
 import runpy
+import signal
 import sys
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -56,13 +57,18 @@ class _Parsed(Exception):
 
 def _parse_then_stop(parser: argparse.ArgumentParser, args: Sequence[str] | None = None, namespace: Any = None) -> NoReturn:
     _PARSE_ARGS(parser, args, namespace)  # a refused flag exits 2 here, as on the command line
+    parser.format_help()  # and --help must print: a lone % in a help string breaks it
     raise _Parsed
+
+
+def _too_long(signum: int, frame: Any) -> NoReturn:
+    raise TimeoutError("the script ran past run_script's timeout_s (a refusal that no longer refuses runs the whole benchmark)")
 
 
 _PARSE_ARGS = argparse.ArgumentParser.parse_args
 
 
-def run_script(path: Path, *arguments: str, parse_only: bool = False) -> ScriptRun:
+def run_script(path: Path, *arguments: str, parse_only: bool = False, timeout_s: float = 120.0) -> ScriptRun:
     """Run the script ``path`` as ``python path ARGUMENTS`` from the project's root would, but in
     this process: a new Python process spends about 6 s importing torch, PyBullet and
     Gymnasium before the script parses its first flag. For flags a script refuses, or its
@@ -74,13 +80,22 @@ def run_script(path: Path, *arguments: str, parse_only: bool = False) -> ScriptR
     With ``parse_only`` the script stops, with exit code 0, once its parser has taken every
     flag: an unknown flag, a missing one or a value of the wrong type exits 2 as on the
     command line (``--help`` would not catch an unknown flag: argparse prints the help and
-    exits before it looks at what it did not know).
+    exits before it looks at what it did not know), and its help is formatted too.
+
+    What this cannot check, a test runs once in a fresh interpreter: that every script
+    imports with only benchmarks/ on the import path (here tests/ is on it too).
+
+    Raises:
+        TimeoutError: the script ran longer than ``timeout_s`` seconds (checked with a
+            timer signal, so only in the main thread, as pytest runs tests).
     """
     out, err = io.StringIO(), io.StringIO()
     argv, cwd = sys.argv, Path.cwd()
     sys.argv = [str(path), *arguments]
     sys.path.insert(0, str(path.parent))
     os.chdir(ROOT)
+    previous = signal.signal(signal.SIGALRM, _too_long)
+    signal.setitimer(signal.ITIMER_REAL, timeout_s)
     try:
         with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err), contextlib.ExitStack() as stack:
             if parse_only:
@@ -94,6 +109,8 @@ def run_script(path: Path, *arguments: str, parse_only: bool = False) -> ScriptR
         if isinstance(exit_.code, str):
             err.write(exit_.code + "\n")
     finally:
+        signal.setitimer(signal.ITIMER_REAL, 0.0)
+        signal.signal(signal.SIGALRM, previous)
         sys.argv = argv
         sys.path.remove(str(path.parent))
         os.chdir(cwd)

@@ -121,8 +121,8 @@ def test_fidelity_command_writes_finite_numbers_with_the_real_rows_in_the_real_c
     assert report["real"] == real
     assert report["sim"]["raw_rows"] == 2 * 93 and 10 <= report["sim"]["rows"] <= report["sim"]["raw_rows"]
     for row in report["comparison"]:
-        if row["sim"] is None:  # two trajectories may keep no row at some yaw: no median pitch there, and a fail
-            assert row["statistic"].startswith("median pitch at yaw") and not row["passed"], row
+        if row["sim"] is None:  # two trajectories may keep no row at some yaw (no median pitch there), or rows near one line (no plane)
+            assert row["statistic"].startswith(("median pitch at yaw", "tilt of the rows' plane")) and not row["passed"], row
             continue
         assert math.isfinite(row["real"]) and math.isfinite(row["sim"]) and math.isfinite(row["value"]), row
     assert report["passed"] == sum(row["passed"] for row in report["comparison"])

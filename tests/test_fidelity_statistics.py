@@ -8,6 +8,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from dvrk_gym.calibration.datasets import load_paper_phase1
+from dvrk_gym.fidelity.comparison import compare
 from dvrk_gym.fidelity.statistics import (
     PAPER_YAWS_DEG,
     SAME_POSITION_M,
@@ -100,6 +101,20 @@ def test_rows_on_a_plane_tilted_about_base_y_give_its_slope_and_angle():
     assert stats.plane_tilt_deg == pytest.approx(np.rad2deg(np.arctan(np.hypot(np.tan(np.deg2rad(7.0)), 0.01))))
     y[:, 2] = -0.16  # level
     assert fidelity_statistics(X, y, cross_validation=False).plane_tilt_deg == pytest.approx(0.0, abs=1e-9)
+
+
+def test_rows_near_one_line_give_no_tilt_and_fail_that_row_only():
+    """A short collection can stay near one line seen from above: no plane, so the tilt is
+    nan (null in the JSON) and its comparison row fails; the other statistics stand."""
+    X, y = _synthetic_rows(np.full(3, 0.001))
+    y[:, 1] = 0.04 + 0.001 * (y[:, 1] - y[:, 1].mean()) / np.ptp(y[:, 1])  # 1 mm wide across x's tens of mm
+    stats = fidelity_statistics(X, y, cross_validation=False)
+    assert np.isnan(stats.plane_tilt_deg) and np.isnan(stats.plane_slope).all()
+    assert stats.to_dict()["plane_tilt_deg"] is None and stats.to_dict()["plane_slope"] == [None, None]
+    assert np.isfinite(stats.rigid_residual_rms_mm) and np.isfinite(stats.view_axis_jitter_mm)
+    rows = {row.name: row for row in compare(stats, stats, 0.37, 0.37)}
+    assert not rows["tilt of the rows' plane in the base frame (deg)"].passed
+    assert all(row.passed for name, row in rows.items() if not name.startswith("tilt"))
 
 
 @pytest.mark.parametrize(

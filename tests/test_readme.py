@@ -4,8 +4,8 @@ Every Python block runs as a script in a fresh interpreter, in a temporary folde
 reader who pastes it would run it; the import lines of the blocks above it in its section
 come first (a reader reading the section top to bottom has them). Blocks that run the
 paper's budgets (see :data:`SLOW_CALLS`) are marked slow. Every shell block is valid bash,
-every command in it takes its arguments (``dvrk-gym`` through its parser, the others with
-``--help`` appended), and every figure (an image, or a table of measured numbers) names
+every command in it takes its arguments (``dvrk-gym`` and the benchmark scripts through
+their parsers, in this process; the others with ``--help`` appended), and every figure (an image, or a table of measured numbers) names
 the command that printed it.
 """
 
@@ -123,6 +123,29 @@ def test_every_benchmark_the_readme_names_exists_and_takes_its_arguments(command
     assert (ROOT / script).is_file(), f"README names {script}, which does not exist"
     result = run_script(ROOT / script, *arguments, parse_only=True)  # the script's parser takes them, then it stops
     assert result.returncode == 0, f"`python {command}`: {result.stderr[-1500:]}"
+
+
+IMPORT_EVERY_SCRIPT = """
+import importlib.util, pathlib, sys
+folder = pathlib.Path("benchmarks").resolve()
+sys.path[0] = str(folder)  # as `python benchmarks/NAME.py` puts the script's folder first
+failed = []
+for path in sorted(folder.glob("*.py")):
+    spec = importlib.util.spec_from_file_location(path.stem, path)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[path.stem] = module
+    try:
+        spec.loader.exec_module(module)
+    except Exception as error:
+        failed.append(f"{path.name}: {type(error).__name__}: {error}")
+print("\\n".join(failed))
+"""
+
+
+def test_every_benchmark_script_imports_in_a_fresh_python_with_only_its_own_folder_added():
+    """What the in-process checks above cannot see: there, tests/ is on the import path too."""
+    result = subprocess.run([sys.executable, "-c", IMPORT_EVERY_SCRIPT], cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert result.returncode == 0 and not result.stdout.strip(), result.stdout + result.stderr[-1500:]
 
 
 def test_every_benchmark_script_is_listed_and_every_listed_one_exists():

@@ -6,12 +6,13 @@ import math
 import shutil
 
 import pytest
+from reproduction_files import files_that_differ
 
 from dvrk_gym import paper
 from dvrk_gym.cli.main import main
 from dvrk_gym.parallel.task_graph import Task, TaskError, run_tasks
 from dvrk_gym.reproduce import TINY, Profile, ReproduceConfig, build_tasks, run_reproduce
-from dvrk_gym.reproduce.run import SETTINGS_STAMP
+from dvrk_gym.reproduce.run import SETTINGS_STAMP, seeded_results
 from dvrk_gym.utils.run_folder import SOURCE_KEY, RunFolder, read_settings
 from dvrk_gym.utils.source_fingerprint import source_fingerprint
 
@@ -73,6 +74,8 @@ def test_rerun_resumes_from_the_cache_and_refuses_other_settings(tiny_run, tmp_p
 
 def test_two_workers_give_the_same_numbers(tiny_run, tmp_path):
     two = run_reproduce(ReproduceConfig(out=tmp_path, profile=TINY, workers=2, progress=False))
+    assert seeded_results(two.data) == seeded_results(tiny_run.data)  # every number the seed decides
+    assert files_that_differ(tiny_run.report.parent, tmp_path) == []  # and the models, data and tables, byte for byte
     assert two.data["calibration"] == tiny_run.data["calibration"]
     assert two.data["debridement"] == [
         {**cell, "wall_s_per_trial": two_cell["wall_s_per_trial"], "wall_s": two_cell["wall_s"]}

@@ -7,6 +7,7 @@ import os
 from pathlib import Path
 
 import pytest
+from reproduction_files import files_that_differ
 from workers_for_tests import die_once, record
 
 from dvrk_gym.cli.main import main
@@ -14,10 +15,6 @@ from dvrk_gym.parallel.executors import InlineExecutor, LocalExecutor
 from dvrk_gym.parallel.task_graph import Task, TaskError, run_tasks
 from dvrk_gym.reproduce import TINY, ReproduceConfig, run_reproduce
 from dvrk_gym.reproduce.run import seeded_results
-
-SAME_BYTES = ("calibration/*.npz", "calibration/calibration_table.json", "debridement/*.json")
-"""The files of a run folder that two runs with the same settings write byte for byte: the
-calibrators' models and Phase I/II data, the calibration table and every debridement cell."""
 
 
 def _graph(log: Path) -> list[Task]:
@@ -67,13 +64,6 @@ def test_reproduce_refuses_a_bad_scheduler_in_one_line(capsys, tmp_path, argumen
     assert not (tmp_path / "run" / "tasks").exists()  # nothing ran
 
 
-def _same_bytes(first: Path, second: Path) -> list[str]:
-    """The files of SAME_BYTES, relative to the run folders, after checking that both runs wrote the same ones."""
-    names = sorted(str(path.relative_to(first)) for pattern in SAME_BYTES for path in first.glob(pattern))
-    assert names == sorted(str(path.relative_to(second)) for pattern in SAME_BYTES for path in second.glob(pattern))
-    return [name for name in names if (first / name).read_bytes() != (second / name).read_bytes()]
-
-
 @pytest.mark.slow
 def test_reproduce_on_a_dask_cluster_gives_what_a_local_process_gives(tmp_path, tiny_reproduction):
     """Every stage of a reproduction (the tiny profile: all of the quick run's tasks, on
@@ -91,5 +81,5 @@ def test_reproduce_on_a_dask_cluster_gives_what_a_local_process_gives(tmp_path, 
         on_dask = run_reproduce(ReproduceConfig(out=tmp_path / "dask", profile=TINY, progress=False), dask)
     assert on_dask.data["settings"]["executor"].startswith(f"Dask scheduler {cluster.scheduler_address} (2 workers, 2 threads)")
     assert seeded_results(json.loads(on_dask.results.read_text())) == seeded_results(json.loads(local.results.read_text()))
-    assert _same_bytes(local.report.parent, tmp_path / "dask") == []
+    assert files_that_differ(local.report.parent, tmp_path / "dask") == []
     assert len(list((tmp_path / "dask" / "debridement").glob("*.json"))) == 6

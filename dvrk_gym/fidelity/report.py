@@ -65,7 +65,8 @@ def format_table(run: FidelityRun) -> str:
 
 
 def _finite_or_none(value: float) -> float | None:
-    """``value``, or None (JSON null) where it is undefined: a yaw without simulated rows has no median pitch."""
+    """``value``, or None (JSON null) where it is undefined: a yaw without simulated rows has no median
+    pitch, and rows near one line no plane to tilt."""
     return value if math.isfinite(value) else None
 
 

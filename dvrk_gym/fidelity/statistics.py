@@ -116,9 +116,10 @@ class FidelityStatistics:
         pitch_autocorrelation: correlation of consecutive rows' pitch (lag 1), in [-1, 1]
             (0 when the pitch does not vary).
         plane_tilt_deg: tilt of the least-squares plane through the reported positions
-            from the base xy-plane, degrees, in [0, 90).
+            from the base xy-plane, degrees, in [0, 90); nan when they define no plane
+            (:func:`plane_slope`: a short collection can stay near one line).
         plane_slope: ``(a, b)`` of that plane, ``bz = a bx + b by + c``: metres of height
-            per metre along base x and y.
+            per metre along base x and y (nan, nan without a plane).
         kept_fraction_per_yaw: fraction of rows nearest each of ``PAPER_YAWS_DEG``.
         pitch_p5_deg: 5th percentile of the rows' pitch, degrees.
         pitch_p95_deg: 95th percentile of the rows' pitch, degrees.
@@ -151,8 +152,9 @@ class FidelityStatistics:
         """The fields as a JSON-ready dict (tuples as lists)."""
         values = asdict(self)
         values["kept_fraction_per_yaw"] = list(self.kept_fraction_per_yaw)
-        values["plane_slope"] = list(self.plane_slope)
-        # A yaw without rows has no median: None (JSON null), not NaN (not JSON).
+        # No plane, or a yaw without rows and so no median: None (JSON null), not NaN (not JSON).
+        values["plane_tilt_deg"] = None if math.isnan(self.plane_tilt_deg) else self.plane_tilt_deg
+        values["plane_slope"] = [None if math.isnan(s) else s for s in self.plane_slope]
         values["pitch_median_per_yaw_deg"] = [None if math.isnan(p) else p for p in self.pitch_median_per_yaw_deg]
         return values
 
@@ -262,8 +264,7 @@ def fidelity_statistics(
 
     Raises:
         ValueError: on bad shapes, non-finite values, units that are not metres and
-            radians, fewer rows than ``folds``, no consecutive pair for the jitter, or
-            reported positions on one line seen from above (no plane to tilt).
+            radians, fewer rows than ``folds``, or no consecutive pair for the jitter.
     """
     X = check_inputs(X)
     y = check_targets(y, X.shape[0])
@@ -279,7 +280,10 @@ def fidelity_statistics(
     jumps = residual[pairs + 1] - residual[pairs]
     groups = nearest_yaw_index(X[:, 3])
     pitch_deg = np.rad2deg(X[:, 4])
-    slope = plane_slope(y)
+    try:
+        slope = plane_slope(y)
+    except ValueError:  # the rows lie near one line seen from above: no tilt, and the comparison fails its row
+        slope = (math.nan, math.nan)
     linear = forest = None
     if cross_validation:
         linear = contiguous_cv_mse_mm2(LinearRegression, X, y, folds)

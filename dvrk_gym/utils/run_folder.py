@@ -135,8 +135,10 @@ def check_made_here(folder: str | os.PathLike, stamp: str, remedy: str) -> None:
         remedy: what the message tells the user to do instead.
 
     Raises:
-        ValueError: the stamp records another dvrk_gym's source fingerprint, or none, or is
-            not a JSON object (the message names the folder, both fingerprints and ``remedy``).
+        ValueError: the stamp records another dvrk_gym's source fingerprint, or none (the
+            message names the folder, this version's fingerprint and the stamp's when it
+            has one, and ``remedy``); or the stamp is unreadable or not a JSON object (the
+            message names it and says to delete it).
     """
     found = _read_stamp(Path(folder) / stamp)
     if found is not None:

@@ -8,7 +8,7 @@ import time
 
 import psutil
 import pytest
-from faults import ROOT, TINY_PROFILE, cli_command, deterministic, environment, write_profile
+from faults import ROOT, cli_command, deterministic, environment, write_profile
 
 from dvrk_gym.reproduce import TINY, Profile
 
@@ -67,5 +67,5 @@ def test_sigkill_leaves_no_worker_and_the_rerun_matches_an_uninterrupted_run(tmp
     assert cached_before <= set(resumed["task_cached"])  # what finished before the kill was not run again
     assert not list(out.rglob(".*.partial*"))
 
-    assert Profile.from_dict(TINY_PROFILE) == TINY  # the profile of the uninterrupted run to compare with
+    assert Profile.from_dict(json.loads(profile_path.read_text())) == TINY  # the profile of the uninterrupted run compared with
     assert deterministic(resumed) == deterministic(json.loads(tiny_reproduction.results.read_text()))
