@@ -62,7 +62,8 @@ def main() -> None:
     local_s = time.perf_counter() - start
 
     start = time.perf_counter()
-    with LocalCluster(n_workers=args.workers, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
+    # dashboard_address ":0": any free port for the HTTP server; None still takes 8787 (distributed 2026.8), so two clusters at once warn
+    with LocalCluster(n_workers=args.workers, threads_per_worker=1, processes=True, dashboard_address=":0") as cluster:
         cluster_s = time.perf_counter() - start
         with DaskExecutor(cluster.scheduler_address) as executor:
             dask = run_sweep(settings, root / "dask", executor, progress=False)

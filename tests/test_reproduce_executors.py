@@ -74,8 +74,9 @@ def test_reproduce_on_a_dask_cluster_gives_what_a_local_process_gives(tmp_path, 
     from dvrk_gym.parallel.dask_executor import DaskExecutor
 
     local = tiny_reproduction
+    # dashboard_address ":0": any free port for the HTTP server; None still takes 8787 (distributed 2026.8), so two clusters at once warn
     with (
-        distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster,
+        distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0") as cluster,
         DaskExecutor(cluster.scheduler_address) as dask,
     ):
         on_dask = run_reproduce(ReproduceConfig(out=tmp_path / "dask", profile=TINY, progress=False), dask)

@@ -240,8 +240,9 @@ def test_local_processes_and_a_dask_cluster_give_identical_numbers_and_a_resumed
         resumed = Counting(pool)
         again = run_sweep(settings, tmp_path / "local", resumed, progress=False)
         assert resumed.count == 0 and again.computed == () and again.rows == on_pool.rows
+    # dashboard_address ":0": any free port for the HTTP server; None still takes 8787 (distributed 2026.8), so two clusters at once warn
     with (
-        distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster,
+        distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0") as cluster,
         DaskExecutor(cluster.scheduler_address) as dask,
     ):
         assert "2 workers" in dask.description
