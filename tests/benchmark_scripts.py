@@ -55,6 +55,9 @@ class _Parsed(Exception):
     """Raised by :func:`run_script` with ``parse_only`` once the script's flags have parsed."""
 
 
+_PARSE_ARGS = argparse.ArgumentParser.parse_args
+
+
 def _parse_then_stop(parser: argparse.ArgumentParser, args: Sequence[str] | None = None, namespace: Any = None) -> NoReturn:
     _PARSE_ARGS(parser, args, namespace)  # a refused flag exits 2 here, as on the command line
     parser.format_help()  # and --help must print: a lone % in a help string breaks it
@@ -63,9 +66,6 @@ def _parse_then_stop(parser: argparse.ArgumentParser, args: Sequence[str] | None
 
 def _too_long(signum: int, frame: Any) -> NoReturn:
     raise TimeoutError("the script ran past run_script's timeout_s (a refusal that no longer refuses runs the whole benchmark)")
-
-
-_PARSE_ARGS = argparse.ArgumentParser.parse_args
 
 
 def run_script(path: Path, *arguments: str, parse_only: bool = False, timeout_s: float = 120.0) -> ScriptRun:
@@ -97,9 +97,8 @@ def run_script(path: Path, *arguments: str, parse_only: bool = False, timeout_s:
     previous = signal.signal(signal.SIGALRM, _too_long)
     signal.setitimer(signal.ITIMER_REAL, timeout_s)
     try:
-        with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err), contextlib.ExitStack() as stack:
-            if parse_only:
-                stack.enter_context(mock.patch.object(argparse.ArgumentParser, "parse_args", _parse_then_stop))
+        stop = mock.patch.object(argparse.ArgumentParser, "parse_args", _parse_then_stop) if parse_only else contextlib.nullcontext()
+        with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err), stop:
             runpy.run_path(str(path), run_name="__main__")
         code = 0
     except _Parsed:

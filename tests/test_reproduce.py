@@ -17,11 +17,6 @@ from dvrk_gym.utils.run_folder import SOURCE_KEY, RunFolder, read_settings
 from dvrk_gym.utils.source_fingerprint import source_fingerprint
 
 
-@pytest.fixture
-def tiny_run(tiny_reproduction):
-    return tiny_reproduction
-
-
 def _numbers(value):
     """Every number in a JSON tree (booleans are not numbers here)."""
     if isinstance(value, dict):
@@ -34,9 +29,9 @@ def _numbers(value):
         yield value
 
 
-def test_tiny_reproduce_writes_report_results_and_figures(tiny_run):
-    out = tiny_run.report.parent
-    data = json.loads(tiny_run.results.read_text())
+def test_tiny_reproduce_writes_report_results_and_figures(tiny_reproduction):
+    out = tiny_reproduction.report.parent
+    data = json.loads(tiny_reproduction.results.read_text())
     assert set(data["calibration"]) == {"RBT", "DNN", "DNN+RF"}
     for row in data["calibration"].values():
         assert math.isfinite(row["mean_mm"]) and row["mean_mm"] > 0
@@ -55,34 +50,34 @@ def test_tiny_reproduce_writes_report_results_and_figures(tiny_run):
     assert len(numbers) > 200 and all(math.isfinite(n) for n in numbers)
     for path in data["figures"].values():
         assert (out / path).stat().st_size > 1000, path
-    report = tiny_run.report.read_text()
+    report = tiny_reproduction.report.read_text()
     for heading in ("## Calibration error", "## Debridement", "## Model search", "## Reinforcement-learning baseline", "## Phase I data"):
         assert heading in report
     assert "| DNN+RF, paper | 10.5 | 14.2 | 12.8 | 12.1 | 8.9 | 14.7 | 1.08 |" in report  # the paper beside the simulation
     assert "figures/bias_field.png" in report
 
 
-def test_rerun_resumes_from_the_cache_and_refuses_other_settings(tiny_run, tmp_path):
+def test_rerun_resumes_from_the_cache_and_refuses_other_settings(tiny_reproduction, tmp_path):
     out = tmp_path / "run"
-    shutil.copytree(tiny_run.report.parent, out)  # the shared run stays as it was made
+    shutil.copytree(tiny_reproduction.report.parent, out)  # the shared run stays as it was made
     again = run_reproduce(ReproduceConfig(out=out, profile=TINY, workers=1, progress=False))
     assert set(again.data["task_cached"]) == {task.name for task in build_tasks(ReproduceConfig(out=out, profile=TINY))}
-    assert again.data["calibration"] == tiny_run.data["calibration"]
+    assert again.data["calibration"] == tiny_reproduction.data["calibration"]
     with pytest.raises(ValueError, match="other settings"):
         run_reproduce(ReproduceConfig(out=out, profile=TINY, seed=1, progress=False))
 
 
-def test_two_workers_give_the_same_numbers(tiny_run, tmp_path):
+def test_two_workers_give_the_same_numbers(tiny_reproduction, tmp_path):
     two = run_reproduce(ReproduceConfig(out=tmp_path, profile=TINY, workers=2, progress=False))
-    assert seeded_results(two.data) == seeded_results(tiny_run.data)  # every number the seed decides
-    assert files_that_differ(tiny_run.report.parent, tmp_path) == []  # and the models, data and tables, byte for byte
-    assert two.data["calibration"] == tiny_run.data["calibration"]
+    assert seeded_results(two.data) == seeded_results(tiny_reproduction.data)  # every number the seed decides
+    assert files_that_differ(tiny_reproduction.report.parent, tmp_path) == []  # and the models, data and tables, byte for byte
+    assert two.data["calibration"] == tiny_reproduction.data["calibration"]
     assert two.data["debridement"] == [
         {**cell, "wall_s_per_trial": two_cell["wall_s_per_trial"], "wall_s": two_cell["wall_s"]}
-        for cell, two_cell in zip(tiny_run.data["debridement"], two.data["debridement"])
+        for cell, two_cell in zip(tiny_reproduction.data["debridement"], two.data["debridement"])
     ]
-    assert two.data["rl"][0]["mean_mm"] == tiny_run.data["rl"][0]["mean_mm"]
-    assert [r["mean_mm2"] for r in two.data["search"]] == [r["mean_mm2"] for r in tiny_run.data["search"]]
+    assert two.data["rl"][0]["mean_mm"] == tiny_reproduction.data["rl"][0]["mean_mm"]
+    assert [r["mean_mm2"] for r in two.data["search"]] == [r["mean_mm2"] for r in tiny_reproduction.data["search"]]
 
 
 def test_bad_settings_are_refused(tmp_path):

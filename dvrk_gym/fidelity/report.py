@@ -7,7 +7,6 @@ the new one, never half of one.
 from __future__ import annotations
 
 import json
-import math
 import os
 from pathlib import Path
 from typing import Any
@@ -23,7 +22,7 @@ from dvrk_gym.fidelity.comparison import (
     ComparisonRow,
     FidelityRun,
 )
-from dvrk_gym.fidelity.statistics import PAPER_YAWS_DEG, rigid_residuals_camera
+from dvrk_gym.fidelity.statistics import PAPER_YAWS_DEG, finite_or_none, rigid_residuals_camera
 from dvrk_gym.utils.atomic import atomic_savefig, atomic_write_text
 
 __all__ = ["JSON_NAME", "PNG_NAME", "format_table", "plot_fidelity", "report_dict", "write_report"]
@@ -64,12 +63,6 @@ def format_table(run: FidelityRun) -> str:
     return "\n".join(lines)
 
 
-def _finite_or_none(value: float) -> float | None:
-    """``value``, or None (JSON null) where it is undefined: a yaw without simulated rows has no median
-    pitch, and rows near one line no plane to tilt."""
-    return value if math.isfinite(value) else None
-
-
 def report_dict(run: FidelityRun) -> dict[str, Any]:
     """The report as JSON-ready data: settings, both statistics, the comparison rows."""
     return {
@@ -85,10 +78,10 @@ def report_dict(run: FidelityRun) -> dict[str, Any]:
         "comparison": [
             {
                 "statistic": row.name,
-                "real": _finite_or_none(row.real),
-                "sim": _finite_or_none(row.sim),
+                "real": finite_or_none(row.real),
+                "sim": finite_or_none(row.sim),
                 "measure": "difference" if row.share else "ratio",
-                "value": _finite_or_none(row.difference),
+                "value": finite_or_none(row.difference),
                 "tolerance": row.tolerance,
                 "passed": row.passed,
             }

@@ -63,6 +63,7 @@ __all__ = [
     "CV_FOLDS",
     "CV_FOREST_TREES",
     "JITTER_MAX_STEP_M",
+    "PLANE_MIN_WIDTH",
     "SAME_POSITION_M",
     "PAPER_YAWS_DEG",
     "FidelityStatistics",
@@ -72,6 +73,7 @@ __all__ = [
     "tilt_deg",
     "contiguous_cv_mse_mm2",
     "fidelity_statistics",
+    "finite_or_none",
     "rigid_residuals_camera",
 ]
 
@@ -153,10 +155,16 @@ class FidelityStatistics:
         values = asdict(self)
         values["kept_fraction_per_yaw"] = list(self.kept_fraction_per_yaw)
         # No plane, or a yaw without rows and so no median: None (JSON null), not NaN (not JSON).
-        values["plane_tilt_deg"] = None if math.isnan(self.plane_tilt_deg) else self.plane_tilt_deg
-        values["plane_slope"] = [None if math.isnan(s) else s for s in self.plane_slope]
-        values["pitch_median_per_yaw_deg"] = [None if math.isnan(p) else p for p in self.pitch_median_per_yaw_deg]
+        values["plane_tilt_deg"] = finite_or_none(self.plane_tilt_deg)
+        values["plane_slope"] = [finite_or_none(s) for s in self.plane_slope]
+        values["pitch_median_per_yaw_deg"] = [finite_or_none(p) for p in self.pitch_median_per_yaw_deg]
         return values
+
+
+def finite_or_none(value: float) -> float | None:
+    """``value``, or None (JSON null) where it is undefined (nan): a yaw without rows has no
+    median pitch, and rows near one line no plane to tilt."""
+    return value if math.isfinite(value) else None
 
 
 def _check_units(X: np.ndarray, y: np.ndarray) -> None:
@@ -201,7 +209,7 @@ def plane_slope(positions: np.ndarray) -> tuple[float, float]:
     if positions.ndim != 2 or positions.shape[1] != 3 or positions.shape[0] < 3 or not np.isfinite(positions).all():
         raise ValueError(f"positions must be (N, 3) finite metres with N >= 3, got shape {positions.shape}")
     spread = np.linalg.svd(positions[:, :2] - positions[:, :2].mean(axis=0), compute_uv=False)  # along, across the main line
-    if not spread[1] >= PLANE_MIN_WIDTH * spread[0] or spread[1] == 0.0:
+    if spread[1] == 0.0 or spread[1] < PLANE_MIN_WIDTH * spread[0]:
         width = spread[1] / spread[0] if spread[0] > 0.0 else 0.0
         raise ValueError(
             f"the positions lie on one line seen from above (their width across it is {width:.2g} of their length, "
