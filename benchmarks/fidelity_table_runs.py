@@ -2,26 +2,26 @@
 
 The authors recorded every touch of the runs that measured the paper's table, and the Phase II
 pushes of the same days (:func:`dvrk_gym.calibration.datasets.load_paper_table_runs`). The
-rigid body's runs did two things ``dvrk-gym evaluate`` does not: they were lifted 4 to 9 mm
-(:data:`~dvrk_gym.paper.TABLE_LIFT_MM`; their author: height was a main reason for its low
-performance), and the last three first clipped the predicted height into a band of the
-robot's frame whose top lies 0.3 mm under the jaws pushed onto the paper in the authors' first
-mapping (:data:`~dvrk_gym.paper.TABLE_Z_BAND_M`,
-:data:`~dvrk_gym.paper.TABLE_CLIPPED`). The network's runs sent its predictions as they were.
+rigid body's runs were lifted 4 to 9 mm (:data:`~dvrk_gym.paper.TABLE_LIFT_MM`; their
+author: height was a main reason for its low performance), and the last three first clipped
+the predicted height into a band of the robot's frame whose top lies 0.3 mm under the jaws
+pushed onto the paper in the authors' first mapping (:data:`~dvrk_gym.paper.TABLE_Z_BAND_M`,
+:data:`~dvrk_gym.paper.TABLE_CLIPPED`); ``dvrk-gym evaluate`` does the same by default
+(:mod:`dvrk_gym.evaluation.table_protocol`). The network's runs sent its predictions as they were.
 The robot was sent there, and a person drew a box around the end effector in the left image;
 the table's error is the distance from the circle's centre to the box's.
 
 Per method and setting, over the 35 circles, for the real robot and for the simulated one (a
 calibration run's calibrators on GridTouch-v0 with ``dvrk-gym evaluate``'s seeds, touched
-the authors' way: the same lifts, and the band, where they clipped, carried over by where
-each robot reports its jaws pushed onto the circles; for the network, the authors' way is
-``dvrk-gym evaluate``'s):
+the authors' way, as ``dvrk-gym evaluate`` touches: the same lifts, and the band, where they
+clipped, carried over by where each robot reports its jaws pushed onto the circles):
 
-- the table's error, px (the simulated one also as ``dvrk-gym evaluate`` touches);
+- the table's error, px (the rigid body's also raw: its predictions sent as they are,
+  ``dvrk-gym evaluate --protocol raw``);
 - the prediction's height (clipped, in a run that clipped: the records keep no other) over
   the jaws pushed onto the paper, mm (median): over a plane through the reported positions
   of the Phase II pushes at that yaw (the real robot's from the same day as the run,
-  :data:`PUSH_ROUND`; the simulated robot's from where the simulated person's push leaves
+  :data:`~dvrk_gym.paper.TABLE_PUSH_ROUND`; the simulated robot's from where the simulated person's push leaves
   the reported jaws at each touch, GridTouch's ``human_correction``);
 - the sent height over that plane, mm (median): how high the jaws hung, or how far under the
   paper they were sent;
@@ -32,9 +32,10 @@ five fixed yaws for the rest: the random setting has no real pushes). Before the
 the real rigid body's miss to the right in the image follows how deep it was sent; after
 them: for the rigid body's touches sent more than 1 mm under the pushed jaws, how far over
 the sent height the robot reported itself after the move (the real arm gave way to part of
-the depth; the simulated descent stops where the jaws meet the paper, so it reports all of
-it); where the Phase I kept rows lie over the pushed jaws, real (the first round of
-pushes, the nearest in time) and simulated; how the paper's plane tilts in each robot's
+the depth, and so does the simulated one, :data:`dvrk_gym.sim.identified.PAPER_CONTACT`,
+identified from these records by ``benchmarks/identify_contact.py``); where the Phase I
+kept rows lie over the pushed jaws, real (the first round of pushes, the nearest in time)
+and simulated; how the paper's plane tilts in each robot's
 frame (through the pushes, and through the Phase I rows, which followed the authors' plane
 fitted through four corners); and, per yaw, the mean of the Phase II pushes
 (how far a person moved the jaws from the network's prediction onto the circle, in the
@@ -55,7 +56,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import dataclasses
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -73,6 +74,8 @@ from dvrk_gym.calibration.phase1 import Phase1Data
 from dvrk_gym.calibration.phase2 import Phase2Data
 from dvrk_gym.calibration.pipeline import BENCHMARK_SEED_OFFSET, SETTINGS_STAMP, PipelineConfig, read_pipeline_settings
 from dvrk_gym.calibration.policy import CalibratedPolicy
+from dvrk_gym.evaluation.table_protocol import RAW, HeightRule, RuledPolicy, carried_band, paper_rules
+from dvrk_gym.fidelity.contact import height_over_pushes, pushes_of_run
 from dvrk_gym.fidelity.statistics import plane_slope, tilt_deg
 from dvrk_gym.sim.world import DvrkWorld
 from dvrk_gym.sim.world_config import WorldConfig
@@ -88,52 +91,10 @@ STATISTICS = (
 )
 GIVE_DEPTH_M = 1e-3
 """A touch sent deeper than this under the pushed jaws counts for :func:`give`, metres."""
-PUSH_ROUND: dict[str, int] = {"DNN": 0, "DNN+RF": 0, "RBT": 1}
-"""The round of Phase II pushes made on the day of each method's runs (the network's and
-DNN+RF's on 1 September 2017, the rigid body's on 6 September): the reported height of the
-jaws on the paper moved by about 1.2 mm between the two."""
 
 
-class AuthorsTouch:
-    """A calibrated policy whose height is clipped into a band (or not) and then lifted, as the
-    authors ran it; it keeps each prediction (m; clipped, where it clips) and what was sent (m).
-
-    Args:
-        policy: the calibrated policy, observation -> (bx, by, bz, yaw) in m and rad.
-        band_m: (lowest, highest) height the prediction is clipped into, base frame, metres;
-            None: not clipped.
-        lift_m: what is added to the (clipped) height, metres.
-    """
-
-    def __init__(self, policy: CalibratedPolicy, band_m: tuple[float, float] | None, lift_m: float) -> None:
-        if band_m is not None and not band_m[0] < band_m[1]:
-            raise ValueError(f"band_m must be (lowest, highest) with lowest < highest, got {band_m}")
-        self.policy, self.band_m, self.lift_m = policy, band_m, float(lift_m)
-        self.predicted: list[np.ndarray] = []
-        self.sent: list[np.ndarray] = []
-
-    def __call__(self, observation: Any) -> np.ndarray:
-        action = np.array(self.policy(observation), dtype=np.float32)
-        if self.band_m is not None:
-            action[2] = np.float32(np.clip(action[2], *self.band_m))
-        self.predicted.append(action[:3].astype(np.float64))  # clipped where the run clipped, as the real records keep it
-        action[2] = np.float32(float(action[2]) + self.lift_m)
-        self.sent.append(action[:3].astype(np.float64))
-        return action
-
-
-def simulated_band(pushed_heights_m: np.ndarray) -> tuple[float, float]:
-    """The authors' band in the simulated robot's frame, metres: moved by how far the simulated
-    robot's mean reported height with its jaws pushed onto the circles lies from theirs."""
-    shift = float(np.mean(pushed_heights_m)) - paper.TABLE_PAPER_Z_M
-    return paper.TABLE_Z_BAND_M[0] + shift, paper.TABLE_Z_BAND_M[1] + shift
-
-
-def over_plane(points: np.ndarray, pushed: np.ndarray) -> np.ndarray:
-    """Heights (n,) of ``points`` (n, 3) m over the least-squares plane through ``pushed`` (m, 3) m, metres."""
-    design = np.c_[pushed[:, :2], np.ones(len(pushed))]
-    plane, *_ = np.linalg.lstsq(design, pushed[:, 2], rcond=None)
-    return points[:, 2] - np.c_[points[:, :2], np.ones(len(points))] @ plane
+over_plane = height_over_pushes
+"""Heights (n,) m of points (n, 3) m over the plane through the pushed jaws (m, 3) m."""
 
 
 def statistics(pixels: np.ndarray, predicted: np.ndarray, sent: np.ndarray, pushed: np.ndarray | None) -> tuple[float, ...]:
@@ -150,10 +111,8 @@ def statistics(pixels: np.ndarray, predicted: np.ndarray, sent: np.ndarray, push
     )
 
 
-def real_pushed_jaws(runs: PaperTableRuns, label: str, setting: int) -> np.ndarray:
-    """The real Phase II pushes (n, 3) m at a fixed-yaw setting's yaw, from the day of the method's runs."""
-    same = np.isclose(np.rad2deg(runs.push_yaw), paper.PHASE2_YAWS_DEG[setting]) & (runs.push_round == PUSH_ROUND[label])
-    return runs.push_after[same]
+real_pushed_jaws = pushes_of_run
+"""The real Phase II pushes (n, 3) m at a fixed-yaw setting's yaw, from the day of the method's runs."""
 
 
 def sliding(runs: PaperTableRuns, label: str) -> list[float]:
@@ -222,16 +181,14 @@ class Touches:
     pushed: np.ndarray
 
 
-def simulated_touches(
-    env: gym.Env, policy: CalibratedPolicy, protocol: list[tuple[tuple[float, float] | None, float]], seed: int = BENCHMARK_SEED
-) -> list[Touches]:
-    """Per setting, the simulated touches sent by ``protocol``: per setting, the band the height
-    is clipped into (None: not clipped) and the lift (m). Setting k's pass is seeded with
+def simulated_touches(env: gym.Env, policy: CalibratedPolicy, rules: Sequence[HeightRule], seed: int = BENCHMARK_SEED) -> list[Touches]:
+    """Per setting, the simulated touches sent by that setting's height rule (``rules``:
+    :mod:`dvrk_gym.evaluation.table_protocol`). Setting k's pass is seeded with
     ``seed + k``, as ``dvrk-gym evaluate`` seeds it (``seed``: the run's seed plus
     :data:`~dvrk_gym.calibration.pipeline.BENCHMARK_SEED_OFFSET`)."""
     settings = []
-    for k, ((_, yaw), (band, lift)) in enumerate(zip(YAW_SETTINGS, protocol, strict=True)):
-        touch = AuthorsTouch(policy, band, lift)
+    for k, ((_, yaw), rule) in enumerate(zip(YAW_SETTINGS, rules, strict=True)):
+        touch = RuledPolicy(policy, rule)
         episodes = touch_grid_episodes(env, touch, yaw, seed=seed + k)
         reported = np.array([e.final_info["reported_position"] for e in episodes])
         pushed = reported + np.array([e.final_info["human_correction"] for e in episodes])
@@ -241,10 +198,10 @@ def simulated_touches(
 
 
 def simulated_table(
-    env: gym.Env, policy: CalibratedPolicy, protocol: list[tuple[tuple[float, float] | None, float]], seed: int = BENCHMARK_SEED
+    env: gym.Env, policy: CalibratedPolicy, rules: Sequence[HeightRule], seed: int = BENCHMARK_SEED
 ) -> list[tuple[float, ...]]:
     """Per setting, the statistics of :func:`simulated_touches` (seeded from ``seed``)."""
-    return touch_statistics(simulated_touches(env, policy, protocol, seed))
+    return touch_statistics(simulated_touches(env, policy, rules, seed))
 
 
 def touch_statistics(touches: list[Touches]) -> list[tuple[float, ...]]:
@@ -291,7 +248,7 @@ def print_rows(name: str, rows: dict[str, list[tuple[float, ...]]]) -> None:
 def report(calibration: Path, config: PipelineConfig, runs: PaperTableRuns) -> None:
     """Print the comparison for the calibration run in ``calibration`` (made with ``config``)."""
     phase2 = Phase2Data.load(calibration / "phase2.npz")
-    band = simulated_band(phase2.corrected[:, 2])
+    band = carried_band(phase2.corrected[:, 2])
     print(
         f"the authors' band {1e3 * paper.TABLE_Z_BAND_M[0]:.1f} to {1e3 * paper.TABLE_Z_BAND_M[1]:.1f} mm (their pushed jaws at "
         f"{1e3 * paper.TABLE_PAPER_Z_M:.1f}); simulated {1e3 * band[0]:.1f} to {1e3 * band[1]:.1f} mm (pushed jaws at "
@@ -300,16 +257,14 @@ def report(calibration: Path, config: PipelineConfig, runs: PaperTableRuns) -> N
     print(f"instrument: {config.env_kwargs()}")
     env = gym.make("dvrk_gym/GridTouch-v0", **config.env_kwargs())
     try:
-        _print_comparison(calibration, env, band, phase2, runs, config.seed + BENCHMARK_SEED_OFFSET)
+        _print_comparison(calibration, env, phase2, runs, config.seed + BENCHMARK_SEED_OFFSET)
     finally:
         env.close()
 
 
-def _print_comparison(
-    calibration: Path, env: gym.Env, band: tuple[float, float], phase2: Phase2Data, runs: PaperTableRuns, seed: int
-) -> None:
+def _print_comparison(calibration: Path, env: gym.Env, phase2: Phase2Data, runs: PaperTableRuns, seed: int) -> None:
     """The rows of :func:`report`, touched on ``env`` with ``dvrk-gym evaluate``'s seeds (from
-    ``seed``); ``band`` (m) carried over by ``phase2``'s pushes."""
+    ``seed``); the authors' band carried over by ``phase2``'s pushes."""
     real = real_table(runs)
     print(
         "real RBT: correlation of how far right of the circle the end effector landed (px) with how high it was sent "
@@ -320,11 +275,11 @@ def _print_comparison(
     for name, label in paper.METHOD_LABELS.items():
         policy = CalibratedPolicy(load_calibrator(calibration, name)[0])
         lifts, clipped = paper.TABLE_LIFT_MM[label], paper.TABLE_CLIPPED[label]
-        authors = [(band if clip else None, 1e-3 * lift) for lift, clip in zip(lifts, clipped, strict=True)]
-        as_evaluate = [(None, 0.0)] * len(YAW_SETTINGS)
+        authors = paper_rules(label, phase2.corrected[:, 2])
+        raw = (RAW,) * len(YAW_SETTINGS)
         touched = {"sim, the authors' way": simulated_touches(env, policy, authors, seed)}
-        if authors != as_evaluate:
-            touched["sim, as evaluate"] = simulated_touches(env, policy, as_evaluate, seed)
+        if authors != raw:
+            touched["sim, raw"] = simulated_touches(env, policy, raw, seed)
         if label == "RBT":
             rigid_body = touched
         rows = {"real": real[label]}
@@ -337,7 +292,7 @@ def _print_comparison(
         print_rows(f"{label} (lifts {', '.join(f'{v:.0f}' for v in lifts)} mm; {clips})", rows)
     print(
         f"RBT, the touches sent more than {1e3 * GIVE_DEPTH_M:.0f} mm under the pushed jaws (fixed yaws): how far over the sent "
-        "height the robot reported itself (the simulated descent stops where the jaws meet the paper)"
+        "height the robot reported itself (the simulated arm gives way as dvrk_gym.sim.identified.PAPER_CONTACT says)"
     )
     settings = [(runs.method == "RBT") & (runs.setting == k) for k in range(FIXED_YAWS)]
     pushes = [real_pushed_jaws(runs, "RBT", k) for k in range(FIXED_YAWS)]

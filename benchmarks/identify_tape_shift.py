@@ -12,7 +12,8 @@ yaws). Seen nearer than the circles, the tape teaches a mapping that sends the c
 For each candidate shift (``--shifts``; the true baseline follows from it so that the tape
 stays where the rows put it, :func:`dvrk_gym.sim.endoscope.baseline.true_baseline_m`) this
 collects the paper's Phase I on the instrument, fits the rigid body to its kept rows,
-touches the 35 circles at the table's six settings as ``dvrk-gym evaluate`` does, and prints
+touches the 35 circles at the table's six settings with ``dvrk-gym evaluate``'s seeds,
+its predictions unlifted, and prints
 the statistics of ``benchmarks/fidelity_table_runs.py``: the prediction's median height over
 the plane through the simulated pushes at each yaw, and the table's error. The identified
 shift is where the mean height over the five yaws crosses the real one (linear between the
@@ -41,12 +42,14 @@ from dvrk_gym.calibration.datasets import load_paper_table_runs
 from dvrk_gym.calibration.models.rigid import RigidBodyCalibrator
 from dvrk_gym.calibration.phase1 import run_paper_phase1
 from dvrk_gym.calibration.policy import CalibratedPolicy
+from dvrk_gym.evaluation.table_protocol import RAW
 from dvrk_gym.sim import identified
 from dvrk_gym.sim.endoscope.baseline import true_baseline_m
 from dvrk_gym.sim.endoscope.noise import MAX_RIGHT_SHIFT_PX
 
-AS_EVALUATE = [(None, 0.0)] * len(paper.CALIBRATION_SETTINGS)
-"""No band and no lift at any setting: the touches as ``dvrk-gym evaluate`` makes them."""
+UNLIFTED = (RAW,) * len(paper.CALIBRATION_SETTINGS)
+"""No band and no lift at any setting: the predictions sent as they are (``dvrk-gym evaluate
+--protocol raw``); the dive is measured on the predictions, whatever lifts them."""
 
 
 @contextlib.contextmanager
@@ -60,14 +63,14 @@ def tape_shift(pixels: float) -> Iterator[None]:
 
 def rigid_body_rows(shift_px: float, bias_seed: int, seed: int) -> list[tuple[float, ...]]:
     """Per setting of the table, the statistics of ``fidelity_table_runs.statistics`` for the rigid
-    body of instrument ``bias_seed`` collected with the tape shift ``shift_px``, touched as evaluate."""
+    body of instrument ``bias_seed`` collected with the tape shift ``shift_px``, touched unlifted."""
     with tape_shift(shift_px):
         phase1 = run_paper_phase1(seed=seed, bias_seed=bias_seed, progress=False)
         clean = phase1.cleaned()
         policy = CalibratedPolicy(RigidBodyCalibrator().fit(clean.X, clean.y))
         env = gym.make("dvrk_gym/GridTouch-v0", bias="paper", bias_seed=bias_seed)
         try:
-            return simulated_table(env, policy, AS_EVALUATE)
+            return simulated_table(env, policy, UNLIFTED)
         finally:
             env.close()
 

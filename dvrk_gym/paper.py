@@ -142,6 +142,11 @@ the ``--z_offset`` each run added to the height, clipped in the runs that clippe
 author noting that height was a main reason for its low performance; the network's example
 call (``click_and_crop_v3.py``, version 23) gives 0, and its other runs record no offset (the
 script's default is 0)."""
+TABLE_PUSH_ROUND: dict[str, int] = {"RBT": 1, "DNN": 0, "DNN+RF": 0}
+"""The round of Phase II pushes in the authors' records made on the day of each method's runs
+(:func:`dvrk_gym.calibration.datasets.load_paper_table_runs`, ``push_round``): the network's
+and DNN+RF's on 1 September 2017, the rigid body's on 6 September. The reported height of the
+jaws on the paper moved by about 1.2 mm between the two."""
 
 # ---------------------------------------------------------------------------- debridement
 DEBRIDEMENT_TRIALS = 15

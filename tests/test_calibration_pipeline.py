@@ -71,7 +71,9 @@ def test_calibrated_policy_refuses_broken_calibrators():
 
 
 def test_a_perfect_calibrator_touches_every_centre_on_a_perfect_robot():
-    env = gym.make("dvrk_gym/GridTouch-v0", bias="none", camera_resolution=(1920, 1080))
+    # A rigid paper: the oracle's goals lie up to 0.27 mm under the paper (below), and the
+    # compliant paper would slide the jaws 0.2 mm from there.
+    env = gym.make("dvrk_gym/GridTouch-v0", bias="none", camera_resolution=(1920, 1080), contact="rigid")
     try:
         errors = touch_grid(env, CalibratedPolicy(TipOracle(env.unwrapped.world.camera)), yaw=0.0)
     finally:
@@ -158,6 +160,16 @@ def test_pipeline_runs_end_to_end_resumes_and_refuses_other_settings(tmp_path):
     assert set(again["timings_s"]) == {"benchmark"}  # every other stage came from the cache
     np.testing.assert_array_equal(again["table"]["DNN"]["yaw 0"].mm, first["table"]["DNN"]["yaw 0"].mm)
     assert "paper" in format_table(first["table"])
+    assert json.loads((tmp_path / "calibration_table.json").read_text())["protocol"] == "paper"
+    assert (tmp_path / "calibration_table.txt").read_text().startswith("Protocol: paper (the rigid body's heights lifted")
+    raw = run_calibration(tmp_path, config, progress=False, protocol="raw")  # not a setting: the same folder, evaluated raw
+    assert set(raw["timings_s"]) == {"benchmark"} and raw["protocol"] == "raw"
+    assert (tmp_path / "calibration_table.txt").read_text().startswith("Protocol: raw (every prediction sent as it is)")
+    for label, _ in YAW_SETTINGS:  # the networks' runs were sent as they were; the rigid body's were lifted 4-9 mm
+        np.testing.assert_array_equal(raw["table"]["DNN"][label].mm, first["table"]["DNN"][label].mm)
+        assert not np.array_equal(raw["table"]["RBT"][label].mm, first["table"]["RBT"][label].mm)
+    with pytest.raises(ValueError, match=r"protocol must be one of \['paper', 'raw'\]"):
+        run_calibration(tmp_path, config, progress=False, protocol="lifted")
     with pytest.raises(ValueError, match="other settings"):
         run_calibration(tmp_path, PipelineConfig(n_trajectories=4, camera_resolution=SMALL), progress=False)
 

@@ -7,6 +7,7 @@ import pytest
 
 from dvrk_gym.calibration.datasets import load_paper_table_runs
 from dvrk_gym.envs.grid_touch import N_CIRCLES, SURFACE_Z_M, TOUR, tool_pose
+from dvrk_gym.sim.identified import PAPER_CONTACT
 from dvrk_gym.sim.robot import kinematics as kin
 from dvrk_gym.sim.robot.bias import BIAS_PRESETS
 
@@ -109,13 +110,42 @@ def test_biased_robot_misses_and_the_correction_puts_it_right(make_env):
     assert after["mm_error"] < 0.35 * info["mm_error"]
 
 
-def test_descent_stops_when_the_jaws_meet_the_paper(make_env):
-    env = make_env("dvrk_gym/GridTouch-v0", bias="none")
+def _touch_under(make_env, contact: str, depth_m: float, bias="none") -> dict:
+    env = make_env("dvrk_gym/GridTouch-v0", bias=bias, contact=contact)
     env.reset(seed=0, options={"circle": 3})
-    action = _nominal_action(env, 3)
-    action[2] -= 0.004  # command 4 mm into the phantom
-    _, _, _, _, info = env.step(action)
+    action = _nominal_action(env, 3)  # a perfect robot's command onto the circle
+    action[2] -= depth_m  # commanded under the paper
+    return env.step(action)[4] | {"on_paper": _nominal_action(env, 3)[:3].astype(float)}
+
+
+def test_a_rigid_paper_stops_the_descent_where_the_jaws_meet_it(make_env):
+    info = _touch_under(make_env, "rigid", 0.004)
     assert info["true_tip_position"][2] == pytest.approx(SURFACE_Z_M, abs=1e-6)
+    assert info["mm_error"] < 1e-3  # a perfect robot, stopped on the circle
+    np.testing.assert_allclose(info["reported_position"], info["on_paper"], atol=1e-6)  # it reports where it stopped
+
+
+@pytest.mark.parametrize("bias", ["none", "paper"])
+def test_the_compliant_paper_gives_way_and_the_jaws_slide_by_the_identified_amounts(make_env, bias):
+    depth = 0.004
+    rigid, compliant = (_touch_under(make_env, contact, depth, bias) for contact in ("rigid", "compliant"))
+    assert compliant["true_tip_position"][2] == SURFACE_Z_M  # held on the paper
+    slid = (compliant["true_tip_position"] - rigid["true_tip_position"])[:2]
+    slide = np.array(PAPER_CONTACT.slide_per_depth)
+    under = float(slid @ slide / (slide @ slide))  # m: how far under first contact the command went
+    np.testing.assert_allclose(slid, slide * under, atol=5e-5)  # along the identified direction (the cables move the tip 25 um)
+    if bias == "none":  # the perfect robot meets the paper at the nominal command; a biased one elsewhere
+        assert under == pytest.approx(depth, abs=2e-5)
+    went_on = rigid["reported_position"][2] - compliant["reported_position"][2]  # the arm went on down, short of its command
+    assert went_on == pytest.approx((1.0 - PAPER_CONTACT.give) * under, abs=1e-4)
+
+
+def test_a_touch_over_the_paper_is_the_same_on_either_paper(make_env):
+    rigid, compliant = (_touch_under(make_env, contact, -0.008, "paper") for contact in ("rigid", "compliant"))  # 8 mm over
+    assert rigid["true_tip_position"][2] > SURFACE_Z_M + 0.001  # hanging over the paper
+    for key in ("true_tip_position", "reported_position", "human_correction"):
+        np.testing.assert_array_equal(rigid[key], compliant[key])
+    assert rigid["pixel_error"] == compliant["pixel_error"]
 
 
 def test_compute_reward_is_vectorised_for_her(make_env):
@@ -132,6 +162,8 @@ def test_bad_config_values_are_clear_errors(make_env):
         make_env("dvrk_gym/GridTouch-v0", reward_type="shaped")
     with pytest.raises(ValueError, match="approach_height_m"):
         make_env("dvrk_gym/GridTouch-v0", approach_height_m=-1.0)
+    with pytest.raises(ValueError, match=r"contact must be one of \['compliant', 'rigid'\]"):
+        make_env("dvrk_gym/GridTouch-v0", contact="soft")
 
 
 def test_reset_lifts_from_the_last_touch_and_stays_put_without_one(make_env):

@@ -18,6 +18,7 @@ from dvrk_gym.calibration import datasets
 from dvrk_gym.calibration.datasets import load_paper_phase1, load_paper_table_runs
 from dvrk_gym.calibration.models.rigid import RigidBodyCalibrator
 from dvrk_gym.calibration.pipeline import SETTINGS_STAMP, PipelineConfig
+from dvrk_gym.evaluation.table_protocol import RAW
 from dvrk_gym.utils.run_folder import RunFolder
 
 convert = load_script("convert_authors_table_runs")
@@ -176,12 +177,8 @@ def test_the_packages_rigid_body_on_the_real_rows_is_the_one_the_table_used():
         np.testing.assert_allclose(rbt.predict(inputs), clipped[free], atol=2e-6)  # metres
 
 
-def test_the_heights_are_measured_over_the_pushed_plane_and_the_band_moves_with_the_robot():
-    pushed = np.array([[0.0, 0.0, -0.1], [0.01, 0.0, -0.101], [0.0, 0.01, -0.1], [0.01, 0.01, -0.101]])
+def test_a_setting_without_pushes_has_no_heights():
     points = np.array([[0.005, 0.005, -0.1], [0.02, 0.0, -0.105]])
-    np.testing.assert_allclose(table_runs.over_plane(points, pushed), [0.0005, -0.003], atol=1e-12)
-    low, high = table_runs.simulated_band(np.full(3, paper.TABLE_PAPER_Z_M + 0.015))
-    assert np.isclose(low, paper.TABLE_Z_BAND_M[0] + 0.015) and np.isclose(high, paper.TABLE_Z_BAND_M[1] + 0.015)
     stats = table_runs.statistics(np.array([10.0, 20.0]), points, points + [0, 0, 0.001], None)
     assert stats[0] == 15.0 and np.isnan(stats[1:]).all()
 
@@ -194,21 +191,6 @@ def test_phase1_rows_are_measured_over_the_plane_of_their_nearest_yaw():
     rows = np.array([[0.01, 0.02, -0.155], [0.03, 0.01, -0.155]])
     heights = table_runs.rows_over_pushes(rows, np.deg2rad([-80.0, 50.0]), pushed, pushed_yaws)  # nearest: yaw -90, yaw 45
     np.testing.assert_allclose(heights, [0.005, 0.002], atol=1e-12)
-
-
-def test_the_authors_touch_clips_then_lifts_and_keeps_both():
-    policy = lambda observation: np.array([0.04, 0.04, observation, 0.3], dtype=np.float32)  # noqa: E731
-    touch = table_runs.AuthorsTouch(policy, (-0.18, -0.168), 0.008)
-    assert np.isclose(touch(-0.15)[2], -0.168 + 0.008, atol=1e-7)  # clipped down to the band's top, then lifted
-    assert np.isclose(touch(-0.175)[2], -0.175 + 0.008, atol=1e-7)
-    assert np.isclose(touch.predicted[0][2], -0.168, atol=1e-7)  # the prediction as the real records keep it: clipped
-    assert np.isclose(touch.sent[0][2], -0.16, atol=1e-7) and np.isclose(touch.predicted[1][2], -0.175, atol=1e-7)
-    lifted = table_runs.AuthorsTouch(policy, None, 0.004)
-    assert np.isclose(lifted(-0.15)[2], -0.146, atol=1e-7)  # a run that did not clip: lifted only
-    as_is = table_runs.AuthorsTouch(policy, None, 0.0)
-    assert as_is(-0.15)[2] == np.float32(-0.15)
-    with pytest.raises(ValueError, match="lowest < highest"):
-        table_runs.AuthorsTouch(policy, (-0.168, -0.18), 0.0)
 
 
 def test_the_real_rigid_body_dove_under_the_paper_and_was_lifted_to_it():
@@ -236,12 +218,12 @@ def test_it_prints_the_real_and_simulated_rows(small_calibration, tmp_path):
         real_cells = [float(v) for v in lines[block + 1].split()[-7:-1]]
         assert real_cells == pytest.approx(paper.CALIBRATION_PIXELS[label], abs=0.11)
         simulated = [line for line in lines[block + 2 : block + 4] if line.split()[0] == "sim,"]
-        assert len(simulated) == (2 if label == "RBT" else 1)  # the authors' way differs from evaluate's for the rigid body only
+        assert len(simulated) == (2 if label == "RBT" else 1)  # the authors' way differs from raw for the rigid body only
         assert all(len(line.split()[-7:]) == 7 and min(float(v) for v in line.split()[-7:]) >= 0.0 for line in simulated)
     gave = lines.index(next(line for line in lines if line.startswith("RBT, the touches sent more than 1 mm under")))
     real_give = "real 73 touches sent 2.7 mm under, reported 1.1 mm over the sent height (0.42 of the depth)"
     assert " ".join(lines[gave + 1].split()) == real_give  # the authors' records, whatever the simulation
-    assert [line.split()[1] for line in lines[gave + 2 : gave + 4]] == ["the", "as"]  # the authors' way, as evaluate
+    assert [line.split()[1] for line in lines[gave + 2 : gave + 4]] == ["the", "raw"]  # the authors' way, raw
     heights = [line for line in lines if line.startswith("Phase I kept rows over the pushed jaws")]
     assert [line.split(",")[1].split(":")[0].strip() for line in heights] == ["real", "sim"]
     assert heights[0].endswith("-0.7 / 0.9 / 3.7 mm (5th / 50th / 95th percentile)")  # the authors' rows, their first round's pushes
@@ -299,7 +281,7 @@ def test_the_simulated_passes_are_seeded_from_the_runs_seed(monkeypatch):
 
     monkeypatch.setattr(table_runs, "touch_grid_episodes", fake_pass)
     policy = lambda observation: np.array([0.04, 0.04, -0.16, 0.0], dtype=np.float32)  # noqa: E731
-    protocol = [(None, 0.0)] * 6
+    protocol = (RAW,) * 6
     table_runs.simulated_touches(None, policy, protocol, seed=1007)  # a run made with --seed 7
     assert seeds == [1007, 1008, 1009, 1010, 1011, 1012]
     seeds.clear()

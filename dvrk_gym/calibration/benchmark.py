@@ -8,7 +8,7 @@ and the circle's centre, over the 35 circles, in pixels (left image) and millime
 from __future__ import annotations
 
 import logging
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -20,6 +20,7 @@ from dvrk_gym import paper
 from dvrk_gym.calibration.policy import CalibratedPolicy, Calibrator
 from dvrk_gym.envs.grid_touch import N_CIRCLES, TOUR
 from dvrk_gym.evaluation.episodes import EpisodeResult, run_episodes, summarize
+from dvrk_gym.evaluation.table_protocol import RAW, HeightRule, RuledPolicy, check_rules, paper_rules
 from dvrk_gym.sim.physics.scene import GRID_COLUMNS, GRID_ROWS
 from dvrk_gym.utils.atomic import atomic_savefig, atomic_write_json
 
@@ -93,19 +94,42 @@ BENCHMARK_SEED = 1000
 
 
 def calibration_table(
-    env: gym.Env, calibrators: dict[str, Calibrator], seed: int = BENCHMARK_SEED, progress: bool = True
+    env: gym.Env,
+    calibrators: dict[str, Calibrator],
+    seed: int = BENCHMARK_SEED,
+    progress: bool = True,
+    rules: Mapping[str, Sequence[HeightRule]] | None = None,
 ) -> dict[str, dict[str, CircleErrors]]:
     """Every method in every setting: ``table[method][setting]``.
 
-    Setting k (of YAW_SETTINGS) is reset with seed ``seed + k``, so any method meets the same episodes.
+    Setting k (of YAW_SETTINGS) is reset with seed ``seed + k``, so any method meets the same
+    episodes. ``rules`` gives, for the methods it names, the height rule of each setting
+    (:mod:`dvrk_gym.evaluation.table_protocol`; the paper's: :func:`paper_table_rules`); the
+    other methods' predictions are sent as they are.
     """
+    rules = {} if rules is None else rules
+    for method, method_rules in rules.items():
+        if method not in calibrators:
+            raise ValueError(f"rules name {method!r}, which is not among the calibrators {sorted(calibrators)}")
+        check_rules(method_rules, len(YAW_SETTINGS))
     table: dict[str, dict[str, CircleErrors]] = {}
     for method, calibrator in calibrators.items():
         policy = CalibratedPolicy(calibrator)
-        table[method] = {label: touch_grid(env, policy, yaw, seed=seed + k) for k, (label, yaw) in enumerate(YAW_SETTINGS)}
+        method_rules = rules.get(method, (RAW,) * len(YAW_SETTINGS))
+        table[method] = {
+            label: touch_grid(env, policy if method_rules[k] == RAW else RuledPolicy(policy, method_rules[k]), yaw, seed=seed + k)
+            for k, (label, yaw) in enumerate(YAW_SETTINGS)
+        }
         mean_mm = np.nanmean([e.mm.mean() for e in table[method].values()])
         logger.info("%s: mean touch error %.2f mm", method, mean_mm)
     return table
+
+
+def paper_table_rules(methods: Sequence[str], pushed_heights_m: np.ndarray) -> dict[str, tuple[HeightRule, ...]]:
+    """The authors' height rules (:func:`~dvrk_gym.evaluation.table_protocol.paper_rules`) for
+    those of ``methods`` that are the paper's ("RBT", "DNN", "DNN+RF"), the band carried over
+    by the reported heights ``pushed_heights_m`` (n,) m of a Phase II's pushed jaws."""
+    return {method: paper_rules(method, pushed_heights_m) for method in methods if method in paper.TABLE_LIFT_MM}
 
 
 def table_summary(table: dict[str, dict[str, CircleErrors]]) -> dict[str, Any]:
@@ -177,9 +201,11 @@ def plot_error_maps(table: dict[str, dict[str, CircleErrors]], path: Path) -> Pa
         plt.close(fig)
 
 
-def save_table(table: dict[str, dict[str, CircleErrors]], path: Path) -> Path:
-    """Write the summary and the per-circle errors as JSON."""
+def save_table(table: dict[str, dict[str, CircleErrors]], path: Path, protocol: str | None = None) -> Path:
+    """Write the summary and the per-circle errors as JSON, with the ``protocol`` the
+    predictions were sent by (:data:`~dvrk_gym.evaluation.table_protocol.PROTOCOLS`), if given."""
     data = {
+        "protocol": protocol,
         "summary": table_summary(table),
         "per_circle": {
             method: {label: {"pixel": e.pixel.tolist(), "mm": e.mm.tolist(), "yaw": e.yaw.tolist()} for label, e in settings.items()}

@@ -20,13 +20,23 @@ from typing import Any
 import gymnasium as gym
 
 from dvrk_gym import paper
-from dvrk_gym.calibration.benchmark import BENCHMARK_SEED, calibration_table, format_table, plot_error_maps, save_table, table_summary
+from dvrk_gym.calibration.benchmark import (
+    BENCHMARK_SEED,
+    calibration_table,
+    format_table,
+    paper_table_rules,
+    plot_error_maps,
+    save_table,
+    table_summary,
+)
 from dvrk_gym.calibration.models.dnn import DNNCalibrator
 from dvrk_gym.calibration.models.rigid import RigidBodyCalibrator
 from dvrk_gym.calibration.models.two_phase import TwoPhaseCalibrator
 from dvrk_gym.calibration.phase1 import Phase1Data, run_paper_phase1
 from dvrk_gym.calibration.phase2 import Phase2Data, collect_phase2
+from dvrk_gym.evaluation.table_protocol import PROTOCOLS
 from dvrk_gym.utils.atomic import atomic_write_text
+from dvrk_gym.utils.checks import check_choice
 from dvrk_gym.utils.run_folder import RunFolder, read_settings
 
 logger = logging.getLogger(__name__)
@@ -37,6 +47,11 @@ CALIBRATOR_FILES = {"rbt": "rbt.zip", "dnn": "dnn.zip", "dnn+rf": "two_phase.zip
 """The model file of each calibrator in a calibration run folder, by the calibrator's name."""
 RETIRED_CALIBRATOR_FILES = {"rbt": "rbt.npz", "dnn": "dnn.npz", "dnn+rf": "two_phase.npz"}
 """The same in the retired ``.npz`` format, which is no longer read (``calibrate`` makes the new files beside them)."""
+PROTOCOL_LINES = {
+    "paper": "Protocol: paper (the rigid body's heights lifted 4-9 mm and, in three settings, clipped, as the authors' runs did)",
+    "raw": "Protocol: raw (every prediction sent as it is)",
+}
+"""The first line of ``calibration_table.txt`` for each protocol."""
 BENCHMARK_SEED_OFFSET = BENCHMARK_SEED
 """The benchmark's seed is the run's seed plus this (so run seed 0 gives calibration_table's default)."""
 
@@ -85,19 +100,27 @@ def _run_phase1(config: PipelineConfig, progress: bool) -> Phase1Data:
     return run_paper_phase1(config.n_trajectories, config.seed, config.steps_per_trajectory, **config.env_kwargs(), progress=progress)
 
 
-def run_calibration(out: Path, config: PipelineConfig = PipelineConfig(), progress: bool = True, benchmark: bool = True) -> dict[str, Any]:
+def run_calibration(
+    out: Path, config: PipelineConfig = PipelineConfig(), progress: bool = True, benchmark: bool = True, protocol: str = "paper"
+) -> dict[str, Any]:
     """Run (or resume) the whole two-phase calibration and, if asked, its benchmark in ``out``.
+
+    The benchmark sends the predictions by ``protocol``: "paper", the authors' height rules
+    for each method (the rigid body's lifted, :mod:`dvrk_gym.evaluation.table_protocol`), or
+    "raw", as they are. It is not a setting of the run: one folder can be evaluated both ways.
 
     Returns:
         ``{"phase1": Phase1Data, "phase2": Phase2Data, "models": {...}, "table": ...,
         "summary": ..., "timings_s": {...}}`` (no table or summary without ``benchmark``).
     """
+    check_choice("protocol", protocol, PROTOCOLS)
     out = Path(out)
     with RunFolder(out, dataclasses.asdict(config), stamp=SETTINGS_STAMP) as folder:
-        return _run_stages(out, folder, config, progress, benchmark)
+        return _run_stages(out, folder, config, progress, protocol if benchmark else None)
 
 
-def _run_stages(out: Path, folder: RunFolder, config: PipelineConfig, progress: bool, benchmark: bool) -> dict[str, Any]:
+def _run_stages(out: Path, folder: RunFolder, config: PipelineConfig, progress: bool, protocol: str | None) -> dict[str, Any]:
+    """The stages; ``protocol`` is the benchmark's, or None for no benchmark."""
     grid = gym.make("dvrk_gym/GridTouch-v0", **config.env_kwargs())
     try:
         phase1 = folder.cached("phase1.npz", lambda: _run_phase1(config, progress), Phase1Data.load, _save)
@@ -125,17 +148,19 @@ def _run_stages(out: Path, folder: RunFolder, config: PipelineConfig, progress: 
         )
         models = {"RBT": rbt, "DNN": dnn, "DNN+RF": two_phase}
         timings = folder.made_s
-        if not benchmark:
+        if protocol is None:
             return {"phase1": phase1, "phase2": phase2, "models": models, "timings_s": timings}
         start = time.perf_counter()
-        table = calibration_table(grid, models, seed=config.seed + BENCHMARK_SEED_OFFSET, progress=progress)
+        rules = paper_table_rules(list(models), phase2.corrected[:, 2]) if protocol == "paper" else None
+        table = calibration_table(grid, models, seed=config.seed + BENCHMARK_SEED_OFFSET, progress=progress, rules=rules)
         timings["benchmark"] = time.perf_counter() - start
     finally:
         grid.close()
-    save_table(table, out / "calibration_table.json")
+    save_table(table, out / "calibration_table.json", protocol=protocol)
     plot_error_maps(table, out / "calibration_error_maps.png")
-    atomic_write_text(out / "calibration_table.txt", format_table(table) + "\n")
+    atomic_write_text(out / "calibration_table.txt", f"{PROTOCOL_LINES[protocol]}\n{format_table(table)}\n")
     return {
+        "protocol": protocol,
         "phase1": phase1,
         "phase2": phase2,
         "models": models,

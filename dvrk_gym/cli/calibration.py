@@ -8,6 +8,7 @@ from pathlib import Path
 
 from dvrk_gym import paper
 from dvrk_gym.cli.options import add_instrument_options, add_progress_option, writable_folder
+from dvrk_gym.evaluation.table_protocol import PROTOCOLS
 from dvrk_gym.utils.atomic import atomic_path, atomic_write_json
 
 
@@ -76,9 +77,12 @@ def _run_evaluate(args: argparse.Namespace) -> int:
     if args.policy:
         return _evaluate_policy(args)
     from dvrk_gym.calibration.benchmark import format_table
-    from dvrk_gym.calibration.pipeline import run_calibration
+    from dvrk_gym.calibration.pipeline import PROTOCOL_LINES, run_calibration
 
-    result = run_calibration(writable_folder(args.out), _config(args), progress=not args.no_progress, benchmark=True)
+    result = run_calibration(
+        writable_folder(args.out), _config(args), progress=not args.no_progress, benchmark=True, protocol=args.protocol
+    )
+    print(PROTOCOL_LINES[args.protocol])
     print(format_table(result["table"]))
     print(f"wrote {args.out / 'calibration_table.json'}, {args.out / 'calibration_table.txt'}, {args.out / 'calibration_error_maps.png'}")
     return 0
@@ -178,6 +182,13 @@ def add_commands(subparsers: argparse._SubParsersAction) -> None:
     evaluate.add_argument("--env", default="dvrk_gym/GridTouch-v0", help="environment for --policy (default: %(default)s)")
     evaluate.add_argument("--episodes", type=int, default=35, help="episodes for --policy (default: %(default)s)")
     evaluate.add_argument("--options", help='reset options for --policy as JSON, e.g. \'{"yaw": "random"}\'')
+    evaluate.add_argument(
+        "--protocol",
+        choices=PROTOCOLS,
+        default="paper",
+        help="how the calibrators' predictions are sent: 'paper', as the authors' runs did (the rigid body's heights lifted "
+        "4-9 mm, and clipped in three settings), or 'raw', as they are (default: %(default)s)",
+    )
     _add_budget_options(evaluate)
     _add_world_options(evaluate)
     add_progress_option(evaluate)

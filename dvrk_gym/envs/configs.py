@@ -15,6 +15,7 @@ from dvrk_gym import paper
 from dvrk_gym.sim.endoscope.noise import MAX_PIXEL_NOISE_PX
 from dvrk_gym.sim.endoscope.renderers import DISPLAY_RENDERERS
 from dvrk_gym.sim.robot.bias import BIAS_PRESETS, BiasConfig
+from dvrk_gym.sim.table.contact import CONTACTS
 from dvrk_gym.utils.checks import check_choice, check_float_fields, check_int_fields, check_resolution
 
 REWARD_TYPES = ("dense", "sparse")
@@ -89,16 +90,22 @@ class GridTouchConfig(EnvConfig):
         approach_height_m: how far above the target the tool goes before descending, m.
         correction_noise_m: standard deviation of a person's correction, per axis, metres
             (the paper's Phase II corrections were made by hand).
+        contact: how a touch sent under the paper ends (:mod:`dvrk_gym.sim.table.contact`):
+            "compliant" (the arm goes on down, stopping short of its command, and the jaws
+            slide along the paper, as the authors' records show the real robot did) or
+            "rigid" (it stops where the jaws meet the paper).
     """
 
     reward_type: str = "dense"
     distance_threshold_m: float = 0.001
     approach_height_m: float = 0.008
     correction_noise_m: float = 0.0002
+    contact: str = "compliant"
 
     def __post_init__(self) -> None:
         super().__post_init__()
         check_choice("reward_type", self.reward_type, REWARD_TYPES)
+        check_choice("contact", self.contact, tuple(CONTACTS))
         bounds = {
             "distance_threshold_m": (0.0, 0.05, False),
             "approach_height_m": (0.0, 0.05, False),

@@ -4,8 +4,11 @@ Goal-conditioned: the desired goal is a circle's centre as the endoscope sees it
 (triangulated, left camera frame, metres); the achieved goal is the touch point of the
 closed jaws as the endoscope sees it. The action is the base-frame command
 ``(bx, by, bz, yaw)`` of the closed gripper (metres, radians; pitch and roll follow from
-yaw by the paper's rule). A step goes above the target, moves down until the jaws touch
-the paper (or the command is reached), and records the touch.
+yaw by the paper's rule). A step goes above the target, moves down to the command, and
+records the touch. A command under the paper ends as the ``contact`` option says
+(:mod:`dvrk_gym.sim.table.contact`): by default the arm goes on down, stopping short of its
+command (it reports itself over it), and the jaws slide along the paper, as the authors'
+records show the real robot's did; ``contact="rigid"`` stops where the jaws meet the paper.
 
 An episode is one touch of one circle, and successive episodes tour the 35 circles in
 the authors' order (:data:`TOUR`; a seeded reset starts the tour again), so the goal stays fixed within an
@@ -31,6 +34,7 @@ from dvrk_gym.sim.physics.scene import GRID_COLUMNS, GRID_ROWS, WORKSPACE_CENTER
 from dvrk_gym.sim.robot import ik
 from dvrk_gym.sim.robot import kinematics as kin
 from dvrk_gym.sim.robot.bias import BiasConfig
+from dvrk_gym.sim.table.contact import CONTACTS
 from dvrk_gym.sim.world_config import MoveResult
 
 N_CIRCLES = GRID_ROWS * GRID_COLUMNS
@@ -148,6 +152,7 @@ class GridTouchEnv(DvrkEnv[GridTouchConfig]):
         distance_threshold_m: float = 0.001,
         approach_height_m: float = 0.008,
         correction_noise_m: float = 0.0002,
+        contact: str = "compliant",
         camera_resolution: tuple[int, int] = (1920, 1080),
         pixel_noise_px: float = 0.0,
         render_resolution: tuple[int, int] | None = None,
@@ -163,6 +168,7 @@ class GridTouchEnv(DvrkEnv[GridTouchConfig]):
             {"observation": spaces.Box(obs_low, obs_high, dtype=np.float32), "achieved_goal": goal, "desired_goal": goal}
         )
         self.circle_centers = grid_circle_centers()
+        self._paper = CONTACTS[self.config.contact]
         self._next_circle = TOUR[0]
         self._yaw_setting: float | str = 0.0
         self._circle = 0
@@ -214,8 +220,9 @@ class GridTouchEnv(DvrkEnv[GridTouchConfig]):
         target, yaw = action[:3], float(action[3])
         above = target + [0.0, 0.0, self.config.approach_height_m]
         first = self._move(above, yaw)
-        touch = self._move(np.array([target[0], target[1], self._contact_height(target, yaw)]), yaw)
-        tip = self._true_touch_point()
+        contact_z, target_z = self._contact_height(target, yaw), float(target[2])
+        touch = self._move(np.array([target[0], target[1], self._paper.command_height(contact_z, target_z)]), yaw)
+        tip = self._paper.touch_point(self._true_touch_point(), contact_z - target_z, SURFACE_Z_M)
         pixels = self.world.camera.project_point_floats(tip.tolist())
         self._achieved = self._seen_touch_point(pixels)
         self._touched = True

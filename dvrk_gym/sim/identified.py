@@ -38,6 +38,8 @@ __all__ = [
     "TAPE_ROWS_DEPTH_M",
     "WRIST_SETTLE_LAG",
     "FIT_RESIDUALS",
+    "ContactValues",
+    "PAPER_CONTACT",
 ]
 
 
@@ -276,3 +278,31 @@ frame the full model leaves 0.94 / 1.16 / 6.39 mm (x, y, z) on the held-out rows
 left is the detector's noise (the disparity's: 2.5 px), the repeatability, and structure
 none of these terms has (a random forest on pose and orientation explains about a third
 of it)."""
+
+
+@dataclass(frozen=True)
+class ContactValues:
+    """How the paper under the grid gives way when the jaws are sent under it.
+
+    Attributes:
+        slide_per_depth: (2,) how far the jaws slide along the robot's x and y per metre
+            the command goes under the paper, metres per metre.
+        give: the share of that depth by which the arm stops short of its command (the
+            reported height lies ``give * depth`` over the command), dimensionless.
+    """
+
+    slide_per_depth: tuple[float, float]
+    give: float
+
+
+PAPER_CONTACT = ContactValues(slide_per_depth=(-0.710, 0.232), give=0.390)
+"""Fitted to the authors' records of the rigid body's table runs (its 175 touches at the five
+fixed yaws, 93 of them sent under the jaws pushed onto the paper that day, up to 10 mm) by
+``python benchmarks/identify_contact.py`` (:func:`dvrk_gym.fidelity.contact.fit_contact`):
+slide (-0.710, 0.232) m/m, standard errors 0.042 each, 0.75 mm of slide per mm of depth,
+right and a little down in the left image; give 0.390 (0.008). The touches sent over the
+paper show neither (slopes 0.0). The networks' runs, which the fit never saw, were sent
+hardly under the paper (median 0.4 mm of their touches under it): their give is 0.275 (DNN,
+0.026) and 0.386 (DNN+RF, 0.028), and their slide, (0.05, 0.61) m/m (0.13), points along y,
+not x: at a few tenths of a millimetre the slide is lost among the touches' other errors,
+which go with the height they were sent at. The line is the rigid body's, for 1 to 10 mm."""

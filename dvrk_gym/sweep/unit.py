@@ -17,7 +17,7 @@ from typing import Any
 
 import gymnasium as gym
 
-from dvrk_gym.calibration.benchmark import calibration_table, table_summary
+from dvrk_gym.calibration.benchmark import calibration_table, paper_table_rules, table_summary
 from dvrk_gym.calibration.pipeline import BENCHMARK_SEED_OFFSET, PipelineConfig, run_calibration
 from dvrk_gym.sweep.grid import CALIBRATORS, METHOD_NAMES
 from dvrk_gym.utils.torch_threads import torch_threads
@@ -58,9 +58,9 @@ def run_unit(config: PipelineConfig) -> dict[str, Any]:
                 began = time.perf_counter()
                 # One method at a time: setting k is always reset with the same seed, so each
                 # method's numbers are those of the pipeline's three-method table.
-                table = calibration_table(
-                    grid, {method: result["models"][method]}, seed=config.seed + BENCHMARK_SEED_OFFSET, progress=False
-                )
+                models = {method: result["models"][method]}
+                rules = paper_table_rules(list(models), result["phase2"].corrected[:, 2])  # the paper's protocol, as evaluate's
+                table = calibration_table(grid, models, seed=config.seed + BENCHMARK_SEED_OFFSET, progress=False, rules=rules)
                 calibrators[name] = {**_errors(table_summary(table)[method]), "benchmark_s": time.perf_counter() - began}
         finally:
             grid.close()

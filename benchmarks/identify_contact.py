@@ -1,0 +1,85 @@
+"""Identify how the paper gives way under the jaws from the authors' records of their table's runs.
+
+Fits :func:`dvrk_gym.fidelity.contact.fit_contact` (the give and the slide of a touch sent
+under the paper) to the rigid body's runs, whose touches went up to 10 mm under it, and
+checks it on the networks' runs, which the fit never saw. Also prints the control: the same
+slopes for the touches sent over the paper, where there is nothing to give way, and the
+identified values the simulator uses (:data:`dvrk_gym.sim.identified.PAPER_CONTACT`).
+A few seconds:
+
+    python benchmarks/identify_contact.py
+"""
+
+from __future__ import annotations
+
+import argparse
+
+import numpy as np
+
+from dvrk_gym import paper
+from dvrk_gym.calibration.datasets import PaperTableRuns, load_paper_table_runs
+from dvrk_gym.fidelity.contact import FIXED_SETTINGS, ContactFit, fit_contact, height_over_pushes, pushes_of_run
+from dvrk_gym.sim.identified import PAPER_CONTACT
+
+FITS = (
+    ("fit: RBT", ("RBT",)),
+    ("held out: DNN", ("DNN",)),
+    ("held out: DNN+RF", ("DNN+RF",)),
+    ("held out: both networks", ("DNN", "DNN+RF")),
+)
+"""Which runs each printed fit uses: the rigid body's is the identification, the rest check it."""
+
+
+def over_paper_slopes(runs: PaperTableRuns, method: str) -> tuple[float, float, float]:
+    """For ``method``'s touches sent over the paper: the least-squares slopes of the image offset
+    (u, v; px per mm) and of the reported-minus-sent height (mm per mm) on the height they were
+    sent at over it, with a free intercept per run. Where there is no contact both are ~0."""
+    heights, offsets, rises, run_ids = [], [], [], []
+    for setting in range(FIXED_SETTINGS):
+        mine = (runs.method == method) & (runs.setting == setting)
+        height = height_over_pushes(runs.sent[mine], pushes_of_run(runs, method, setting))
+        over = height >= 0.0
+        heights.append(1e3 * height[over])
+        offsets.append((runs.end_effector_px[mine] - runs.circle_px[mine])[over])
+        rises.append(1e3 * (runs.reported[mine, 2] - runs.sent[mine, 2])[over])
+        run_ids.append(np.full(int(over.sum()), setting))
+    h, ids = np.concatenate(heights), np.concatenate(run_ids)
+    design = np.c_[h, (ids[:, None] == np.arange(FIXED_SETTINGS)).astype(float)]
+    slopes = [np.linalg.lstsq(design, target, rcond=None)[0][0] for target in (*np.concatenate(offsets).T, np.concatenate(rises))]
+    return float(slopes[0]), float(slopes[1]), float(slopes[2])
+
+
+def format_fit(name: str, fit: ContactFit) -> str:
+    slide, se = fit.slide_per_depth, fit.slide_se
+    return (
+        f"  {name:<26s}{fit.touches:>5d} touches ({fit.touches_under:>3d} under)   slide x {slide[0]:+.3f} ({se[0]:.3f})"
+        f"  y {slide[1]:+.3f} ({se[1]:.3f}) m/m, {np.hypot(*slide):.2f} mm per mm   give {fit.give:.3f} ({fit.give_se:.3f})"
+    )
+
+
+def main() -> None:
+    argparse.ArgumentParser(description=__doc__.split("\n\n")[0]).parse_args()
+    runs = load_paper_table_runs()
+    print("touches sent under the jaws pushed onto the paper that day (the fixed yaws), least squares with an intercept per run")
+    print("(standard errors in brackets):")
+    fits = {name: fit_contact(runs, methods) for name, methods in FITS}
+    for name, fit in fits.items():
+        print(format_fit(name, fit))
+    print("control, the touches sent over the paper (no contact): slopes on the height sent over it")
+    for method in ("RBT", "DNN", "DNN+RF"):
+        u, v, rise = over_paper_slopes(runs, method)
+        print(f"  {method:<26s}image u {u:+.2f} px/mm  v {v:+.2f} px/mm   reported minus sent {rise:+.3f} mm/mm")
+    identified = fits["fit: RBT"]
+    per_mm = paper.PX_PER_MM * np.hypot(*identified.slide_per_depth)
+    print(
+        f"(under the paper, the rigid body's slide is {per_mm:.1f} px per mm of depth in the image; the networks' offsets go with"
+        " their heights over the paper too, where nothing slides, so their fits under it mix that in)"
+    )
+    print(
+        f"identified (dvrk_gym.sim.identified.PAPER_CONTACT): slide {PAPER_CONTACT.slide_per_depth} m/m, give {PAPER_CONTACT.give};"
+        f" this fit rounds to ({identified.slide_per_depth[0]:.3f}, {identified.slide_per_depth[1]:.3f}), {identified.give:.3f}"
+    )
+
+
+if __name__ == "__main__":
+    main()

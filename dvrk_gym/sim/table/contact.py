@@ -1,0 +1,74 @@
+"""The paper under the grid, as the jaws meet it: where a touch sent under it ends.
+
+A touch commanded ``depth`` under the point where the jaws first meet the paper does not stop
+there, nor go through. On the real robot (the authors' records of their table's runs,
+:data:`dvrk_gym.sim.identified.PAPER_CONTACT`) the arm went on down, stopping short of its
+command by ``give * depth`` (held off by the paper: its reported height lies that far over
+the command), and the jaws, held on the paper, slid along it by ``slide_per_depth * depth``.
+:class:`PaperContact` is that model; :data:`COMPLIANT` has the identified values and
+:data:`RIGID` stops at first contact, reporting all the depth, without sliding (the
+simulator before the records were read).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from dvrk_gym.sim.identified import PAPER_CONTACT
+
+__all__ = ["COMPLIANT", "CONTACTS", "PaperContact", "RIGID"]
+
+MAX_SLIDE_PER_DEPTH = 5.0
+"""Largest slide per depth accepted, metres per metre."""
+
+
+@dataclass(frozen=True)
+class PaperContact:
+    """How a touch sent under the paper ends.
+
+    Attributes:
+        slide_per_depth: (2,) how far the jaws slide along the robot's x and y per metre
+            the command goes under first contact, metres per metre.
+        give: the share of that depth the arm stops short of its command, in [0, 1]
+            (1: it stops at first contact).
+    """
+
+    slide_per_depth: tuple[float, float]
+    give: float
+
+    def __post_init__(self) -> None:
+        slide = tuple(self.slide_per_depth)
+        if len(slide) != 2 or not all(isinstance(v, (int, float)) and math.isfinite(v) and abs(v) <= MAX_SLIDE_PER_DEPTH for v in slide):
+            raise ValueError(f"slide_per_depth must be two finite numbers within +-{MAX_SLIDE_PER_DEPTH} m/m, got {self.slide_per_depth!r}")
+        if not (isinstance(self.give, (int, float)) and 0.0 <= self.give <= 1.0):
+            raise ValueError(f"give must be a number in [0, 1], got {self.give!r}")
+
+    def command_height(self, contact_z_m: float, target_z_m: float) -> float:
+        """Where the arm's command ends, metres: ``target_z_m`` if the jaws would not reach
+        the paper before it (``contact_z_m``, the command's height at first contact, is not
+        over it), else ``give`` of the depth short of it."""
+        depth = contact_z_m - target_z_m
+        if depth <= 0.0:
+            return target_z_m
+        return contact_z_m if self.give == 1.0 else target_z_m + self.give * depth
+
+    def touch_point(self, tip_m: np.ndarray, depth_m: float, surface_z_m: float) -> np.ndarray:
+        """Where the jaws touch, (3,) m: the true tip ``tip_m`` (3,) m of an arm whose command
+        went ``depth_m`` under first contact, held on the paper at ``surface_z_m`` and slid
+        along it. A depth of 0 or less gives the tip as it is; so does a contact without give
+        or slide (the arm stopped where the jaws met the paper)."""
+        if depth_m <= 0.0 or self == RIGID:
+            return tip_m
+        z = float(tip_m[2]) if self.give == 1.0 else surface_z_m
+        return np.array([tip_m[0] + self.slide_per_depth[0] * depth_m, tip_m[1] + self.slide_per_depth[1] * depth_m, z])
+
+
+COMPLIANT = PaperContact(slide_per_depth=PAPER_CONTACT.slide_per_depth, give=PAPER_CONTACT.give)
+"""The paper as the authors' records show it (:data:`dvrk_gym.sim.identified.PAPER_CONTACT`)."""
+RIGID = PaperContact(slide_per_depth=(0.0, 0.0), give=1.0)
+"""A paper that stops the arm at first contact: no give, no slide."""
+CONTACTS = {"compliant": COMPLIANT, "rigid": RIGID}
+"""GridTouch-v0's ``contact`` choices."""
