@@ -40,7 +40,10 @@ frame (through the pushes, and through the Phase I rows, which followed the auth
 fitted through four corners); and, per yaw, the mean of the Phase II pushes
 (how far a person moved the jaws from the network's prediction onto the circle, in the
 robot's x and y), real (both rounds) and simulated (the calibration run's Phase II), with
-how far the mean y spreads over the yaws.
+how far the mean y spreads over the yaws. Between the last two: how each method's sent
+heights scatter about a plane through them, real and simulated, and whether a circle's
+error there repeats from run to run (as it does when the runs share one detection of the
+circles).
 
 The rigid body's dive identifies the tape detector's right-image shift
 (``benchmarks/identify_tape_shift.py``, which uses this script's statistics).
@@ -153,6 +156,39 @@ def push_means(yaws: np.ndarray, moves: np.ndarray) -> np.ndarray:
     if len(moves) != len(yaws) or np.bincount(nearest, minlength=len(paper.PHASE2_YAWS_DEG)).min() == 0:
         raise ValueError(f"every paper yaw needs a push; got {len(yaws)} yaws and {len(moves)} moves")
     return np.array([moves[nearest == k].mean(axis=0) for k in range(len(paper.PHASE2_YAWS_DEG))])
+
+
+def height_scatter(sent: list[np.ndarray]) -> tuple[list[float], float]:
+    """How the sent heights scatter about a plane through them, per fixed yaw (sd of the
+    residuals, mm; ``sent``: per yaw (35, 3) m, the circles in one order), and the median over
+    pairs of yaws of the correlation between one circle's residuals: near 1 when each circle
+    keeps its error from run to run (one detection of the circles), near 0 when each run
+    draws its own."""
+    residuals = []
+    for points in sent:
+        design = np.c_[points[:, :2], np.ones(len(points))]
+        plane, *_ = np.linalg.lstsq(design, points[:, 2], rcond=None)
+        residuals.append(points[:, 2] - design @ plane)
+    correlation = np.corrcoef(np.array(residuals))[np.triu_indices(len(residuals), k=1)]
+    return [1e3 * float(np.std(r)) for r in residuals], float(np.median(correlation))
+
+
+def print_height_scatter(runs: PaperTableRuns, simulated: dict[str, list[Touches]]) -> None:
+    """The :func:`height_scatter` of each method's real runs and of its simulated touches (the authors' way)."""
+    print(
+        "the sent heights' scatter about a plane through them (sd, mm; yaw -90 to 90), one circle's correlation between runs"
+        " (median), and how far the real circles' detected centres move between runs (the most, px)"
+    )
+    for label in paper.METHOD_LABELS.values():
+        mine = [(runs.method == label) & (runs.setting == k) for k in range(FIXED_YAWS)]
+        moved = float(np.ptp(np.array([runs.circle_px[m] for m in mine]), axis=0).max())
+        for who, sent in (
+            ("real", [runs.sent[m] for m in mine]),
+            ("sim, the authors' way", [t.sent for t in simulated[label][:FIXED_YAWS]]),
+        ):
+            spread, correlation = height_scatter(sent)
+            centres = f"   centres move {moved:.0f} px" if who == "real" else ""
+            print(f"  {label:<8s}{who:<26s}" + "".join(f"{v:6.2f}" for v in spread) + f"   correlation {correlation:+.2f}{centres}")
 
 
 def real_table(runs: PaperTableRuns) -> dict[str, list[tuple[float, ...]]]:
@@ -272,12 +308,14 @@ def _print_comparison(calibration: Path, env: gym.Env, phase2: Phase2Data, runs:
     )
     print(f"  {'':<60s}" + "".join(f"{label:>9s}" for label, _ in YAW_SETTINGS) + f"{'mean':>9s}")
     rigid_body: dict[str, list[Touches]] = {}  # the rigid body's simulated touches, kept for its give below
+    authors_way: dict[str, list[Touches]] = {}  # every method's, for the heights' scatter
     for name, label in paper.METHOD_LABELS.items():
         policy = CalibratedPolicy(load_calibrator(calibration, name)[0])
         lifts, clipped = paper.TABLE_LIFT_MM[label], paper.TABLE_CLIPPED[label]
         authors = paper_rules(label, phase2.corrected[:, 2])
         raw = (RAW,) * len(YAW_SETTINGS)
         touched = {"sim, the authors' way": simulated_touches(env, policy, authors, seed)}
+        authors_way[label] = touched["sim, the authors' way"]
         if authors != raw:
             touched["sim, raw"] = simulated_touches(env, policy, raw, seed)
         if label == "RBT":
@@ -318,6 +356,7 @@ def _print_comparison(calibration: Path, env: gym.Env, phase2: Phase2Data, runs:
     ]
     for who, positions in planes:
         print(f"  {who:<34s}" + plane_tilt(positions))
+    print_height_scatter(runs, authors_way)
     _print_push_means(runs, phase2)
 
 

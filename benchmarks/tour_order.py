@@ -7,7 +7,8 @@ package toured each row from -x to +x until it took theirs. For a calibration ru
 script prints:
 
 1. the calibration table's mean error per method and setting (mm), touched as ``dvrk-gym
-   evaluate`` does (its seeds, from the run's seed; each pass starts relaxed and carries the
+   evaluate`` does (its seeds, from the run's seed, and its protocol: the rigid body's
+   heights lifted as the authors' runs did; each pass starts relaxed and carries the
    history within it), in the authors' order and in row-major order. The forests learned
    their corrections from the run's Phase II, which toured the authors' order;
 2. how the Phase II pushes (how far a person moved the jaws from the network's prediction
@@ -28,6 +29,7 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -43,6 +45,7 @@ from dvrk_gym.calibration.phase2 import Phase2Data
 from dvrk_gym.calibration.pipeline import BENCHMARK_SEED_OFFSET, PipelineConfig
 from dvrk_gym.calibration.policy import CalibratedPolicy
 from dvrk_gym.envs.grid_touch import N_CIRCLES, TOUR
+from dvrk_gym.evaluation.table_protocol import RuledPolicy, paper_rules
 
 ORDERS: dict[str, tuple[int, ...]] = {"authors'": TOUR, "row-major": tuple(range(N_CIRCLES))}
 """The two orders the table is touched in, as circle indices."""
@@ -51,7 +54,7 @@ ROW_MOVE_M = 0.005
 moves along a row go 10 to 17 mm towards -x; to the next row, 30 to 70 mm back)."""
 
 
-def mean_error(env: gym.Env, policy: CalibratedPolicy, setting: int, order: tuple[int, ...], seed: int) -> float:
+def mean_error(env: gym.Env, policy: Any, setting: int, order: tuple[int, ...], seed: int) -> float:
     """Mean touch error (mm) of one pass over the circles in ``order`` at ``setting`` of
     YAW_SETTINGS, its first reset seeded with ``seed + setting`` (as ``calibration_table`` seeds it)."""
     episodes = touch_grid_episodes(env, policy, YAW_SETTINGS[setting][1], seed=seed + setting, order=order)
@@ -81,16 +84,21 @@ def pushes_by_move(sent: np.ndarray, pushes: np.ndarray, yaws: np.ndarray) -> np
     return out
 
 
-def print_orders(calibration_folder: Path, config: PipelineConfig) -> None:
-    """Part 1: each calibrator's mean error per setting, touched in each of :data:`ORDERS`."""
+def print_orders(calibration_folder: Path, config: PipelineConfig, phase2: Phase2Data) -> None:
+    """Part 1: each calibrator's mean error per setting, touched in each of :data:`ORDERS` by the
+    paper's protocol (the authors' band carried over by ``phase2``'s pushes)."""
     print("1. Mean touch error (mm) per setting, touched in each order")
     print(f"  {'method':<8s}{'order':<11s}" + "".join(f"{label:>9s}" for label, _ in YAW_SETTINGS) + f"{'mean':>9s}")
     env = gym.make("dvrk_gym/GridTouch-v0", **config.env_kwargs())
     try:
         for name, label in paper.METHOD_LABELS.items():
             policy = CalibratedPolicy(load_calibrator(calibration_folder, name)[0])
+            rules = paper_rules(label, phase2.corrected[:, 2])
             for order_name, order in ORDERS.items():
-                cells = [mean_error(env, policy, k, order, config.seed + BENCHMARK_SEED_OFFSET) for k in range(len(YAW_SETTINGS))]
+                cells = [
+                    mean_error(env, RuledPolicy(policy, rules[k]), k, order, config.seed + BENCHMARK_SEED_OFFSET)
+                    for k in range(len(YAW_SETTINGS))
+                ]
                 print(f"  {label:<8s}{order_name:<11s}" + "".join(f"{v:9.2f}" for v in cells) + f"{np.mean(cells):9.2f}")
     finally:
         env.close()
@@ -124,7 +132,7 @@ def main() -> None:
     phase2 = Phase2Data.load(args.calibration / "phase2.npz")
     if not phase2.in_authors_tour:
         parser.error(f"{args.calibration} holds a Phase II made before the authors' tour; make the calibration again")
-    print_orders(args.calibration, config)
+    print_orders(args.calibration, config, phase2)
     print_pushes_by_move(load_paper_table_runs(), phase2)
 
 
