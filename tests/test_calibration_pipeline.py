@@ -219,6 +219,10 @@ def test_cli_evaluates_any_policy_from_a_factory(tmp_path, capsys):
 def test_cli_reports_bad_arguments_clearly(tmp_path, capsys):
     assert main(["evaluate", "--policy", "nonsense", "--out", str(tmp_path)]) == 2
     assert "module:factory" in capsys.readouterr().err
+    factory = "policies_for_tests:middle_of_the_grid"
+    assert main(["evaluate", "--policy", factory, "--protocol", "raw", "--out", str(tmp_path)]) == 2
+    assert "a --policy sends its own actions as they are" in capsys.readouterr().err
+    assert not (tmp_path / "evaluation.json").exists()
 
 
 def test_cli_collect_writes_phase1_data(tmp_path, capsys):

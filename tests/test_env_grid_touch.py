@@ -115,7 +115,9 @@ def _touch_under(make_env, contact: str, depth_m: float, bias="none") -> dict:
     env.reset(seed=0, options={"circle": 3})
     action = _nominal_action(env, 3)  # a perfect robot's command onto the circle
     action[2] -= depth_m  # commanded under the paper
-    return env.step(action)[4] | {"on_paper": _nominal_action(env, 3)[:3].astype(float)}
+    observation, _, _, _, info = env.step(action)
+    extra = {"on_paper": _nominal_action(env, 3)[:3].astype(float), "achieved_goal": observation["achieved_goal"]}
+    return info | extra | {"camera": env.unwrapped.world.camera}
 
 
 def test_a_rigid_paper_stops_the_descent_where_the_jaws_meet_it(make_env):
@@ -138,6 +140,13 @@ def test_the_compliant_paper_gives_way_and_the_jaws_slide_by_the_identified_amou
         assert under == pytest.approx(depth, abs=2e-5)
     went_on = rigid["reported_position"][2] - compliant["reported_position"][2]  # the arm went on down, short of its command
     assert went_on == pytest.approx((1.0 - PAPER_CONTACT.give) * under, abs=1e-4)
+    circle = compliant["true_circle_position"]  # the errors and the seen touch are the slid jaws'
+    assert compliant["mm_error"] == pytest.approx(1e3 * np.linalg.norm((compliant["true_tip_position"] - circle)[:2]))
+    if bias == "none":  # on the circle when rigid, 3 mm off it when slid: at 640 x 360, about 3.8 px a mm
+        assert rigid["pixel_error"] < 1.0 and compliant["pixel_error"] == pytest.approx(3.8 * 1e3 * np.hypot(*slid), rel=0.1)
+    camera = compliant["camera"]  # its triangulation scales what it sees by its depth scale
+    seen = camera.depth_scale * camera.to_camera_frame(compliant["true_tip_position"][None])[0]
+    np.testing.assert_allclose(compliant["achieved_goal"], seen, atol=1e-4)  # m: the endoscope sees the slid jaws
 
 
 def test_a_touch_over_the_paper_is_the_same_on_either_paper(make_env):

@@ -26,9 +26,13 @@ def test_the_command_goes_on_down_short_of_its_target_by_the_give():
 
 BAD_CONTACTS = [
     ((0.1,), 0.5, "slide_per_depth"),
+    (0.1, 0.5, "slide_per_depth"),
+    ("ab", 0.5, "slide_per_depth"),
     ((0.1, np.nan), 0.5, "slide_per_depth"),
     ((9.0, 0.0), 0.5, "slide_per_depth"),
+    ((True, 0.0), 0.5, "slide_per_depth"),
     ((0.0, 0.0), 1.5, "give"),
+    ((0.0, 0.0), True, "give"),
 ]
 
 
@@ -36,6 +40,14 @@ BAD_CONTACTS = [
 def test_bad_contacts_are_refused(slide, give, message):
     with pytest.raises(ValueError, match=message):
         PaperContact(slide_per_depth=slide, give=give)
+
+
+def test_a_contact_keeps_plain_floats_whatever_numbers_it_was_given():
+    contact = PaperContact(slide_per_depth=[np.float32(0.0), 0], give=np.float64(1.0))
+    assert contact.slide_per_depth == (0.0, 0.0) and type(contact.give) is float
+    assert contact == RIGID  # so the rigid paper's shortcut holds for it too
+    tip = np.array([0.01, 0.02, -0.1641])
+    assert contact.touch_point(tip, 0.010, -0.164) is tip
 
 
 def test_heights_are_measured_over_the_plane_of_the_pushes():
@@ -87,6 +99,10 @@ def test_the_fit_refuses_unknown_methods_and_runs_that_never_went_under():
         fit_contact(lifted, ("RBT",))
     with pytest.raises(ValueError, match="fixed yaw"):
         pushes_of_run(runs, "RBT", 5)
+    with pytest.raises(ValueError, match="method must be one of"):
+        pushes_of_run(runs, "SAC", 0)
+    with pytest.raises(ValueError, match="at least three pushed positions"):
+        height_over_pushes(np.zeros((2, 3)), np.zeros((2, 3)))
 
 
 def test_the_identification_script_prints_the_fit_and_its_check():

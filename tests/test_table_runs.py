@@ -273,11 +273,14 @@ def test_the_push_means_are_taken_per_nearest_paper_yaw():
 def test_the_simulated_passes_are_seeded_from_the_runs_seed(monkeypatch):
     seeds = []
 
-    def fake_pass(env, touch, yaw, seed):  # one episode per circle, as touch_grid_episodes gives them
+    def fake_pass(env, touch, yaw, seed):  # one episode per circle, as touch_grid_episodes gives them (three circles here)
         seeds.append(seed)
-        touch(None)
-        info = {"reported_position": np.zeros(3), "human_correction": np.zeros(3)}
-        return [SimpleNamespace(final_info=info, metrics={"pixel_error": 1.0})]
+        episodes = []
+        for corner in ([0.0, 0.0, 0.0], [0.01, 0.0, 0.0], [0.0, 0.01, 0.0]):  # pushes a plane can be fitted through
+            touch(None)
+            info = {"reported_position": np.array(corner), "human_correction": np.zeros(3)}
+            episodes.append(SimpleNamespace(final_info=info, metrics={"pixel_error": 1.0}))
+        return episodes
 
     monkeypatch.setattr(table_runs, "touch_grid_episodes", fake_pass)
     policy = lambda observation: np.array([0.04, 0.04, -0.16, 0.0], dtype=np.float32)  # noqa: E731

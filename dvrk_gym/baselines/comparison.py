@@ -3,8 +3,11 @@
 Touch grid (GridTouch agents): an agent touches the 35 circles at the six yaw settings
 through the same :func:`~dvrk_gym.calibration.benchmark.touch_grid` and seeds as the
 calibrators in :func:`~dvrk_gym.calibration.pipeline.run_calibration`, so their rows are
-comparable. The calibrators' rows come from a calibration run folder
-(``calibration_table.json`` and ``pipeline_config.json``, as ``dvrk-gym evaluate`` writes them).
+comparable; an agent's commands are sent as they are, the calibrators' by the table's
+protocol (the paper's lifts the rigid body's, :mod:`dvrk_gym.evaluation.table_protocol`; the
+protocol is in each calibrator row's source). The calibrators' rows come from a calibration
+run folder (``calibration_table.json`` and ``pipeline_config.json``, as ``dvrk-gym evaluate``
+writes them).
 
 Debridement (any agent, through :func:`~dvrk_gym.baselines.transfer.pick_policy`): the
 paper's trials of eight picks on Debridement-v0, run by
@@ -102,13 +105,17 @@ def calibration_rows(folder: Path) -> tuple[list[ComparisonRow], PipelineConfig]
     table_path = folder / "calibration_table.json"
     if not table_path.exists():
         raise FileNotFoundError(f"{table_path} not found: run 'dvrk-gym evaluate --out {folder}' first")
-    summary = json.loads(table_path.read_text())["summary"]
+    table = json.loads(table_path.read_text())
+    summary = table["summary"]
+    protocol = table.get("protocol") or "raw"  # a table written before the protocol was recorded sent its predictions raw
     config = _pipeline_config(folder)
     moves = calibrator_moves(config)
     rows = []
     for method, stats in summary.items():
         every = stats["all settings"]
-        rows.append(ComparisonRow(method, moves.get(method, -1), every["mm"]["mean"], every["pixel"]["mean"], str(table_path)))
+        rows.append(
+            ComparisonRow(method, moves.get(method, -1), every["mm"]["mean"], every["pixel"]["mean"], f"{table_path} (protocol {protocol})")
+        )
     return rows, config
 
 

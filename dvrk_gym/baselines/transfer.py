@@ -9,11 +9,13 @@ GridTouch's desired goal, with the rest of GridTouch's observation as at the sta
 touch (the robot at its home pose; the yaw replaced by the pick's). The agent's action is
 mapped onto the base-frame box as in training; Debridement's pick box is GridTouch's.
 
-One difference remains: GridTouch's touch descends until the jaws meet the paper, so a
-command below the paper costs a GridTouch agent nothing, and its height ``bz`` may lie
-below the contact height a calibrator predicts (measured in the package README). A pick
-ends its free move ``approach_height_m`` above ``bz`` and then lowers the jaws until the
-floor stops them, so a low ``bz`` shortens the approach rather than missing.
+One difference remains: a GridTouch touch sent under the paper goes on down and its jaws
+slide along the paper (:mod:`dvrk_gym.sim.table.contact`), so a GridTouch agent pays for a
+command below the paper in its touch error, but a pick ends its free move
+``approach_height_m`` above ``bz`` and then lowers the jaws until the floor stops them, so a
+low ``bz`` there shortens the approach rather than missing. (On the rigid paper of earlier
+versions, a command below the paper cost a GridTouch agent nothing, and the agents learnt
+heights 11 mm under the contact height a calibrator predicts: the baselines README.)
 
 A pick agent (Debridement-v0) gets the same raw-observation interface, through the
 functions its training wrapper uses.

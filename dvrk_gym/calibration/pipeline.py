@@ -34,7 +34,7 @@ from dvrk_gym.calibration.models.rigid import RigidBodyCalibrator
 from dvrk_gym.calibration.models.two_phase import TwoPhaseCalibrator
 from dvrk_gym.calibration.phase1 import Phase1Data, run_paper_phase1
 from dvrk_gym.calibration.phase2 import Phase2Data, collect_phase2
-from dvrk_gym.evaluation.table_protocol import PROTOCOLS
+from dvrk_gym.evaluation.table_protocol import PROTOCOL_LINES, PROTOCOLS
 from dvrk_gym.utils.atomic import atomic_write_text
 from dvrk_gym.utils.checks import check_choice
 from dvrk_gym.utils.run_folder import RunFolder, read_settings
@@ -47,11 +47,6 @@ CALIBRATOR_FILES = {"rbt": "rbt.zip", "dnn": "dnn.zip", "dnn+rf": "two_phase.zip
 """The model file of each calibrator in a calibration run folder, by the calibrator's name."""
 RETIRED_CALIBRATOR_FILES = {"rbt": "rbt.npz", "dnn": "dnn.npz", "dnn+rf": "two_phase.npz"}
 """The same in the retired ``.npz`` format, which is no longer read (``calibrate`` makes the new files beside them)."""
-PROTOCOL_LINES = {
-    "paper": "Protocol: paper (the rigid body's heights lifted 4-9 mm and, in three settings, clipped, as the authors' runs did)",
-    "raw": "Protocol: raw (every prediction sent as it is)",
-}
-"""The first line of ``calibration_table.txt`` for each protocol."""
 BENCHMARK_SEED_OFFSET = BENCHMARK_SEED
 """The benchmark's seed is the run's seed plus this (so run seed 0 gives calibration_table's default)."""
 

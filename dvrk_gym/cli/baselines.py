@@ -228,7 +228,8 @@ def _add_evaluate(subparsers: argparse._SubParsersAction) -> None:
         "evaluate",
         help="the calibrators' benchmarks (touch grid; debridement trials) for trained agents, and comparison tables",
         description="Run trained GridTouch agents through the calibrators' benchmark (35 circles x 6 yaw settings, the same "
-        "touch_grid protocol and seeds as 'dvrk-gym evaluate') and print the paper-style table; run pick agents (and, with "
+        "touch_grid passes and seeds as 'dvrk-gym evaluate'; an agent's commands are sent as they are, where evaluate lifts "
+        "the rigid body's as the paper's runs did) and print the paper-style table; run pick agents (and, with "
         "--transfer, GridTouch agents aimed at the fragments) through debridement trials of 8 picks (success, A/B/C, time "
         "per fragment). With --calibration, the calibrators' rows beside them: their touch errors from the run's table, and "
         "their debridement trials run here with the same seeds (as 'dvrk-gym debride'). " + LOAD_WARNING,

@@ -8,7 +8,7 @@ from pathlib import Path
 
 from dvrk_gym import paper
 from dvrk_gym.cli.options import add_instrument_options, add_progress_option, writable_folder
-from dvrk_gym.evaluation.table_protocol import PROTOCOLS
+from dvrk_gym.evaluation.table_protocol import PROTOCOL_LINES, PROTOCOLS
 from dvrk_gym.utils.atomic import atomic_path, atomic_write_json
 
 
@@ -75,14 +75,15 @@ def _run_calibrate(args: argparse.Namespace) -> int:
 
 def _run_evaluate(args: argparse.Namespace) -> int:
     if args.policy:
+        if args.protocol is not None:
+            raise ValueError("--protocol is how the calibrators' predictions are sent; a --policy sends its own actions as they are")
         return _evaluate_policy(args)
     from dvrk_gym.calibration.benchmark import format_table
-    from dvrk_gym.calibration.pipeline import PROTOCOL_LINES, run_calibration
+    from dvrk_gym.calibration.pipeline import run_calibration
 
-    result = run_calibration(
-        writable_folder(args.out), _config(args), progress=not args.no_progress, benchmark=True, protocol=args.protocol
-    )
-    print(PROTOCOL_LINES[args.protocol])
+    protocol = args.protocol or "paper"
+    result = run_calibration(writable_folder(args.out), _config(args), progress=not args.no_progress, benchmark=True, protocol=protocol)
+    print(PROTOCOL_LINES[protocol])
     print(format_table(result["table"]))
     print(f"wrote {args.out / 'calibration_table.json'}, {args.out / 'calibration_table.txt'}, {args.out / 'calibration_error_maps.png'}")
     return 0
@@ -185,9 +186,9 @@ def add_commands(subparsers: argparse._SubParsersAction) -> None:
     evaluate.add_argument(
         "--protocol",
         choices=PROTOCOLS,
-        default="paper",
+        default=None,
         help="how the calibrators' predictions are sent: 'paper', as the authors' runs did (the rigid body's heights lifted "
-        "4-9 mm, and clipped in three settings), or 'raw', as they are (default: %(default)s)",
+        "4-9 mm, and clipped in three settings), or 'raw', as they are (default: paper)",
     )
     _add_budget_options(evaluate)
     _add_world_options(evaluate)

@@ -292,7 +292,8 @@ class GridTouchEnv(DvrkEnv[GridTouchConfig]):
         return ik.touch_point_floats(cable.peek_true_joints_floats(command), cable.true_dh)
 
     def _contact_height(self, target: np.ndarray, yaw: float) -> float:
-        """The commanded height at which the descent stops: the command, or first contact.
+        """The commanded height of first contact: where the jaws meet the paper, or the command
+        if they do not reach it (:meth:`PaperContact.command_height` says where the arm then stops).
 
         The true tip height moves one for one with the commanded height, so a fixed-point
         iteration finds where the jaws meet the paper in a few steps.

@@ -18,7 +18,6 @@ the simulated robot by where it reports its jaws pushed onto the circles
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -26,11 +25,17 @@ from typing import Any
 import numpy as np
 
 from dvrk_gym import paper
+from dvrk_gym.utils.checks import check_float
 
-__all__ = ["PROTOCOLS", "RAW", "HeightRule", "RuledPolicy", "carried_band", "paper_rules"]
+__all__ = ["PROTOCOLS", "PROTOCOL_LINES", "RAW", "HeightRule", "RuledPolicy", "carried_band", "paper_rules"]
 
 PROTOCOLS = ("paper", "raw")
 """``dvrk-gym evaluate``'s protocols: the authors' height rules, or the predictions as they are."""
+PROTOCOL_LINES = {
+    "paper": "Protocol: paper (the rigid body's heights lifted 4-9 mm and, in three settings, clipped, as the authors' runs did)",
+    "raw": "Protocol: raw (every prediction sent as it is)",
+}
+"""What the calibration table's text says of each protocol (its first line)."""
 MAX_LIFT_M = 0.05
 """Largest lift accepted, metres."""
 
@@ -50,11 +55,14 @@ class HeightRule:
 
     def __post_init__(self) -> None:
         if self.band_m is not None:
-            band = tuple(self.band_m)
-            if len(band) != 2 or not all(isinstance(v, (int, float)) and math.isfinite(v) for v in band) or not band[0] < band[1]:
-                raise ValueError(f"band_m must be (lowest, highest) finite metres with lowest < highest, got {self.band_m!r}")
-        if not (isinstance(self.lift_m, (int, float)) and math.isfinite(self.lift_m) and abs(self.lift_m) <= MAX_LIFT_M):
-            raise ValueError(f"lift_m must be finite metres within +-{MAX_LIFT_M}, got {self.lift_m!r}")
+            band = self.band_m
+            if isinstance(band, (str, bytes)) or not isinstance(band, Sequence) or len(band) != 2:
+                raise ValueError(f"band_m must be (lowest, highest) in metres, or None; got {band!r}")
+            low, high = (check_float(f"band_m[{i}]", v, unit="m") for i, v in enumerate(band))
+            if not low < high:
+                raise ValueError(f"band_m must be (lowest, highest) with lowest < highest, got {band!r}")
+            object.__setattr__(self, "band_m", (low, high))
+        object.__setattr__(self, "lift_m", check_float("lift_m", self.lift_m, -MAX_LIFT_M, MAX_LIFT_M, unit="m"))
 
     def clipped(self, z_m: float) -> float:
         """The height ``z_m`` (m) clipped into the band (as it is without one), metres."""

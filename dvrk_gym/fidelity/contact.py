@@ -8,19 +8,22 @@ plane to 0.15-0.34 mm). A touch sent ``depth`` under that plane met the paper be
 command; what the records show it did then:
 
 - **give**: the arm reported itself ``give * depth`` over where it was sent (the motors
-  stopped short, held off by the paper), where a touch sent over the paper reported itself
-  where it was sent (a slope of 0.0);
+  stopped short, held off by the paper), where the rigid body's touches sent over the paper
+  reported themselves where they were sent (a slope of 0.0 on the height over it);
 - **slide**: the end effector landed ``slide * depth`` from where a touch over the paper
   lands, along one direction of the table's plane: further right in the image the deeper it
-  was sent (a slope of 0.0 for the touches over the paper).
+  was sent (a slope of 0.0 for the rigid body's touches over the paper).
 
 Both are straight lines through the touches with a free intercept per run (one method at one
 yaw): the give on the reported minus the sent height, the slide on the image offsets,
 through the image's Jacobian of the plane (the identified camera,
 :func:`~dvrk_gym.sim.endoscope.camera.default_camera_pose`), so the slide comes out in the
 robot's frame, metres per metre. They are fitted on the rigid body's runs (its touches went
-up to 10 mm under the paper; the networks' hardly 2) and checked on the networks' runs,
-which the fit never saw. ``python benchmarks/identify_contact.py`` prints every figure.
+up to 10 mm under the paper; the networks' hardly 2) and set beside the networks' runs,
+which the fit never saw and which do not confirm the slide: their touches went a few tenths
+of a millimetre under, and their offsets go with the height they were sent at over the
+paper too (:data:`dvrk_gym.sim.identified.PAPER_CONTACT` has the figures).
+``python benchmarks/identify_contact.py`` prints every figure.
 """
 
 from __future__ import annotations
@@ -68,13 +71,17 @@ def pushes_of_run(runs: PaperTableRuns, method: str, setting: int) -> np.ndarray
     ``method``'s runs (:data:`~dvrk_gym.paper.TABLE_PUSH_ROUND`)."""
     if not 0 <= setting < FIXED_SETTINGS:
         raise ValueError(f"setting must be a fixed yaw's, 0-{FIXED_SETTINGS - 1}; got {setting}")
+    if method not in paper.TABLE_PUSH_ROUND:
+        raise ValueError(f"method must be one of {sorted(paper.TABLE_PUSH_ROUND)}, got {method!r}")
     same = np.isclose(np.rad2deg(runs.push_yaw), paper.PHASE2_YAWS_DEG[setting]) & (runs.push_round == paper.TABLE_PUSH_ROUND[method])
     return runs.push_after[same]
 
 
 def height_over_pushes(points: np.ndarray, pushed: np.ndarray) -> np.ndarray:
     """Heights (n,) m of ``points`` (n, 3) m over the least-squares plane through ``pushed``
-    (m, 3) m (negative under it)."""
+    (m, 3) m (negative under it). Raises ValueError for fewer than three pushes."""
+    if len(pushed) < 3:
+        raise ValueError(f"a plane needs at least three pushed positions, got {len(pushed)}")
     design = np.c_[pushed[:, :2], np.ones(len(pushed))]
     plane, *_ = np.linalg.lstsq(design, pushed[:, 2], rcond=None)
     return points[:, 2] - np.c_[points[:, :2], np.ones(len(points))] @ plane

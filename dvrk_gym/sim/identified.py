@@ -131,7 +131,8 @@ is. The Phase I rows cannot tell this from a short stereo baseline (the depth sc
 (``python benchmarks/identify_tape_shift.py``, 6 to 14 minutes on a busy machine). The rigid body the authors
 fitted to the tape's rows put the printed circles 7.2 mm under the jaws pushed onto them
 (the mean over the five yaws of the median per yaw). The simulated rigid body, fitted to a
-Phase I of the identified instrument and touched as ``dvrk-gym evaluate`` does, put them
+Phase I of the identified instrument and touched with ``dvrk-gym evaluate``'s seeds, unlifted
+(``--protocol raw``), put them
 1.7, 6.1, 8.4 and 10.8 mm under at shifts of 0, 2, 3 and 4 px; 7.2 mm is reached at 2.47 px
 (linear between 2 and 3, on the unrounded means). The shift narrows what the 12 px gate
 keeps, so the detector's misses were matched again with it (:data:`MARKER_DETECTION_NOISE`);
@@ -301,8 +302,11 @@ fixed yaws, 93 of them sent under the jaws pushed onto the paper that day, up to
 ``python benchmarks/identify_contact.py`` (:func:`dvrk_gym.fidelity.contact.fit_contact`):
 slide (-0.710, 0.232) m/m, standard errors 0.042 each, 0.75 mm of slide per mm of depth,
 right and a little down in the left image; give 0.390 (0.008). The touches sent over the
-paper show neither (slopes 0.0). The networks' runs, which the fit never saw, were sent
-hardly under the paper (median 0.4 mm of their touches under it): their give is 0.275 (DNN,
-0.026) and 0.386 (DNN+RF, 0.028), and their slide, (0.05, 0.61) m/m (0.13), points along y,
-not x: at a few tenths of a millimetre the slide is lost among the touches' other errors,
-which go with the height they were sent at. The line is the rigid body's, for 1 to 10 mm."""
+paper show neither (slopes 0.0 for the rigid body). The networks' runs, which the fit never
+saw, do not confirm it: they were sent hardly under the paper (median 0.4 mm of their
+touches under it); their give is 0.275 (DNN, 0.026) and 0.386 (DNN+RF, 0.028), and their
+slide, (0.05, 0.61) m/m (0.13), points along y, not x. Their offsets and reported heights go
+with the height they were sent at over the paper too (DNN+RF: -12.7 px/mm along u, -0.126
+in the reported height), where nothing touches, so at a few tenths of a millimetre their
+other errors swamp a slide. The line is the rigid body's, measured from 1 to 10 mm; the
+simulator extends it to every depth."""

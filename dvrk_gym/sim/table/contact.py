@@ -5,6 +5,9 @@ there, nor go through. On the real robot (the authors' records of their table's 
 :data:`dvrk_gym.sim.identified.PAPER_CONTACT`) the arm went on down, stopping short of its
 command by ``give * depth`` (held off by the paper: its reported height lies that far over
 the command), and the jaws, held on the paper, slid along it by ``slide_per_depth * depth``.
+The model gives where the jaws touch (GridTouch-v0's ``true_tip_position`` and what the
+endoscope sees); the arm's joints and its PyBullet body follow the command, so a rendered
+touch under the paper shows the jaws through it, as the world's own ``true_touch_point`` puts them.
 :class:`PaperContact` is that model; :data:`COMPLIANT` has the identified values and
 :data:`RIGID` stops at first contact, reporting all the depth, without sliding (the
 simulator before the records were read).
@@ -12,12 +15,13 @@ simulator before the records were read).
 
 from __future__ import annotations
 
-import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
 from dvrk_gym.sim.identified import PAPER_CONTACT
+from dvrk_gym.utils.checks import check_float
 
 __all__ = ["COMPLIANT", "CONTACTS", "PaperContact", "RIGID"]
 
@@ -32,19 +36,28 @@ class PaperContact:
     Attributes:
         slide_per_depth: (2,) how far the jaws slide along the robot's x and y per metre
             the command goes under first contact, metres per metre.
-        give: the share of that depth the arm stops short of its command, in [0, 1]
-            (1: it stops at first contact).
+        give: the share of that depth by which the arm gives way: it stops that far short of
+            its command, held off by the paper, in [0, 1] (1: it stops at first contact, as
+            on a paper that does not yield).
+
+    Raises ValueError for a slide that is not two finite numbers within
+    :data:`MAX_SLIDE_PER_DEPTH`, or a give outside [0, 1] (bools are not numbers here).
     """
 
     slide_per_depth: tuple[float, float]
     give: float
 
     def __post_init__(self) -> None:
-        slide = tuple(self.slide_per_depth)
-        if len(slide) != 2 or not all(isinstance(v, (int, float)) and math.isfinite(v) and abs(v) <= MAX_SLIDE_PER_DEPTH for v in slide):
-            raise ValueError(f"slide_per_depth must be two finite numbers within +-{MAX_SLIDE_PER_DEPTH} m/m, got {self.slide_per_depth!r}")
-        if not (isinstance(self.give, (int, float)) and 0.0 <= self.give <= 1.0):
-            raise ValueError(f"give must be a number in [0, 1], got {self.give!r}")
+        if (
+            isinstance(self.slide_per_depth, (str, bytes))
+            or not isinstance(self.slide_per_depth, Sequence)
+            or len(self.slide_per_depth) != 2
+        ):
+            raise ValueError(f"slide_per_depth must be two numbers (x, y) in m/m, got {self.slide_per_depth!r}")
+        bound = MAX_SLIDE_PER_DEPTH
+        slide = tuple(check_float(f"slide_per_depth[{i}]", v, -bound, bound, unit="m/m") for i, v in enumerate(self.slide_per_depth))
+        object.__setattr__(self, "slide_per_depth", slide)
+        object.__setattr__(self, "give", check_float("give", self.give, 0.0, 1.0))
 
     def command_height(self, contact_z_m: float, target_z_m: float) -> float:
         """Where the arm's command ends, metres: ``target_z_m`` if the jaws would not reach
@@ -69,6 +82,6 @@ class PaperContact:
 COMPLIANT = PaperContact(slide_per_depth=PAPER_CONTACT.slide_per_depth, give=PAPER_CONTACT.give)
 """The paper as the authors' records show it (:data:`dvrk_gym.sim.identified.PAPER_CONTACT`)."""
 RIGID = PaperContact(slide_per_depth=(0.0, 0.0), give=1.0)
-"""A paper that stops the arm at first contact: no give, no slide."""
+"""A paper that does not yield: the arm stops at first contact (give 1), and the jaws do not slide."""
 CONTACTS = {"compliant": COMPLIANT, "rigid": RIGID}
 """GridTouch-v0's ``contact`` choices."""
