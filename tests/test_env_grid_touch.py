@@ -242,3 +242,27 @@ def test_the_arm_body_shows_the_true_joints_whenever_it_is_asked_for(make_env):
             env.step(env.action_space.sample())
         frame = world.robot.wrist_yaw_frame()  # the body is set when asked for, not at every move
         np.testing.assert_allclose(frame[:3, 3], kin.last_frame(world.q_true, world.cable.true_dh)[:3, 3], atol=1e-6)
+
+
+RIGID_TOUCHES_BEFORE_THE_COMPLIANT_PAPER = np.array(  # d880b29's GridTouch-v0, which had only the rigid stop
+    [
+        [0.03974108598616034, 0.01889378118811414, -0.16410446870595344, 0.04208664372688189, 0.01551935382806369, -0.15225736532812528],
+        [0.04178137665837241, 0.02933005669297257, -0.1639403334408889, 0.04206718192485243, 0.0280087213120631, -0.15233027058511023],
+        [0.04014882871101581, 0.04174019599316977, -0.1645547632570649, 0.04208759915393438, 0.04051987498361834, -0.15240878194737806],
+        [0.04098857291417973, 0.05511470264464194, -0.16423281838010143, 0.04206861183118355, 0.05300949855670103, -0.15234986543682827],
+    ]
+)
+"""True tip and reported position (m) of four touches with history, 4 mm under, 2 mm over, 6 mm under and at the
+nominal command, as the test below makes them, recorded on d880b29 (the rigid contact gave the same digits)."""
+
+
+def test_the_rigid_paper_is_the_simulator_before_the_compliant_one(make_env):
+    env = make_env("dvrk_gym/GridTouch-v0", bias="paper", contact="rigid")
+    env.reset(seed=3, options={"circle": 3, "yaw": 0.5})
+    touches = []
+    for circle, dz in ((3, -0.004), (10, 0.002), (17, -0.006), (24, 0.0)):
+        env.reset(options={"circle": circle})
+        command = env.unwrapped.circle_centers[circle] - tool_pose(np.zeros(3), 0.5)[:3, 2] * kin.JAW_LENGTH_M
+        info = env.step(np.array([*command[:2], command[2] + dz, 0.5], dtype=np.float32))[4]
+        touches.append([*info["true_tip_position"], *info["reported_position"]])
+    np.testing.assert_allclose(touches, RIGID_TOUCHES_BEFORE_THE_COMPLIANT_PAPER, rtol=0, atol=1e-12)
