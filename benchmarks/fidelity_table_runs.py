@@ -164,11 +164,7 @@ def height_scatter(sent: list[np.ndarray]) -> tuple[list[float], float]:
     pairs of yaws of the correlation between one circle's residuals: near 1 when each circle
     keeps its error from run to run (one detection of the circles), near 0 when each run
     draws its own."""
-    residuals = []
-    for points in sent:
-        design = np.c_[points[:, :2], np.ones(len(points))]
-        plane, *_ = np.linalg.lstsq(design, points[:, 2], rcond=None)
-        residuals.append(points[:, 2] - design @ plane)
+    residuals = [height_over_pushes(points, points) for points in sent]  # each set's heights over its own plane
     correlation = np.corrcoef(np.array(residuals))[np.triu_indices(len(residuals), k=1)]
     return [1e3 * float(np.std(r)) for r in residuals], float(np.median(correlation))
 
