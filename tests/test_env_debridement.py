@@ -19,6 +19,7 @@ from dvrk_gym.sim.physics.scene import WORKSPACE_CENTER_M
 from dvrk_gym.sim.robot import ik
 from dvrk_gym.sim.robot import kinematics as kin
 from dvrk_gym.sim.table import judge
+from dvrk_gym.sim.table.contact import COMPLIANT
 from dvrk_gym.sim.table.fragment_types import FRAGMENT_TYPES
 from dvrk_gym.sim.table.fragments import TRUNCATE_SD
 from dvrk_gym.sim.table.grasp import GRASP_TIP_CLEARANCE_M
@@ -129,7 +130,7 @@ def test_jaws_squeeze_a_raisin_more_than_a_seed_in_the_envs_world(make):
 # ---------------------------------------------------------------------------- picks and the judge
 @pytest.mark.parametrize("kind", ["pumpkin_seed", "raisin"])
 def test_perfectly_calibrated_pick_delivers_the_fragment(make, kind):
-    env = make(fragment=kind)
+    env = make(fragment=kind, contact="rigid")  # the oracle aims at the centre, not for the slide
     env.reset(seed=0)
     fragment = _first_on_paper(env)
     _, reward, terminated, _, info = env.step(oracle_action(fragment))
@@ -142,6 +143,23 @@ def test_perfectly_calibrated_pick_delivers_the_fragment(make, kind):
     assert info["true_grip_offset_ratio"] < 0.05
     assert info["true_tip_at_grip"][2] >= SURFACE_Z_M + GRASP_TIP_CLEARANCE_M - 3e-4  # the jaws did not dig in
     assert info["fragments_on_paper"] == 7
+
+
+def test_a_pick_sent_under_the_floor_slides_its_jaws_as_a_grid_touch_does(make):
+    """The jaws stall on the floor over the paper and, on the compliant paper, slide along it
+    by the identified slide at the command's depth under that floor; on the rigid one they
+    stall where they are. The pick's grip depth takes the oracle's command under the floor."""
+    tips = {}
+    for contact in ("rigid", "compliant"):
+        env = make(fragment="pumpkin_seed", contact=contact)
+        env.reset(seed=0)
+        fragment = _first_on_paper(env)
+        depth = SURFACE_Z_M + GRASP_TIP_CLEARANCE_M - (float(fragment.position()[2]) - env.unwrapped.config.timing.grip_depth_m)
+        _, _, _, _, info = env.step(oracle_action(fragment))
+        tips[contact] = np.asarray(info["true_tip_at_grip"], dtype=float)
+    assert depth > 0.001  # the command went a millimetre and more under the floor
+    np.testing.assert_allclose(tips["compliant"][:2] - tips["rigid"][:2], COMPLIANT.slide_m(depth), atol=1e-4)
+    assert tips["compliant"][2] == pytest.approx(tips["rigid"][2], abs=1e-4)  # both on the floor
 
 
 def test_pick_5_mm_off_along_a_seed_is_judged_a_calibration_miss(make):

@@ -127,6 +127,8 @@ def test_step_before_reset_and_unknown_options_are_clear_errors(make):
         gym.make(ENV_ID, fragment="almond")
     with pytest.raises(ValueError, match="primitive"):
         gym.make(ENV_ID, action_mode="torque")
+    with pytest.raises(ValueError, match=r"contact must be one of \['compliant', 'rigid'\]"):
+        gym.make(ENV_ID, contact="soft")
 
 
 def test_out_of_range_pick_is_clamped_and_reported(make):

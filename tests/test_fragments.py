@@ -13,6 +13,7 @@ from dvrk_gym.sim.physics.scene import WORKSPACE_CENTER_M, build_scene
 from dvrk_gym.sim.robot import ik
 from dvrk_gym.sim.robot import kinematics as kin
 from dvrk_gym.sim.robot.body import PSMBody
+from dvrk_gym.sim.table.contact import COMPLIANT
 from dvrk_gym.sim.table.fragment_types import FRAGMENT_TYPES
 from dvrk_gym.sim.table.fragments import sample_fragment_sizes, spawn_fragments
 from dvrk_gym.sim.table.grasp import GRASP_TIP_CLEARANCE_M, JAW_LINKS, Gripper
@@ -319,7 +320,10 @@ def test_same_seed_gives_bit_identical_fragment_positions():
 def test_table_drives_the_worlds_jaws_until_the_world_is_rebuilt():
     world = DvrkWorld(WorldConfig(bias="none", camera_resolution=(320, 180)))
     try:
+        with pytest.raises(ValueError, match="contact must be a PaperContact"):
+            DebridementTable(world, contact="compliant")
         table = DebridementTable(world)
+        assert table.contact is COMPLIANT  # the identified paper, as GridTouch-v0's default
         assert world.jaw_driver is None and table.held() == {} and table.true_fragment_positions().shape == (0, 3)
         with pytest.raises(RuntimeError, match="add_fragments"):
             table.actuate_jaws(0.5)

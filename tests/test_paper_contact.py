@@ -24,6 +24,14 @@ def test_the_command_goes_on_down_short_of_its_target_by_the_give():
     assert COMPLIANT.slide_per_depth == PAPER_CONTACT.slide_per_depth and COMPLIANT.give == PAPER_CONTACT.give
 
 
+def test_the_slide_grows_with_the_depth_and_is_none_over_the_paper():
+    contact = PaperContact(slide_per_depth=(0.5, -0.25), give=0.4)
+    np.testing.assert_allclose(contact.slide_m(0.004), [0.002, -0.001])  # m
+    assert np.array_equal(contact.slide_m(0.0), [0.0, 0.0]) and np.array_equal(contact.slide_m(-0.003), [0.0, 0.0])
+    assert contact.slides and COMPLIANT.slides and not RIGID.slides
+    assert not PaperContact(slide_per_depth=(0.0, 0.0), give=0.4).slides  # gives, but does not slide
+
+
 BAD_CONTACTS = [
     ((0.1,), 0.5, "slide_per_depth"),
     (0.1, 0.5, "slide_per_depth"),

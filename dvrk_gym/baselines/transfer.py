@@ -9,13 +9,12 @@ GridTouch's desired goal, with the rest of GridTouch's observation as at the sta
 touch (the robot at its home pose; the yaw replaced by the pick's). The agent's action is
 mapped onto the base-frame box as in training; Debridement's pick box is GridTouch's.
 
-One difference remains: a GridTouch touch sent under the paper goes on down and its jaws
-slide along the paper (:mod:`dvrk_gym.sim.table.contact`), so a GridTouch agent pays for a
-command below the paper in its touch error, but a pick ends its free move
-``approach_height_m`` above ``bz`` and then lowers the jaws until the floor stops them, so a
-low ``bz`` there shortens the approach rather than missing. (On the rigid paper of earlier
-versions, a command below the paper cost a GridTouch agent nothing, and the agents learnt
-heights 11 mm under the contact height a calibrator predicts: the baselines README.)
+The paper is the same in both envs (:mod:`dvrk_gym.sim.table.contact`): a GridTouch touch
+sent under it goes on down and its jaws slide along it, and a pick's jaws, lowered onto it,
+stall on a floor just above it and slide by as much at the same depth under that floor. A
+GridTouch agent that learnt to send its touches deep and aim against the slide therefore
+picks where it touched. (With GridTouch's paper compliant and the picks' rigid, as before
+the picks slid, the agents' deep, slide-aimed commands missed most fragments: the README.)
 
 A pick agent (Debridement-v0) gets the same raw-observation interface, through the
 functions its training wrapper uses.

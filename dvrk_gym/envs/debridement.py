@@ -16,6 +16,10 @@ gripper); every reset rebuilds both. Two action modes:
   pick (:mod:`dvrk_gym.envs.picks`) has the paper's six phases: to the fragment (free
   space), lower, grip, raise, to the receptacle, drop and rotate. The episode ends after
   ``max_picks`` picks or when no fragment is left on the paper.
+  Lowered onto the paper, the jaws stall on a floor just above it; a command that goes
+  on under that floor slides them along the paper as GridTouch's touches slide
+  (``contact``, :mod:`dvrk_gym.sim.table.contact`; ``"rigid"`` stalls them in place), so
+  a command that touches a circle in GridTouch picks at the same place here.
 * ``"delta"``: Cartesian and jaw increments at 10 Hz for learning agents,
   ``(dx, dy, dz, djaw)`` (metres and radians per step), physics stepped for the whole
   control period; truncated after ``max_steps``.
@@ -58,6 +62,7 @@ from dvrk_gym.sim.robot import ik
 from dvrk_gym.sim.robot import kinematics as kin
 from dvrk_gym.sim.robot.bias import BiasConfig
 from dvrk_gym.sim.table import judge
+from dvrk_gym.sim.table.contact import CONTACTS
 from dvrk_gym.sim.table.grasp import GRASP_TIP_CLEARANCE_M
 from dvrk_gym.sim.table.gripper_config import GripperConfig
 from dvrk_gym.sim.table.table import DebridementTable
@@ -137,6 +142,7 @@ class DebridementEnv(DvrkEnv[DebridementConfig]):
         max_delta_m: float = 0.005,
         max_delta_jaw_rad: float = 0.25,
         delta_yaw_rad: float = 0.0,
+        contact: str = "compliant",
         camera_resolution: tuple[int, int] = (1920, 1080),
         pixel_noise_px: float = 0.0,
         render_resolution: tuple[int, int] | None = None,
@@ -164,7 +170,7 @@ class DebridementEnv(DvrkEnv[DebridementConfig]):
             }
         )
         self.observer = FragmentObserver(self.world.camera, pixel_noise_px=self.config.pixel_noise_px)
-        self.table = DebridementTable(self.world, gripper_config=self.config.gripper)
+        self.table = DebridementTable(self.world, gripper_config=self.config.gripper, contact=CONTACTS[self.config.contact])
         self.picker = PickPrimitive(self.world, self.table, self.config.timing)
         self._frames: list[np.ndarray] = []  # render_mode "rgb_array_list": frames since the last render()
         if self.render_mode == "rgb_array_list":

@@ -15,6 +15,7 @@ import numpy as np
 from dvrk_gym import paper
 from dvrk_gym.envs.configs import EnvConfig
 from dvrk_gym.sim.robot.motion_limits import MotionLimits
+from dvrk_gym.sim.table.contact import CONTACTS
 from dvrk_gym.sim.table.fragment_types import FRAGMENT_TYPES
 from dvrk_gym.sim.table.gripper_config import GripperConfig
 from dvrk_gym.utils.checks import check_bool, check_choice, check_float_fields, check_int_fields
@@ -106,6 +107,10 @@ class DebridementConfig(EnvConfig):
         max_delta_m: largest position increment per delta step, per axis, m.
         max_delta_jaw_rad: largest jaw increment per delta step, rad.
         delta_yaw_rad: the tool's yaw in delta mode (pitch and roll by the paper's rule), rad.
+        contact: how the paper takes jaws sent under the floor that stops them
+            (:mod:`dvrk_gym.sim.table.contact`, as GridTouch-v0's ``contact``): "compliant"
+            (they slide along it by the identified slide per depth) or "rigid" (they stall
+            where they are).
     """
 
     fragment: str = "pumpkin_seed"
@@ -119,6 +124,7 @@ class DebridementConfig(EnvConfig):
     max_delta_m: float = 0.005
     max_delta_jaw_rad: float = 0.25
     delta_yaw_rad: float = 0.0
+    contact: str = "compliant"
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -138,6 +144,7 @@ class DebridementConfig(EnvConfig):
             )
         check_choice("fragment", self.fragment, sorted(FRAGMENT_TYPES))
         check_choice("action_mode", self.action_mode, ACTION_MODES)
+        check_choice("contact", self.contact, tuple(CONTACTS))
         check_int_fields("DebridementConfig", self, {"max_picks": (1, MAX_PICKS), "max_steps": (1, 1_000_000)})
         check_bool("remove_failed", self.remove_failed)
         bounds = {

@@ -8,9 +8,12 @@ the command), and the jaws, held on the paper, slid along it by ``slide_per_dept
 The model gives where the jaws touch (GridTouch-v0's ``true_tip_position`` and what the
 endoscope sees); the arm's joints and its PyBullet body follow the command, so a rendered
 touch under the paper shows the jaws through it, as the world's own ``true_touch_point`` puts them.
+Debridement-v0's picks meet the same paper: their jaws stall on a floor just over it and
+slide along it by :meth:`PaperContact.slide_m` of the depth under that floor
+(:class:`~dvrk_gym.sim.table.table.DebridementTable`).
 :class:`PaperContact` is that model; :data:`COMPLIANT` has the identified values and
 :data:`RIGID` stops at first contact, reporting all the depth, without sliding (the
-simulator before the records were read).
+simulator before the records were read); ``CONTACTS`` names them for the envs' ``contact``.
 """
 
 from __future__ import annotations
@@ -76,7 +79,19 @@ class PaperContact:
         if depth_m <= 0.0 or self == RIGID:
             return tip_m
         z = float(tip_m[2]) if self.give == 1.0 else surface_z_m
-        return np.array([tip_m[0] + self.slide_per_depth[0] * depth_m, tip_m[1] + self.slide_per_depth[1] * depth_m, z])
+        slide = self.slide_m(depth_m)
+        return np.array([tip_m[0] + slide[0], tip_m[1] + slide[1], z])
+
+    @property
+    def slides(self) -> bool:
+        """Whether the jaws slide at all under a command below the paper."""
+        return self.slide_per_depth != (0.0, 0.0)
+
+    def slide_m(self, depth_m: float) -> np.ndarray:
+        """How far the jaws slide along the robot's x and y, (2,) m, under a command ``depth_m``
+        metres below first contact (none at a depth of 0 or less)."""
+        depth = max(float(depth_m), 0.0)
+        return np.array([self.slide_per_depth[0] * depth, self.slide_per_depth[1] * depth])
 
 
 COMPLIANT = PaperContact(slide_per_depth=PAPER_CONTACT.slide_per_depth, give=PAPER_CONTACT.give)
@@ -84,4 +99,4 @@ COMPLIANT = PaperContact(slide_per_depth=PAPER_CONTACT.slide_per_depth, give=PAP
 RIGID = PaperContact(slide_per_depth=(0.0, 0.0), give=1.0)
 """A paper that does not yield: the arm stops at first contact (give 1), and the jaws do not slide."""
 CONTACTS = {"compliant": COMPLIANT, "rigid": RIGID}
-"""GridTouch-v0's ``contact`` choices."""
+"""GridTouch-v0's and Debridement-v0's ``contact`` choices."""

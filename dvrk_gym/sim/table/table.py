@@ -23,6 +23,7 @@ from dvrk_gym.sim.robot import ik
 from dvrk_gym.sim.robot import kinematics as kin
 from dvrk_gym.sim.robot.motion import CartesianMove, trapezoid_progress
 from dvrk_gym.sim.robot.motion_limits import MotionLimits
+from dvrk_gym.sim.table.contact import COMPLIANT, PaperContact
 from dvrk_gym.sim.table.fragment_types import FragmentType
 from dvrk_gym.sim.table.fragments import FRAGMENTS_PER_TRIAL, Fragment, sample_fragment_sizes, spawn_fragments
 from dvrk_gym.sim.table.grasp import Gripper
@@ -47,15 +48,22 @@ class DebridementTable:
             once it has fragments (see :class:`~dvrk_gym.sim.world_config.JawDriver`).
         gripper_config: grip force, jaw speed, friction and contact thresholds of the
             gripper each :meth:`add_fragments` makes (None: the defaults).
+        contact: how the paper takes a move sent under :meth:`move_stepped`'s floor: the
+            jaws slide along it by ``contact.slide_m`` of the depth
+            (:mod:`dvrk_gym.sim.table.contact`; GridTouch-v0's paper). Default: the
+            identified paper.
 
     Attributes:
         fragments: the fragments laid since the world was last rebuilt, in spawn order.
         gripper: the gripper acting on them; None until :meth:`add_fragments`.
     """
 
-    def __init__(self, world: DvrkWorld, gripper_config: GripperConfig | None = None) -> None:
+    def __init__(self, world: DvrkWorld, gripper_config: GripperConfig | None = None, contact: PaperContact = COMPLIANT) -> None:
+        if not isinstance(contact, PaperContact):
+            raise ValueError(f"contact must be a PaperContact, got {type(contact).__name__}")
         self.world = world
         self.gripper_config = gripper_config
+        self.contact = contact
         self.fragments: list[Fragment] = []
         self.gripper: Gripper | None = None
 
@@ -136,7 +144,8 @@ class DebridementTable:
             min_tip_clearance_m: keep the closed jaw tip at least this high above the
                 paper: the part of the path below is raised onto that floor, where the
                 tool stalls (the silicone under the paper gives; the jaws do not dig in),
-                metres; None: no floor.
+                and slid along it as far as the table's ``contact`` slides jaws sent that
+                deep under it (as GridTouch-v0's touches are), metres; None: no floor.
             limits: speed limits of this move (default: the world's).
             duration_s: make the move last exactly this long at constant speed, with
                 no settling (a control period), seconds; None: the trapezoidal profile.
@@ -172,9 +181,11 @@ class DebridementTable:
             offset_start: the true joints' offset from the cable model's at the start
                 (the last move's repeatability noise), rad / m.
             floor: the lowest height the closed jaw tip may reach, base frame z, m; None:
-                no floor.
+                no floor. A waypoint that would take the tip ``depth`` under it is raised by
+                ``depth`` and moved by the contact's slide at that depth.
         """
         cable = self.world.cable
+        slides = self.contact.slides
         commands: list[np.ndarray] = []
         trues: list[np.ndarray] = []
         q_ref = self.world.q_cmd
@@ -189,6 +200,8 @@ class DebridementTable:
                     cable.set_state(state)
                     waypoint = waypoint.copy()
                     waypoint[2, 3] -= gap
+                    if slides:
+                        waypoint[:2, 3] += self.contact.slide_m(-gap)
                     q_ref, _ = ik.inverse_kinematics_clamped(waypoint, q_ref=commands[-1] if commands else self.world.q_cmd)
                     q_true = cable.true_joints(q_ref)
             commands.append(q_ref)
