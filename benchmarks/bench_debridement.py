@@ -10,11 +10,17 @@ paper's proportions; one 8-fragment trial in at most 30 s wall on one core.
 ``--what-if-physics-step S`` and ``--what-if-coarse-only`` run the table on a changed
 simulation (``benchmarks/bench_pick_parts.py`` says what each changes and how fast a pick
 then is): what issue 18's 10 picks/s would cost in the table.
+
+``--contact rigid`` runs the picks on a paper that does not give way (the jaws stall on the
+floor over it, where they are), as Debridement-v0 did before its picks met GridTouch-v0's
+paper; ``--grip-depth-mm D`` lowers the jaws D mm under the target instead of the authors' 2
+(their ``--z_offset``), to see how far the slide at that depth costs picks.
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import time
 from pathlib import Path
 
@@ -26,13 +32,18 @@ from dvrk_gym import paper
 from dvrk_gym.calibration.loading import load_calibrator
 from dvrk_gym.calibration.policy import CalibratedPolicy
 from dvrk_gym.envs.debridement import fragment_target
+from dvrk_gym.envs.debridement_config import DEFAULT_PICK_TIMING
 from dvrk_gym.envs.picks import PHASES
 from dvrk_gym.evaluation.trials import run_trials, totals
 from dvrk_gym.paper import DEBRIDEMENT_PHASE_S as PAPER_PHASE_S
+from dvrk_gym.sim.table.contact import CONTACTS
 
 
-def bench_cell(folder: Path, calibrator_name: str, fragment: str, trials: int, seed: int, resolution: tuple[int, int]) -> dict:
-    """Run one cell of the table; returns its totals and the wall seconds per trial."""
+def bench_cell(
+    folder: Path, calibrator_name: str, fragment: str, trials: int, seed: int, resolution: tuple[int, int], **env_kwargs: object
+) -> dict:
+    """Run one cell of the table; returns its totals and the wall seconds per trial.
+    ``env_kwargs`` go to ``gym.make`` (``contact``, ``timing``)."""
     calibrator, settings = load_calibrator(folder, calibrator_name)
     env = gym.make(
         "dvrk_gym/Debridement-v0",
@@ -40,6 +51,7 @@ def bench_cell(folder: Path, calibrator_name: str, fragment: str, trials: int, s
         bias=settings["bias"],
         bias_seed=int(settings["bias_seed"]),
         camera_resolution=resolution,
+        **env_kwargs,
     )
     try:
         start = time.perf_counter()
@@ -71,17 +83,30 @@ def main() -> None:
         "--resolution", type=int, nargs=2, default=(1920, 1080), metavar=("W", "H"), help="endoscope image size (default: 1920 1080)"
     )
     parser.add_argument("--rows", action="store_true", help="also print every trial's outcome string")
+    parser.add_argument("--contact", choices=sorted(CONTACTS), default="compliant", help="the paper under the picks (default: %(default)s)")
+    default_depth_mm = 1e3 * DEFAULT_PICK_TIMING.grip_depth_m
+    parser.add_argument(
+        "--grip-depth-mm",
+        type=float,
+        default=default_depth_mm,
+        help="how far under the target the jaws are lowered, mm (default: %(default)s)",
+    )
     add_what_if_arguments(parser)
     args = parser.parse_args()
     what_if = apply_what_ifs(parser, args)
     if what_if:
         print(what_if)
+    if not 0.0 <= args.grip_depth_mm <= 100.0:
+        parser.error(f"--grip-depth-mm must be in [0, 100], got {args.grip_depth_mm}")
+    timing = dataclasses.replace(DEFAULT_PICK_TIMING, grip_depth_m=1e-3 * args.grip_depth_mm)
+    env_kwargs = {"contact": args.contact, "timing": timing}
+    print(f"paper: {args.contact}; the jaws lowered {args.grip_depth_mm:g} mm under the target")
     header = f"{'fragment':<14}{'calibrator':<10}{'success':>15}{'A':>5}{'B':>5}{'C':>5}{'s/fragment':>12}{'wall s/trial':>14}{'paper':>26}"
     print(header)
     phase_lines = []
     for fragment in args.fragments:
         for name in args.calibrators:
-            cell = bench_cell(args.calibration, name, fragment, args.trials, args.seed, tuple(args.resolution))
+            cell = bench_cell(args.calibration, name, fragment, args.trials, args.seed, tuple(args.resolution), **env_kwargs)
             reference = paper.DEBRIDEMENT_RESULTS.get((name, fragment))
             picks = paper.DEBRIDEMENT_PICKS_PER_CELL
             paper_text = f"{reference['success']}/{picks} A{reference['A']} B{reference['B']} C{reference['C']}" if reference else "-"
