@@ -5,6 +5,10 @@ under the paper) to the rigid body's runs, whose touches went up to 10 mm under 
 checks it on the networks' runs, which the fit never saw. Also prints the control: the same
 slopes for the touches sent over the paper, where there is nothing to give way, and the
 identified values the simulator uses (:data:`dvrk_gym.sim.identified.PAPER_CONTACT`).
+Last, the rigid body's fit again with a dead zone (``--dead-zones-mm``): both lines start
+that deep under the plane of the pushes, a hinge, and how well each fits says whether the
+records put the give and the slide at first contact or a little under it (F: the slide's
+improvement over the straight line, one parameter, in units of its residual variance).
 A few seconds:
 
     python benchmarks/identify_contact.py
@@ -18,7 +22,7 @@ import numpy as np
 
 from dvrk_gym import paper
 from dvrk_gym.calibration.datasets import PaperTableRuns, load_paper_table_runs
-from dvrk_gym.fidelity.contact import FIXED_SETTINGS, ContactFit, fit_contact, height_over_pushes, pushes_of_run
+from dvrk_gym.fidelity.contact import FIXED_SETTINGS, MAX_DEAD_ZONE_M, ContactFit, fit_contact, height_over_pushes, pushes_of_run
 from dvrk_gym.sim.identified import PAPER_CONTACT
 
 FITS = (
@@ -57,8 +61,36 @@ def format_fit(name: str, fit: ContactFit) -> str:
     )
 
 
+def dead_zone_lines(runs: PaperTableRuns, dead_zones_mm: list[float]) -> list[str]:
+    """The rigid body's fit at each dead zone (mm): slide, give, residuals, and F against none."""
+    straight = fit_contact(runs, ("RBT",))
+    equations = 2 * straight.touches
+    unknowns = 2 + 2 * FIXED_SETTINGS
+    lines = []
+    for dead_zone in dead_zones_mm:
+        fit = fit_contact(runs, ("RBT",), dead_zone_m=1e-3 * dead_zone)
+        rss, rss_straight = equations * fit.slide_rms_px**2, equations * straight.slide_rms_px**2
+        f_statistic = (rss_straight - rss) / (rss / (equations - unknowns - 1))
+        lines.append(
+            f"  dead zone {dead_zone:4.2f} mm: slide {np.hypot(*fit.slide_per_depth):.2f} mm per mm"
+            f" ({fit.slide_per_depth[0]:+.3f}, {fit.slide_per_depth[1]:+.3f}), give {fit.give:.3f},"
+            f" residuals {fit.slide_rms_px:.2f} px / {1e3 * fit.give_rms_m:.3f} mm, F {f_statistic:+.1f}"
+        )
+    return lines
+
+
 def main() -> None:
-    argparse.ArgumentParser(description=__doc__.split("\n\n")[0]).parse_args()
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument(
+        "--dead-zones-mm",
+        type=float,
+        nargs="+",
+        default=[0.0, 0.25, 0.5, 0.75, 1.0, 1.5, 2.0, 3.0],
+        help="dead zones to fit the rigid body's runs with, mm (default: %(default)s)",
+    )
+    args = parser.parse_args()
+    if any(not 0.0 <= d <= 1e3 * MAX_DEAD_ZONE_M for d in args.dead_zones_mm):
+        parser.error(f"--dead-zones-mm must lie in [0, {1e3 * MAX_DEAD_ZONE_M:g}], got {args.dead_zones_mm}")
     runs = load_paper_table_runs()
     print("touches sent under the jaws pushed onto the paper that day (the fixed yaws), least squares with an intercept per run")
     print("(standard errors in brackets):")
@@ -79,6 +111,9 @@ def main() -> None:
         f"identified (dvrk_gym.sim.identified.PAPER_CONTACT): slide {PAPER_CONTACT.slide_per_depth} m/m, give {PAPER_CONTACT.give};"
         f" this fit rounds to ({identified.slide_per_depth[0]:.3f}, {identified.slide_per_depth[1]:.3f}), {identified.give:.3f}"
     )
+    print("the rigid body's fit with a dead zone (both lines start that deep under the pushes; the simulator's has none):")
+    for line in dead_zone_lines(runs, args.dead_zones_mm):
+        print(line)
 
 
 if __name__ == "__main__":

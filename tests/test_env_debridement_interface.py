@@ -20,6 +20,7 @@ from dvrk_gym.sim.endoscope.fragment_detection import detect_fragments
 from dvrk_gym.sim.physics.scene import WORKSPACE_CENTER_M
 from dvrk_gym.sim.robot import ik
 from dvrk_gym.sim.robot import kinematics as kin
+from dvrk_gym.sim.table.contact import CONTACTS
 
 
 @pytest.fixture
@@ -199,12 +200,17 @@ def test_debride_command_writes_the_trial_table(tmp_path, capsys):
             "640",
             "360",
             "--no-progress",
+            "--contact",
+            "rigid",
         ]
     )
     assert args.func(args) == 0
     printed = capsys.readouterr().out
     assert "total  success" in printed and "paper" in printed
     written = json.loads((tmp_path / "out" / "debridement_rbt_raisin.json").read_text())
+    assert written["contact"] == "rigid"  # the paper the picks met is recorded
+    choices = next(a.choices for a in parser._subparsers._group_actions[0].choices["debride"]._actions if a.dest == "contact")
+    assert set(choices) == set(CONTACTS)
     # One outcome per pick: eight, or fewer when no raisin is left on the paper sooner (a pick can carry two).
     assert 7 <= len(written["trials"][0]["outcomes"].split(",")) <= 8
     assert written["totals"]["success"] >= 6

@@ -74,26 +74,50 @@ def test_the_identified_contact_is_the_fit_to_the_rigid_bodys_runs():
     assert (np.abs(fit.slide_per_depth) > 4 * fit.slide_se).all() and fit.give > 20 * fit.give_se  # well away from none
 
 
-def test_the_fit_gives_back_a_known_give_and_slide():
-    """Records rewritten by a known contact (the real sent heights and pushes) are fitted back."""
+def _rewritten(methods, slide, give, dead_zone_m=0.0, noise_px=0.5):
+    """The records with the image offsets and reported heights of ``methods``' touches made
+    again by a known contact (the real sent heights and pushes), and the camera used."""
     runs = load_paper_table_runs()
-    camera, slide, give = StereoCamera(), np.array([0.3, -0.6]), 0.25
+    camera = StereoCamera()
     rng = np.random.default_rng(0)
     end_effector, reported = runs.end_effector_px.copy(), runs.reported.copy()
-    for method in ("DNN", "DNN+RF"):
+    for method in methods:
         for setting in range(5):
             mine = np.flatnonzero((runs.method == method) & (runs.setting == setting))
-            depth = depth_under_pushes(runs.sent[mine], pushes_of_run(runs, method, setting))
+            depth = np.maximum(depth_under_pushes(runs.sent[mine], pushes_of_run(runs, method, setting)) - dead_zone_m, 0.0)
             run_offset = rng.normal(0.0, 10.0, 2)  # px: the run's own miss
             for i, d in zip(mine, depth, strict=True):
                 point = runs.sent[i]
                 uv, _ = camera.project(np.array([point, point + np.r_[slide * d, 0.0]]))
-                end_effector[i] = runs.circle_px[i] + run_offset + (uv[1] - uv[0]) + rng.normal(0.0, 0.5, 2)
+                end_effector[i] = runs.circle_px[i] + run_offset + (uv[1] - uv[0]) + rng.normal(0.0, noise_px, 2)
                 reported[i, 2] = runs.sent[i, 2] + 2e-4 + give * d + rng.normal(0.0, 2e-5)
-    rewritten = dataclasses.replace(runs, end_effector_px=end_effector, reported=reported)
+    return dataclasses.replace(runs, end_effector_px=end_effector, reported=reported), camera
+
+
+def test_the_fit_gives_back_a_known_give_and_slide():
+    """Records rewritten by a known contact (the real sent heights and pushes) are fitted back."""
+    slide, give = np.array([0.3, -0.6]), 0.25
+    rewritten, camera = _rewritten(("DNN", "DNN+RF"), slide, give)
     fit = fit_contact(rewritten, ("DNN", "DNN+RF"), camera)
     np.testing.assert_allclose(fit.slide_per_depth, slide, atol=0.02)
     assert fit.give == pytest.approx(give, abs=0.005)
+    assert fit.dead_zone_m == 0.0 and fit.slide_rms_px == pytest.approx(0.5, rel=0.2)  # px: the noise put in
+
+
+def test_a_dead_zone_is_fitted_back_and_fits_best_where_it_is():
+    slide, give = np.array([-0.8, 0.25]), 0.45
+    rewritten, camera = _rewritten(("RBT",), slide, give, dead_zone_m=0.0015)
+    fits = {d: fit_contact(rewritten, ("RBT",), camera, dead_zone_m=1e-3 * d) for d in (0.0, 1.5, 3.0)}
+    np.testing.assert_allclose(fits[1.5].slide_per_depth, slide, atol=0.02)
+    assert fits[1.5].give == pytest.approx(give, abs=0.005) and fits[1.5].dead_zone_m == 0.0015
+    assert fits[1.5].slide_rms_px < min(fits[0.0].slide_rms_px, fits[3.0].slide_rms_px)
+    assert fits[1.5].give_rms_m < min(fits[0.0].give_rms_m, fits[3.0].give_rms_m)
+    assert fits[3.0].touches_under < fits[1.5].touches_under < fits[0.0].touches_under == 93
+    for bad in (-1e-3, 0.02, float("nan"), True):
+        with pytest.raises(ValueError, match="dead_zone_m"):
+            fit_contact(rewritten, ("RBT",), camera, dead_zone_m=bad)
+    with pytest.raises(ValueError, match="beyond 10 mm under the paper"):
+        fit_contact(rewritten, ("DNN",), camera, dead_zone_m=0.01)
 
 
 def test_the_fit_refuses_unknown_methods_and_runs_that_never_went_under():
@@ -122,4 +146,8 @@ def test_the_identification_script_prints_the_fit_and_its_check():
     assert sum(line.strip().startswith("held out:") for line in out.splitlines()) == 3
     control = [line for line in out.splitlines() if line.strip().startswith("RBT ") and "image u" in line]
     assert len(control) == 1 and "reported minus sent -0.006 mm/mm" in control[0]  # over the paper: nothing gives
-    assert out.splitlines()[-1].endswith("this fit rounds to (-0.710, 0.232), 0.390")
+    assert any(line.endswith("this fit rounds to (-0.710, 0.232), 0.390") for line in out.splitlines())
+    hinges = [line for line in out.splitlines() if line.strip().startswith("dead zone")]
+    assert len(hinges) == 8 and hinges[0].endswith("F +0.0") and "slide 0.75 mm per mm" in hinges[0]
+    f_by_zone = {float(line.split()[2]): float(line.split("F ")[-1]) for line in hinges}
+    assert max(f_by_zone, key=f_by_zone.get) in (0.75, 1.0) and max(f_by_zone.values()) > 10  # the records' hinge

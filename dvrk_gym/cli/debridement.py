@@ -40,7 +40,7 @@ def _run_debride(args: argparse.Namespace) -> int:
     bias, bias_seed = settings.get("bias", args.bias), int(settings.get("bias_seed", args.bias_seed))
     policy = CalibratedPolicy(calibrator, target=fragment_target)
     world = {"bias": bias, "bias_seed": bias_seed, "camera_resolution": tuple(args.resolution)}
-    trials = run_debridement(policy, args.trials, args.seed, args.fragment, **world, progress=not args.no_progress)
+    trials = run_debridement(policy, args.trials, args.seed, args.fragment, **world, progress=not args.no_progress, contact=args.contact)
     text = format_trial_table(trials, args.calibrator, args.fragment, args.seed)
     print(text)
     meta = {
@@ -51,6 +51,7 @@ def _run_debride(args: argparse.Namespace) -> int:
         "bias": bias,
         "bias_seed": bias_seed,
         "camera_resolution": list(args.resolution),
+        "contact": args.contact,
     }
     written = save_cell(
         trials, args.out / cell_name(args.calibrator, args.fragment), meta, cell_label(args.calibrator, args.fragment), text
@@ -85,6 +86,13 @@ def add_commands(subparsers: argparse._SubParsersAction) -> None:
         help="run the two-phase calibration in --calibration first if it holds no model (without it, a folder with no model is an error)",
     )
     debride.add_argument("--seed", type=int, default=0, help="seeds the trials (default: %(default)s)")
+    debride.add_argument(
+        "--contact",
+        choices=("compliant", "rigid"),
+        default="compliant",
+        help="the paper under the picks: compliant (jaws sent under the floor they stall on slide along it, as the "
+        "authors' records of their table's runs show) or rigid (they stall in place) (default: %(default)s)",
+    )
     debride.add_argument("--out", type=Path, default=Path("dvrk_gym_out/debridement"), help="output folder (default: %(default)s)")
     add_instrument_options(debride, note=", with --calibrate if the folder has no run yet")
     add_progress_option(debride)

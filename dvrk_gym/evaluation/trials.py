@@ -87,6 +87,7 @@ def run_debridement(
     camera_resolution: tuple[int, int] = paper.ENDOSCOPE_RESOLUTION_PX,
     max_picks: int | None = None,
     progress: bool = False,
+    contact: str = "compliant",
 ) -> list[Trial]:
     """``n_trials`` debridement trials of ``policy`` on a fresh Debridement-v0 (primitive mode), closed after.
 
@@ -100,8 +101,15 @@ def run_debridement(
         camera_resolution: the endoscope's image size (width, height), pixels.
         max_picks: picks per trial (None: the env's, the paper's eight).
         progress: show a progress bar.
+        contact: the paper under the picks, Debridement-v0's ``contact`` ("compliant" or "rigid").
     """
-    settings: dict[str, Any] = {"fragment": fragment, "bias": bias, "bias_seed": bias_seed, "camera_resolution": tuple(camera_resolution)}
+    settings: dict[str, Any] = {
+        "fragment": fragment,
+        "bias": bias,
+        "bias_seed": bias_seed,
+        "camera_resolution": tuple(camera_resolution),
+        "contact": contact,
+    }
     if max_picks is not None:
         settings["max_picks"] = max_picks
     env = gym.make("dvrk_gym/Debridement-v0", **settings)

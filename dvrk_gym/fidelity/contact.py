@@ -35,6 +35,7 @@ import numpy as np
 from dvrk_gym import paper
 from dvrk_gym.calibration.datasets import PaperTableRuns
 from dvrk_gym.sim.endoscope.camera import StereoCamera
+from dvrk_gym.utils.checks import check_float
 
 __all__ = ["ContactFit", "FIXED_SETTINGS", "depth_under_pushes", "fit_contact", "height_over_pushes", "pushes_of_run"]
 
@@ -42,6 +43,8 @@ FIXED_SETTINGS = 5
 """The table's first five settings are the fixed yaws, the ones with Phase II pushes."""
 JACOBIAN_STEP_M = 1e-3
 """The step of the image's finite-difference Jacobian of the plane, metres."""
+MAX_DEAD_ZONE_M = 0.01
+"""The largest dead zone :func:`fit_contact` takes, metres (the rigid body's touches went 10 mm deep)."""
 
 
 @dataclass(frozen=True)
@@ -55,7 +58,10 @@ class ContactFit:
         give: the share of the depth the arm reports itself over where it was sent.
         give_se: its standard error.
         touches: how many touches the fit used.
-        touches_under: how many of them were sent under the paper.
+        touches_under: how many of them were sent under the paper, beyond the dead zone.
+        dead_zone_m: the depth under the plane of the pushes at which both lines begin, m.
+        slide_rms_px: the RMS residual of the image offsets about the fit, left-image pixels.
+        give_rms_m: the RMS residual of the reported-minus-sent heights about the fit, m.
     """
 
     slide_per_depth: np.ndarray
@@ -64,6 +70,9 @@ class ContactFit:
     give_se: float
     touches: int
     touches_under: int
+    dead_zone_m: float
+    slide_rms_px: float
+    give_rms_m: float
 
 
 def pushes_of_run(runs: PaperTableRuns, method: str, setting: int) -> np.ndarray:
@@ -100,18 +109,19 @@ def _plane_jacobian(camera: StereoCamera, point: np.ndarray) -> np.ndarray:
     return np.c_[uv[1] - uv[0], uv[2] - uv[0]] / step
 
 
-def _least_squares(design: np.ndarray, target: np.ndarray, columns: int) -> tuple[np.ndarray, np.ndarray]:
-    """The first ``columns`` coefficients of the least-squares fit and their standard errors."""
+def _least_squares(design: np.ndarray, target: np.ndarray, columns: int) -> tuple[np.ndarray, np.ndarray, float]:
+    """The first ``columns`` coefficients of the least-squares fit, their standard errors, and
+    the RMS residual."""
     coefficients, *_ = np.linalg.lstsq(design, target, rcond=None)
     residual = target - design @ coefficients
     dof = len(target) - design.shape[1]
     if dof <= 0:
         raise ValueError(f"too few touches to fit: {len(target)} equations for {design.shape[1]} unknowns")
     covariance = np.linalg.pinv(design.T @ design) * float(residual @ residual) / dof
-    return coefficients[:columns], np.sqrt(np.diag(covariance)[:columns])
+    return coefficients[:columns], np.sqrt(np.diag(covariance)[:columns]), float(np.sqrt(residual @ residual / len(target)))
 
 
-def fit_contact(runs: PaperTableRuns, methods: tuple[str, ...], camera: StereoCamera | None = None) -> ContactFit:
+def fit_contact(runs: PaperTableRuns, methods: tuple[str, ...], camera: StereoCamera | None = None, dead_zone_m: float = 0.0) -> ContactFit:
     """Fit the give and the slide (module docstring) to the fixed-yaw runs of ``methods``.
 
     Args:
@@ -119,18 +129,24 @@ def fit_contact(runs: PaperTableRuns, methods: tuple[str, ...], camera: StereoCa
         methods: which methods' runs ("RBT", "DNN", "DNN+RF"), each at the five fixed yaws.
         camera: the endoscope whose left image the offsets are measured in; default the
             identified one.
+        dead_zone_m: fit both lines on the depth beyond this much under the plane of the
+            pushes (a hinge: nothing gives or slides before it), in [0, 0.01] m; 0 is the
+            straight lines the simulator uses. Comparing the fits' residuals says where the
+            records put a hinge.
 
-    Raises ValueError if no touch of ``methods`` was sent under the paper.
+    Raises ValueError if no touch of ``methods`` was sent beyond the dead zone, or for a
+    dead zone out of range.
     """
     unknown = set(methods) - set(paper.METHOD_LABELS.values())
     if not methods or unknown:
         raise ValueError(f"methods must be some of {sorted(paper.METHOD_LABELS.values())}, got {methods}")
+    dead_zone = check_float("dead_zone_m", dead_zone_m, 0.0, MAX_DEAD_ZONE_M, unit="m")
     camera = StereoCamera() if camera is None else camera
     slide_rows, offsets, rise_rows, rises = [], [], [], []
     runs_total = len(methods) * FIXED_SETTINGS
     for run, (method, setting) in enumerate((m, s) for m in methods for s in range(FIXED_SETTINGS)):
         mine = (runs.method == method) & (runs.setting == setting)
-        depth = depth_under_pushes(runs.sent[mine], pushes_of_run(runs, method, setting))
+        depth = np.maximum(depth_under_pushes(runs.sent[mine], pushes_of_run(runs, method, setting)) - dead_zone, 0.0)
         offset = runs.end_effector_px[mine] - runs.circle_px[mine]
         for point, d, o, rise in zip(runs.sent[mine], depth, offset, runs.reported[mine, 2] - runs.sent[mine, 2], strict=True):
             row = np.zeros((2, 2 + 2 * runs_total))
@@ -144,7 +160,9 @@ def fit_contact(runs: PaperTableRuns, methods: tuple[str, ...], camera: StereoCa
             rises.append(rise)
     depths = np.array([r[0] for r in rise_rows])
     if not (depths > 0).any():
-        raise ValueError(f"no touch of {methods} was sent under the paper: nothing to fit")
-    slide, slide_se = _least_squares(np.concatenate(slide_rows), np.concatenate(offsets), 2)
-    give, give_se = _least_squares(np.array(rise_rows), np.array(rises), 1)
-    return ContactFit(slide, slide_se, float(give[0]), float(give_se[0]), len(depths), int((depths > 0).sum()))
+        raise ValueError(f"no touch of {methods} was sent beyond {dead_zone * 1e3:g} mm under the paper: nothing to fit")
+    slide, slide_se, slide_rms = _least_squares(np.concatenate(slide_rows), np.concatenate(offsets), 2)
+    give, give_se, give_rms = _least_squares(np.array(rise_rows), np.array(rises), 1)
+    return ContactFit(
+        slide, slide_se, float(give[0]), float(give_se[0]), len(depths), int((depths > 0).sum()), dead_zone, slide_rms, give_rms
+    )
