@@ -8,7 +8,9 @@ identified values the simulator uses (:data:`dvrk_gym.sim.identified.PAPER_CONTA
 Last, the rigid body's fit again with a dead zone (``--dead-zones-mm``): both lines start
 that deep under the plane of the pushes, a hinge, and how well each fits says whether the
 records put the give and the slide at first contact or a little under it (F: the slide's
-improvement over the straight line, one parameter, in units of its residual variance).
+improvement over the straight line, one parameter, in units of its residual variance; the
+best of several dead zones is a choice made on the same touches, so its F overstates what a
+single test would say).
 A few seconds:
 
     python benchmarks/identify_contact.py

@@ -2,7 +2,7 @@
 
 A pick aims its command at the fragment the endoscope sees, then lowers the open jaws
 ``grip_depth_m`` (2 mm, the authors' ``--z_offset``) under that target onto a floor just over
-the paper; Debridement-v0's compliant paper slides jaws sent under that floor as GridTouch-v0's
+the paper; Debridement-v0's compliant paper slides jaws sent under the paper as GridTouch-v0's
 touches slide (:mod:`dvrk_gym.sim.table.contact`). For the first pick of each of ``--trials``
 seeded trials (the same fragments for every calibrator), this prints the medians, in mm, of:
 
@@ -13,8 +13,9 @@ seeded trials (the same fragments for every calibrator), this prints the medians
 - ``+2 mm seen``: how far the aimed height moves when the seen point is raised 2 mm (the
   base frame's z): 2 for a map that follows height, 0 for one that puts every point on the
   paper;
-- ``under floor``: how far the pick's lowered command goes under the floor, and ``slide``:
-  how far the compliant paper then slides the jaws.
+- ``under paper``: how far the pick's lowered command sends the closed jaw tip under the
+  paper (predicted from the cable state at the trial's start), and ``slide``: how far the
+  env's paper then slides the jaws (none on a rigid one).
 
 Evaluation only (it reads the simulator's truth). A few seconds per calibrator::
 
@@ -40,9 +41,7 @@ from dvrk_gym.envs.grid_touch import tool_pose
 from dvrk_gym.sim.physics.scene import WORKSPACE_CENTER_M
 from dvrk_gym.sim.robot import ik
 from dvrk_gym.sim.robot import kinematics as kin
-from dvrk_gym.sim.table.contact import COMPLIANT
 from dvrk_gym.sim.table.fragment_types import FRAGMENT_TYPES
-from dvrk_gym.sim.table.grasp import GRASP_TIP_CLEARANCE_M
 
 PAPER_Z_M = float(WORKSPACE_CENTER_M[2])
 RAISE_M = 0.002
@@ -63,7 +62,7 @@ def aimed_tip(env: gym.Env, command: np.ndarray) -> np.ndarray:
 
 def first_picks(env: gym.Env, calibrator: object, trials: int) -> np.ndarray:
     """(trials, 6) mm per first pick: seen, centre, aimed, aimed change for the raised seen
-    point, depth under the floor, slide (see the module)."""
+    point, depth under the paper, slide (see the module)."""
     camera = env.unwrapped.world.camera
     grip_depth = env.unwrapped.config.timing.grip_depth_m
     rows = []
@@ -76,8 +75,8 @@ def first_picks(env: gym.Env, calibrator: object, trials: int) -> np.ndarray:
         tips = [aimed_tip(env, np.array([*aim, kin.nearest_paper_yaw(yaw)])) for aim in aims]
         centres = env.unwrapped.table.true_fragment_positions()
         centre = centres[np.argmin(np.linalg.norm(centres[:, :2] - seen[:2], axis=1))]
-        under = PAPER_Z_M + GRASP_TIP_CLEARANCE_M - (tips[0][2] - grip_depth)
-        slide = float(np.linalg.norm(COMPLIANT.slide_m(under)))
+        under = PAPER_Z_M - (tips[0][2] - grip_depth)
+        slide = float(np.linalg.norm(env.unwrapped.table.contact.slide_m(under)))
         rows.append([seen[2] - PAPER_Z_M, centre[2] - PAPER_Z_M, tips[0][2] - PAPER_Z_M, tips[1][2] - tips[0][2], max(under, 0.0), slide])
     return 1e3 * np.array(rows)
 
@@ -90,8 +89,8 @@ def main() -> None:
     args = parser.parse_args()
     if not 1 <= args.trials <= 1000:
         parser.error(f"--trials must be in [1, 1000], got {args.trials}")
-    print(f"first picks of {args.trials} trials; medians, mm: heights over the paper, depth under the floor, slide")
-    print(f"{'fragment':<14}{'calibrator':<10}{'seen':>8}{'centre':>8}{'aimed':>8}{'+2 mm seen':>12}{'under floor':>13}{'slide':>8}")
+    print(f"first picks of {args.trials} trials; medians, mm: heights over the paper, depth under it, slide")
+    print(f"{'fragment':<14}{'calibrator':<10}{'seen':>8}{'centre':>8}{'aimed':>8}{'+2 mm seen':>12}{'under paper':>13}{'slide':>8}")
     world = read_calibration(parser, args.calibration).env_kwargs()
     calibrators = {name: load_calibrator(args.calibration, name)[0] for name in args.calibrators}
     for fragment in sorted(FRAGMENT_TYPES):

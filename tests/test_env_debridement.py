@@ -145,21 +145,61 @@ def test_perfectly_calibrated_pick_delivers_the_fragment(make, kind):
     assert info["fragments_on_paper"] == 7
 
 
-def test_a_pick_sent_under_the_floor_slides_its_jaws_as_a_grid_touch_does(make):
+def test_a_pick_sent_under_the_paper_slides_its_jaws_as_a_grid_touch_does(make):
     """The jaws stall on the floor over the paper and, on the compliant paper, slide along it
-    by the identified slide at the command's depth under that floor; on the rigid one they
-    stall where they are. The pick's grip depth takes the oracle's command under the floor."""
+    by the identified slide at the depth the command went under the paper (as GridTouch's
+    touches do); on the rigid one they stall where they are. The encoders do not see it. The
+    pick's grip depth takes the oracle's command under the paper."""
     tips = {}
     for contact in ("rigid", "compliant"):
         env = make(fragment="pumpkin_seed", contact=contact)
         env.reset(seed=0)
         fragment = _first_on_paper(env)
-        depth = SURFACE_Z_M + GRASP_TIP_CLEARANCE_M - (float(fragment.position()[2]) - env.unwrapped.config.timing.grip_depth_m)
+        depth = SURFACE_Z_M - (float(fragment.position()[2]) - env.unwrapped.config.timing.grip_depth_m)
         _, _, _, _, info = env.step(oracle_action(fragment))
         tips[contact] = np.asarray(info["true_tip_at_grip"], dtype=float)
-    assert depth > 0.001  # the command went a millimetre and more under the floor
+    assert depth > 0.0005  # the command went more than half a millimetre under the paper
     np.testing.assert_allclose(tips["compliant"][:2] - tips["rigid"][:2], COMPLIANT.slide_m(depth), atol=1e-4)
     assert tips["compliant"][2] == pytest.approx(tips["rigid"][2], abs=1e-4)  # both on the floor
+
+
+RIGID_PICKS_7275B67 = [
+    [0.03000533266583569, 0.043079809063487184, -0.16308750012894233, -0.029207911461806364, 0.03415699924186682, -0.15999307280829408],
+    [0.026632936650028066, 0.048163317615940185, -0.16298154404037973, -0.02234058769408206, 0.03507230696305354, -0.15999110088927193],
+]
+"""Two picks sent under the paper on 7275b67, before the picks met the compliant paper: the true
+jaw tip at the grip and after the drop (m), as the test below makes them."""
+
+
+def test_the_rigid_paper_picks_as_before_the_picks_slid(make):
+    env = make(fragment="pumpkin_seed", bias="paper", contact="rigid")
+    env.reset(seed=3)
+    for action, recorded in zip(([0.03, 0.04, -0.1585, 0.3], [0.025, 0.045, -0.1625, -0.5]), RIGID_PICKS_7275B67, strict=True):
+        _, _, _, _, info = env.step(np.array(action, dtype=np.float32))
+        now = [*info["true_tip_at_grip"], *env.unwrapped.world.true_touch_point()]
+        np.testing.assert_allclose(now, recorded, rtol=0.0, atol=1e-12)
+
+
+@pytest.mark.parametrize("contact", ["rigid", "compliant"])
+def test_holding_the_tool_down_in_delta_mode_slides_the_jaws_once_not_every_step(make, contact):
+    """Each delta step sent 5 mm down from the floor slides the jaws by the slide at that depth
+    under the paper, from where the encoders say the tool is, so the slide does not build up
+    from step to step; the reported position stays put."""
+    env = make(action_mode="delta", max_steps=60, contact=contact)
+    env.reset(seed=0)
+    world = env.unwrapped.world
+    down = np.array([0.0, 0.0, -0.005, 0.0], dtype=np.float32)
+    tips, reports = [], []
+    for _ in range(40):
+        observation, *_ = env.step(down)
+        tips.append(world.true_touch_point().copy())
+        reports.append(observation["reported_pose"][:3].copy())
+    tips, reports = np.array(tips[-10:]), np.array(reports[-10:])
+    assert tips[:, 2].max() < SURFACE_Z_M + GRASP_TIP_CLEARANCE_M + 3e-4  # on the floor
+    assert np.ptp(tips[:, :2], axis=0).max() < 2e-4 and np.ptp(reports, axis=0).max() < 1e-6  # m: no drift
+    if contact == "compliant":
+        settled = float(np.linalg.norm(tips[-1, :2] - reports[-1, :2]))
+        assert settled > 0.6 * float(np.linalg.norm(COMPLIANT.slide_m(0.005 - GRASP_TIP_CLEARANCE_M)))
 
 
 def test_pick_5_mm_off_along_a_seed_is_judged_a_calibration_miss(make):

@@ -207,14 +207,14 @@ def test_debride_command_writes_the_trial_table(tmp_path, capsys):
     assert args.func(args) == 0
     printed = capsys.readouterr().out
     assert "total  success" in printed and "paper" in printed
-    written = json.loads((tmp_path / "out" / "debridement_rbt_raisin.json").read_text())
-    assert written["contact"] == "rigid"  # the paper the picks met is recorded
+    written = json.loads((tmp_path / "out" / "debridement_rbt_raisin_rigid.json").read_text())
+    assert written["contact"] == "rigid"  # the paper the picks met is recorded, and named: a compliant run does not overwrite it
     choices = next(a.choices for a in parser._subparsers._group_actions[0].choices["debride"]._actions if a.dest == "contact")
     assert set(choices) == set(CONTACTS)
     # One outcome per pick: eight, or fewer when no raisin is left on the paper sooner (a pick can carry two).
     assert 7 <= len(written["trials"][0]["outcomes"].split(",")) <= 8
     assert written["totals"]["success"] >= 6
-    assert (tmp_path / "out" / "debridement_rbt_raisin.png").stat().st_size > 1000
+    assert (tmp_path / "out" / "debridement_rbt_raisin_rigid.png").stat().st_size > 1000
 
 
 def test_nested_settings_can_be_given_as_dicts_and_bad_ones_are_refused():

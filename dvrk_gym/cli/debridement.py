@@ -16,6 +16,7 @@ from pathlib import Path
 
 from dvrk_gym import paper
 from dvrk_gym.cli.options import add_instrument_options, add_progress_option, writable_folder
+from dvrk_gym.sim.table.contact import CONTACTS
 
 
 def _run_debride(args: argparse.Namespace) -> int:
@@ -53,9 +54,9 @@ def _run_debride(args: argparse.Namespace) -> int:
         "camera_resolution": list(args.resolution),
         "contact": args.contact,
     }
-    written = save_cell(
-        trials, args.out / cell_name(args.calibrator, args.fragment), meta, cell_label(args.calibrator, args.fragment), text
-    )
+    stem = cell_name(args.calibrator, args.fragment) + ("" if args.contact == "compliant" else f"_{args.contact}")
+    label = cell_label(args.calibrator, args.fragment) + ("" if args.contact == "compliant" else f", {args.contact} paper")
+    written = save_cell(trials, args.out / stem, meta, label, text)
     print(f"wrote {written['json']}, {written['txt']}, {written['png']}")
     return 0
 
@@ -88,7 +89,7 @@ def add_commands(subparsers: argparse._SubParsersAction) -> None:
     debride.add_argument("--seed", type=int, default=0, help="seeds the trials (default: %(default)s)")
     debride.add_argument(
         "--contact",
-        choices=("compliant", "rigid"),
+        choices=sorted(CONTACTS),
         default="compliant",
         help="the paper under the picks: compliant (jaws sent under the floor they stall on slide along it, as the "
         "authors' records of their table's runs show) or rigid (they stall in place) (default: %(default)s)",

@@ -17,9 +17,9 @@ gripper); every reset rebuilds both. Two action modes:
   space), lower, grip, raise, to the receptacle, drop and rotate. The episode ends after
   ``max_picks`` picks or when no fragment is left on the paper.
   Lowered onto the paper, the jaws stall on a floor just above it; a command that goes
-  on under that floor slides them along the paper as GridTouch's touches slide
-  (``contact``, :mod:`dvrk_gym.sim.table.contact`; ``"rigid"`` stalls them in place), so
-  a command that touches a circle in GridTouch picks at the same place here.
+  on under the paper slides them along it as GridTouch's touches slide
+  (``contact``, :mod:`dvrk_gym.sim.table.contact`; ``"rigid"`` stalls them in place), by
+  as much as a GridTouch touch sent as deep; the reported pose does not show it.
 * ``"delta"``: Cartesian and jaw increments at 10 Hz for learning agents,
   ``(dx, dy, dz, djaw)`` (metres and radians per step), physics stepped for the whole
   control period; truncated after ``max_steps``.

@@ -50,7 +50,9 @@ class PickTiming:
     Attributes:
         approach_height_m: the free move ends this far above the target, m.
         grip_depth_m: the jaws are lowered to this far below the target (the floor,
-            GRASP_TIP_CLEARANCE_M above the paper, stops them first), m.
+            GRASP_TIP_CLEARANCE_M above the paper, stops them first; a command that goes on
+            under the paper slides them along it, ``contact``), m. The authors' pick went
+            2 mm under its target (their ``--z_offset``).
         raise_height_m: how far the jaws lift the fragment, m.
         drop_height_m: the closed jaw tip's height above the receptacle's floor when the
             jaws open (its walls are 14 mm high), m.

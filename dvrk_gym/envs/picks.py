@@ -3,7 +3,8 @@
 One pick starts from a base-frame target ``(bx, by, bz)`` and a yaw: the commanded
 (reported) position that should put the closed jaw tip on a fragment. It moves to above
 the target in free space with the jaws open (``to_seed``), lowers them stepping physics
-onto a floor just above the paper (``lower``), closes them (``grip``), lifts (``raise``),
+onto a floor just above the paper (``lower``; a target under the paper slides them along
+it, :class:`~dvrk_gym.sim.table.table.DebridementTable`), closes them (``grip``), lifts (``raise``),
 carries what it holds to the receptacle (``to_receptacle``), opens the jaws and turns the
 tool back to yaw 0 (``drop_and_rotate``). :class:`PickTiming` sets its heights, speeds
 and dwells; :class:`PickPrimitive` runs it on a world and its table and returns what the

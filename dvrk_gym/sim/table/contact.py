@@ -9,8 +9,9 @@ The model gives where the jaws touch (GridTouch-v0's ``true_tip_position`` and w
 endoscope sees); the arm's joints and its PyBullet body follow the command, so a rendered
 touch under the paper shows the jaws through it, as the world's own ``true_touch_point`` puts them.
 Debridement-v0's picks meet the same paper: their jaws stall on a floor just over it and
-slide along it by :meth:`PaperContact.slide_m` of the depth under that floor
-(:class:`~dvrk_gym.sim.table.table.DebridementTable`).
+slide along it by :meth:`PaperContact.slide_m` of the depth their command goes under the paper
+(:class:`~dvrk_gym.sim.table.table.DebridementTable`), so a command slides the jaws as far in
+either env.
 :class:`PaperContact` is that model; :data:`COMPLIANT` has the identified values and
 :data:`RIGID` stops at first contact, reporting all the depth, without sliding (the
 simulator before the records were read); ``CONTACTS`` names them for the envs' ``contact``.
@@ -89,8 +90,9 @@ class PaperContact:
 
     def slide_m(self, depth_m: float) -> np.ndarray:
         """How far the jaws slide along the robot's x and y, (2,) m, under a command ``depth_m``
-        metres below first contact (none at a depth of 0 or less)."""
-        depth = max(float(depth_m), 0.0)
+        metres below first contact (none at a depth of 0 or less). Raises ValueError for a
+        depth that is not a finite number."""
+        depth = max(check_float("depth_m", depth_m, unit="m"), 0.0)
         return np.array([self.slide_per_depth[0] * depth, self.slide_per_depth[1] * depth])
 
 

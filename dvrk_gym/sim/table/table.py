@@ -144,8 +144,9 @@ class DebridementTable:
             min_tip_clearance_m: keep the closed jaw tip at least this high above the
                 paper: the part of the path below is raised onto that floor, where the
                 tool stalls (the silicone under the paper gives; the jaws do not dig in),
-                and slid along it as far as the table's ``contact`` slides jaws sent that
-                deep under it (as GridTouch-v0's touches are), metres; None: no floor.
+                and the jaws slide along it as far as the table's ``contact`` slides jaws
+                sent that deep under the paper (as GridTouch-v0's touches are; the encoders
+                do not see it), metres; None: no floor.
             limits: speed limits of this move (default: the world's).
             duration_s: make the move last exactly this long at constant speed, with
                 no settling (a control period), seconds; None: the trapezoidal profile.
@@ -161,10 +162,10 @@ class DebridementTable:
         dt = world.physics.time_step_s
         offset_start = world.q_true - world.cable.true_joints(world.q_cmd)
         floor = None if min_tip_clearance_m is None else float(WORKSPACE_CENTER_M[2]) + min_tip_clearance_m
-        commands, trues = self._joint_path(move, offset_start, floor)
+        commands, trues, slides = self._joint_path(move, offset_start, floor)
         noise_end = world.cable.true_joints(commands[-1], noise_rng) - trues[-1]
         fractions = np.arange(1, len(commands) + 1)[:, None] / len(commands)
-        path = np.array(trues) + (1.0 - fractions) * offset_start + fractions * noise_end
+        path = np.array(trues) + np.array(slides) + (1.0 - fractions) * offset_start + fractions * noise_end
         steps = gripper.follow(path)
         world.q_cmd, world.q_true = np.array(commands[-1]), path[-1].copy()
         world.jaw_angle = gripper.jaw_angle
@@ -173,40 +174,50 @@ class DebridementTable:
         world.clock.advance(steps * dt)
         return MoveResult(elapsed, world.q_cmd.copy(), world.q_true.copy(), clamped)
 
-    def _joint_path(self, move: CartesianMove, offset_start: np.ndarray, floor: float | None) -> tuple[list, list]:
-        """The joint commands of a stepped move and the true joints the cables make of them.
+    def _joint_path(self, move: CartesianMove, offset_start: np.ndarray, floor: float | None) -> tuple[list, list, list]:
+        """The joint commands of a stepped move, the true joints the cables make of them, and
+        how far the paper's slide moves the true joints at each waypoint (zeros off the paper).
 
         Args:
             move: the Cartesian move, sampled every physics step.
             offset_start: the true joints' offset from the cable model's at the start
                 (the last move's repeatability noise), rad / m.
             floor: the lowest height the closed jaw tip may reach, base frame z, m; None:
-                no floor. A waypoint that would take the tip ``depth`` under it is raised by
-                ``depth`` and moved by the contact's slide at that depth.
+                no floor. A waypoint that would take the tip under it is raised onto it; if
+                it would take the tip ``depth`` under the paper (where GridTouch-v0's touches
+                meet it), the slide there moves the true joints so that the jaws slide by the
+                contact's slide at that depth, while the command (what the encoders report) stays.
         """
         cable = self.world.cable
         slides = self.contact.slides
+        paper_z = float(WORKSPACE_CENTER_M[2])
         commands: list[np.ndarray] = []
         trues: list[np.ndarray] = []
+        slid: list[np.ndarray] = []
         q_ref = self.world.q_cmd
         for waypoint in _waypoints(move, self.world.physics.time_step_s):
             state = cable.get_state()
             q_ref, _ = ik.inverse_kinematics_clamped(waypoint, q_ref=q_ref)
             q_true = cable.true_joints(q_ref)
+            slide = np.zeros_like(q_true)
             if floor is not None:
                 gap = kin.touch_point(q_true + offset_start, cable.true_dh)[2] - floor
                 if gap < 0.0:  # the tip stays on the floor: lift this waypoint by the gap (the
                     # true tip follows the command one for one in height)
                     cable.set_state(state)
-                    waypoint = waypoint.copy()
-                    waypoint[2, 3] -= gap
-                    if slides:
-                        waypoint[:2, 3] += self.contact.slide_m(-gap)
-                    q_ref, _ = ik.inverse_kinematics_clamped(waypoint, q_ref=commands[-1] if commands else self.world.q_cmd)
+                    lifted = waypoint.copy()
+                    lifted[2, 3] -= gap
+                    q_ref, _ = ik.inverse_kinematics_clamped(lifted, q_ref=commands[-1] if commands else self.world.q_cmd)
                     q_true = cable.true_joints(q_ref)
+                    depth = paper_z - (floor + gap)  # how far under the paper the tip was sent
+                    if slides and depth > 0.0:
+                        lifted[:2, 3] += self.contact.slide_m(depth)
+                        q_slid, _ = ik.inverse_kinematics_clamped(lifted, q_ref=q_ref)
+                        slide = q_slid - q_ref
             commands.append(q_ref)
             trues.append(q_true)
-        return commands, trues
+            slid.append(slide)
+        return commands, trues, slid
 
     def actuate_jaws(self, jaw_angle_rad: float, duration_s: float | None = None) -> float:
         """Command the jaws to an opening (rad; <= 0 closes as far as what they hold allows).
