@@ -280,3 +280,24 @@ def test_baseline_help_imports_neither_torch_nor_pybullet():
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=Path(__file__).parent).stdout
     assert "sac_pick" in out and "HEAVY []" in out
+
+
+def test_an_agent_picks_on_the_paper_it_learnt_on(monkeypatch):
+    """A GridTouch agent that learnt on the rigid paper (an override) picks on it, and the
+    comparison says the calibrators' picks met the compliant one; by default both are compliant."""
+    from dvrk_gym.baselines import comparison
+    from dvrk_gym.calibration.pipeline import PipelineConfig
+
+    rigid = TrainConfig(agent="sac_her", env_overrides={"contact": "rigid"})
+    assert comparison.agent_contact(rigid) == "rigid"
+    assert comparison.agent_contact(TrainConfig(agent="sac_her")) == comparison.agent_contact(TrainConfig(agent="sac_pick")) == "compliant"
+    seen = {}
+    monkeypatch.setattr(comparison, "pick_policy", lambda agent: "policy")
+    monkeypatch.setattr(comparison, "run_debridement", lambda policy, *args, **world: seen.update(world) or [])
+    comparison.benchmark_debridement(SimpleNamespace(config=rigid), n_trials=1)
+    assert seen["contact"] == "rigid" and seen["bias"] == rigid.bias
+    comparison.benchmark_debridement(SimpleNamespace(config=TrainConfig(agent="sac_her")), n_trials=1)
+    assert seen["contact"] == "compliant"
+    notes = comparison.setting_mismatches(SimpleNamespace(config=rigid, label="sac_her (5 steps, seed 0)"), PipelineConfig())
+    assert notes == ["sac_her (5 steps, seed 0): learnt on the rigid paper and picks on it; the calibrators' picks met the compliant one"]
+    assert comparison.setting_mismatches(SimpleNamespace(config=TrainConfig(agent="sac_her"), label="x"), PipelineConfig()) == []

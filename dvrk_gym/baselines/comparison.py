@@ -29,15 +29,17 @@ from pathlib import Path
 import numpy as np
 
 from dvrk_gym import paper
-from dvrk_gym.baselines.budgets import GRID_TOUCH_ID, PHASE2_TOUCHES
+from dvrk_gym.baselines.budgets import DEBRIDEMENT_ID, GRID_TOUCH_ID, PHASE2_TOUCHES
 from dvrk_gym.baselines.checkpoints import LoadedAgent
-from dvrk_gym.baselines.training import make_agent_env
+from dvrk_gym.baselines.training import TrainConfig, make_agent_env
 from dvrk_gym.baselines.transfer import pick_policy
 from dvrk_gym.calibration.benchmark import YAW_SETTINGS, CircleErrors, touch_grid
 from dvrk_gym.calibration.loading import load_calibrator
 from dvrk_gym.calibration.pipeline import BENCHMARK_SEED_OFFSET, CALIBRATOR_FILES, PipelineConfig, read_pipeline_settings
 from dvrk_gym.calibration.policy import CalibratedPolicy
+from dvrk_gym.envs.configs import GridTouchConfig
 from dvrk_gym.envs.debridement import fragment_target
+from dvrk_gym.envs.debridement_config import DebridementConfig
 from dvrk_gym.evaluation.trials import Trial, run_debridement, totals
 
 logger = logging.getLogger(__name__)
@@ -133,6 +135,13 @@ def _pipeline_config(folder: Path) -> PipelineConfig:
     return PipelineConfig.from_settings(settings)
 
 
+def agent_contact(config: TrainConfig) -> str:
+    """The paper an agent learnt on: its env's ``contact`` ("compliant" or "rigid"; the env's
+    default unless its settings replaced it). Its debridement picks meet the same paper."""
+    default = DebridementConfig.contact if config.spec.env_id == DEBRIDEMENT_ID else GridTouchConfig.contact
+    return str(config.env_kwargs().get("contact", default))
+
+
 def setting_mismatches(agent: LoadedAgent, calibration: PipelineConfig) -> list[str]:
     """Differences between an agent's world and a calibration run's that make rows incomparable."""
     notes = []
@@ -140,6 +149,11 @@ def setting_mismatches(agent: LoadedAgent, calibration: PipelineConfig) -> list[
         mine, theirs = getattr(agent.config, name), getattr(calibration, name)
         if mine != theirs:
             notes.append(f"{agent.label}: {name} {mine!r}, but the calibration run used {theirs!r}")
+    contact = agent_contact(agent.config)
+    if contact != DebridementConfig.contact:
+        notes.append(
+            f"{agent.label}: learnt on the {contact} paper and picks on it; the calibrators' picks met the {DebridementConfig.contact} one"
+        )
     return notes
 
 
@@ -203,9 +217,15 @@ def debridement_row(method: str, robot_moves: int, trials: Sequence[Trial], sour
 def benchmark_debridement(
     agent: LoadedAgent, n_trials: int = DEBRIDEMENT_TRIALS, seed: int = 0, fragment: str = "pumpkin_seed", progress: bool = False
 ) -> list[Trial]:
-    """The agent's debridement trials (GridTouch agents transferred by :func:`pick_policy`), in its world."""
+    """The agent's debridement trials (GridTouch agents transferred by :func:`pick_policy`), in its
+    world: its instrument, and the paper it learnt on (:func:`agent_contact`)."""
     config = agent.config
-    world = {"bias": config.bias, "bias_seed": config.bias_seed, "camera_resolution": config.camera_resolution}
+    world = {
+        "bias": config.bias,
+        "bias_seed": config.bias_seed,
+        "camera_resolution": config.camera_resolution,
+        "contact": agent_contact(config),
+    }
     return run_debridement(pick_policy(agent), n_trials, seed, fragment, **world, progress=progress)
 
 
