@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from dvrk_gym import paper
-from dvrk_gym.baselines.budgets import DEBRIDEMENT_ID, GRID_TOUCH_ID, PHASE2_TOUCHES
+from dvrk_gym.baselines.budgets import GRID_TOUCH_ID, PHASE2_TOUCHES
 from dvrk_gym.baselines.checkpoints import LoadedAgent
 from dvrk_gym.baselines.training import TrainConfig, make_agent_env
 from dvrk_gym.baselines.transfer import pick_policy
@@ -37,10 +37,9 @@ from dvrk_gym.calibration.benchmark import YAW_SETTINGS, CircleErrors, touch_gri
 from dvrk_gym.calibration.loading import load_calibrator
 from dvrk_gym.calibration.pipeline import BENCHMARK_SEED_OFFSET, CALIBRATOR_FILES, PipelineConfig, read_pipeline_settings
 from dvrk_gym.calibration.policy import CalibratedPolicy
-from dvrk_gym.envs.configs import GridTouchConfig
 from dvrk_gym.envs.debridement import fragment_target
-from dvrk_gym.envs.debridement_config import DebridementConfig
 from dvrk_gym.evaluation.trials import Trial, run_debridement, totals
+from dvrk_gym.sim.table.contact import DEFAULT_CONTACT
 
 logger = logging.getLogger(__name__)
 
@@ -138,8 +137,7 @@ def _pipeline_config(folder: Path) -> PipelineConfig:
 def agent_contact(config: TrainConfig) -> str:
     """The paper an agent learnt on: its env's ``contact`` ("compliant" or "rigid"; the env's
     default unless its settings replaced it). Its debridement picks meet the same paper."""
-    default = DebridementConfig.contact if config.spec.env_id == DEBRIDEMENT_ID else GridTouchConfig.contact
-    return str(config.env_kwargs().get("contact", default))
+    return str(config.env_kwargs().get("contact", DEFAULT_CONTACT))
 
 
 def setting_mismatches(agent: LoadedAgent, calibration: PipelineConfig) -> list[str]:
@@ -150,10 +148,8 @@ def setting_mismatches(agent: LoadedAgent, calibration: PipelineConfig) -> list[
         if mine != theirs:
             notes.append(f"{agent.label}: {name} {mine!r}, but the calibration run used {theirs!r}")
     contact = agent_contact(agent.config)
-    if contact != DebridementConfig.contact:
-        notes.append(
-            f"{agent.label}: learnt on the {contact} paper and picks on it; the calibrators' picks met the {DebridementConfig.contact} one"
-        )
+    if contact != DEFAULT_CONTACT:
+        notes.append(f"{agent.label}: learnt on the {contact} paper and picks on it; the calibrators' picks met the {DEFAULT_CONTACT} one")
     return notes
 
 

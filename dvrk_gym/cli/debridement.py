@@ -16,7 +16,7 @@ from pathlib import Path
 
 from dvrk_gym import paper
 from dvrk_gym.cli.options import add_instrument_options, add_progress_option, writable_folder
-from dvrk_gym.sim.table.contact import CONTACTS
+from dvrk_gym.sim.table.contact import CONTACTS, DEFAULT_CONTACT
 
 
 def _run_debride(args: argparse.Namespace) -> int:
@@ -54,8 +54,9 @@ def _run_debride(args: argparse.Namespace) -> int:
         "camera_resolution": list(args.resolution),
         "contact": args.contact,
     }
-    stem = cell_name(args.calibrator, args.fragment) + ("" if args.contact == "compliant" else f"_{args.contact}")
-    label = cell_label(args.calibrator, args.fragment) + ("" if args.contact == "compliant" else f", {args.contact} paper")
+    other_paper = args.contact != DEFAULT_CONTACT
+    stem = cell_name(args.calibrator, args.fragment) + (f"_{args.contact}" if other_paper else "")
+    label = cell_label(args.calibrator, args.fragment) + (f", {args.contact} paper" if other_paper else "")
     written = save_cell(trials, args.out / stem, meta, label, text)
     print(f"wrote {written['json']}, {written['txt']}, {written['png']}")
     return 0
@@ -90,7 +91,7 @@ def add_commands(subparsers: argparse._SubParsersAction) -> None:
     debride.add_argument(
         "--contact",
         choices=sorted(CONTACTS),
-        default="compliant",
+        default=DEFAULT_CONTACT,
         help="the paper under the picks: compliant (jaws sent under the floor they stall on slide along it, as the "
         "authors' records of their table's runs show) or rigid (they stall in place) (default: %(default)s)",
     )

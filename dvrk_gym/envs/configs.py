@@ -15,7 +15,7 @@ from dvrk_gym import paper
 from dvrk_gym.sim.endoscope.noise import MAX_PIXEL_NOISE_PX
 from dvrk_gym.sim.endoscope.renderers import DISPLAY_RENDERERS
 from dvrk_gym.sim.robot.bias import BIAS_PRESETS, BiasConfig
-from dvrk_gym.sim.table.contact import CONTACTS
+from dvrk_gym.sim.table.contact import CONTACTS, DEFAULT_CONTACT
 from dvrk_gym.utils.checks import check_choice, check_float_fields, check_int_fields, check_resolution
 
 REWARD_TYPES = ("dense", "sparse")
@@ -100,7 +100,7 @@ class GridTouchConfig(EnvConfig):
     distance_threshold_m: float = 0.001
     approach_height_m: float = 0.008
     correction_noise_m: float = 0.0002
-    contact: str = "compliant"
+    contact: str = DEFAULT_CONTACT
 
     def __post_init__(self) -> None:
         super().__post_init__()

@@ -62,7 +62,7 @@ from dvrk_gym.sim.robot import ik
 from dvrk_gym.sim.robot import kinematics as kin
 from dvrk_gym.sim.robot.bias import BiasConfig
 from dvrk_gym.sim.table import judge
-from dvrk_gym.sim.table.contact import CONTACTS
+from dvrk_gym.sim.table.contact import CONTACTS, DEFAULT_CONTACT
 from dvrk_gym.sim.table.grasp import GRASP_TIP_CLEARANCE_M
 from dvrk_gym.sim.table.gripper_config import GripperConfig
 from dvrk_gym.sim.table.table import DebridementTable
@@ -142,7 +142,7 @@ class DebridementEnv(DvrkEnv[DebridementConfig]):
         max_delta_m: float = 0.005,
         max_delta_jaw_rad: float = 0.25,
         delta_yaw_rad: float = 0.0,
-        contact: str = "compliant",
+        contact: str = DEFAULT_CONTACT,
         camera_resolution: tuple[int, int] = (1920, 1080),
         pixel_noise_px: float = 0.0,
         render_resolution: tuple[int, int] | None = None,

@@ -15,7 +15,7 @@ import numpy as np
 from dvrk_gym import paper
 from dvrk_gym.envs.configs import EnvConfig
 from dvrk_gym.sim.robot.motion_limits import MotionLimits
-from dvrk_gym.sim.table.contact import CONTACTS
+from dvrk_gym.sim.table.contact import CONTACTS, DEFAULT_CONTACT
 from dvrk_gym.sim.table.fragment_types import FRAGMENT_TYPES
 from dvrk_gym.sim.table.gripper_config import GripperConfig
 from dvrk_gym.utils.checks import check_bool, check_choice, check_float_fields, check_int_fields
@@ -126,7 +126,7 @@ class DebridementConfig(EnvConfig):
     max_delta_m: float = 0.005
     max_delta_jaw_rad: float = 0.25
     delta_yaw_rad: float = 0.0
-    contact: str = "compliant"
+    contact: str = DEFAULT_CONTACT
 
     def __post_init__(self) -> None:
         super().__post_init__()

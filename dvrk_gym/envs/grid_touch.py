@@ -34,7 +34,7 @@ from dvrk_gym.sim.physics.scene import GRID_COLUMNS, GRID_ROWS, WORKSPACE_CENTER
 from dvrk_gym.sim.robot import ik
 from dvrk_gym.sim.robot import kinematics as kin
 from dvrk_gym.sim.robot.bias import BiasConfig
-from dvrk_gym.sim.table.contact import CONTACTS
+from dvrk_gym.sim.table.contact import CONTACTS, DEFAULT_CONTACT
 from dvrk_gym.sim.world_config import MoveResult
 
 N_CIRCLES = GRID_ROWS * GRID_COLUMNS
@@ -152,7 +152,7 @@ class GridTouchEnv(DvrkEnv[GridTouchConfig]):
         distance_threshold_m: float = 0.001,
         approach_height_m: float = 0.008,
         correction_noise_m: float = 0.0002,
-        contact: str = "compliant",
+        contact: str = DEFAULT_CONTACT,
         camera_resolution: tuple[int, int] = (1920, 1080),
         pixel_noise_px: float = 0.0,
         render_resolution: tuple[int, int] | None = None,

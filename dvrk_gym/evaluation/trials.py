@@ -21,6 +21,7 @@ import numpy as np
 from dvrk_gym import paper
 from dvrk_gym.envs.picks import PHASES
 from dvrk_gym.evaluation.episodes import run_episodes
+from dvrk_gym.sim.table.contact import DEFAULT_CONTACT
 from dvrk_gym.sim.table.judge import outcome_counts
 from dvrk_gym.utils.atomic import atomic_savefig, atomic_write_json, atomic_write_text
 
@@ -87,7 +88,7 @@ def run_debridement(
     camera_resolution: tuple[int, int] = paper.ENDOSCOPE_RESOLUTION_PX,
     max_picks: int | None = None,
     progress: bool = False,
-    contact: str = "compliant",
+    contact: str = DEFAULT_CONTACT,
 ) -> list[Trial]:
     """``n_trials`` debridement trials of ``policy`` on a fresh Debridement-v0 (primitive mode), closed after.
 

@@ -27,7 +27,7 @@ import numpy as np
 from dvrk_gym.sim.identified import PAPER_CONTACT
 from dvrk_gym.utils.checks import check_float
 
-__all__ = ["COMPLIANT", "CONTACTS", "PaperContact", "RIGID"]
+__all__ = ["COMPLIANT", "CONTACTS", "DEFAULT_CONTACT", "PaperContact", "RIGID"]
 
 MAX_SLIDE_PER_DEPTH = 5.0
 """Largest slide per depth accepted, metres per metre."""
@@ -102,3 +102,5 @@ RIGID = PaperContact(slide_per_depth=(0.0, 0.0), give=1.0)
 """A paper that does not yield: the arm stops at first contact (give 1), and the jaws do not slide."""
 CONTACTS = {"compliant": COMPLIANT, "rigid": RIGID}
 """GridTouch-v0's and Debridement-v0's ``contact`` choices."""
+DEFAULT_CONTACT = "compliant"
+"""Both envs' default ``contact``: the identified paper."""

@@ -165,7 +165,9 @@ class DebridementTable:
         commands, trues, slides = self._joint_path(move, offset_start, floor)
         noise_end = world.cable.true_joints(commands[-1], noise_rng) - trues[-1]
         fractions = np.arange(1, len(commands) + 1)[:, None] / len(commands)
-        path = np.array(trues) + np.array(slides) + (1.0 - fractions) * offset_start + fractions * noise_end
+        path = np.array(trues) + (1.0 - fractions) * offset_start + fractions * noise_end
+        for i, slide in slides.items():
+            path[i] += slide
         steps = gripper.follow(path)
         world.q_cmd, world.q_true = np.array(commands[-1]), path[-1].copy()
         world.jaw_angle = gripper.jaw_angle
@@ -174,9 +176,9 @@ class DebridementTable:
         world.clock.advance(steps * dt)
         return MoveResult(elapsed, world.q_cmd.copy(), world.q_true.copy(), clamped)
 
-    def _joint_path(self, move: CartesianMove, offset_start: np.ndarray, floor: float | None) -> tuple[list, list, list]:
+    def _joint_path(self, move: CartesianMove, offset_start: np.ndarray, floor: float | None) -> tuple[list, list, dict[int, np.ndarray]]:
         """The joint commands of a stepped move, the true joints the cables make of them, and
-        how far the paper's slide moves the true joints at each waypoint (zeros off the paper).
+        how far the paper's slide moves the true joints, by waypoint (only those it moves).
 
         Args:
             move: the Cartesian move, sampled every physics step.
@@ -193,13 +195,12 @@ class DebridementTable:
         paper_z = float(WORKSPACE_CENTER_M[2])
         commands: list[np.ndarray] = []
         trues: list[np.ndarray] = []
-        slid: list[np.ndarray] = []
+        slid: dict[int, np.ndarray] = {}
         q_ref = self.world.q_cmd
         for waypoint in _waypoints(move, self.world.physics.time_step_s):
             state = cable.get_state()
             q_ref, _ = ik.inverse_kinematics_clamped(waypoint, q_ref=q_ref)
             q_true = cable.true_joints(q_ref)
-            slide = np.zeros_like(q_true)
             if floor is not None:
                 gap = kin.touch_point(q_true + offset_start, cable.true_dh)[2] - floor
                 if gap < 0.0:  # the tip stays on the floor: lift this waypoint by the gap (the
@@ -213,10 +214,9 @@ class DebridementTable:
                     if slides and depth > 0.0:
                         lifted[:2, 3] += self.contact.slide_m(depth)
                         q_slid, _ = ik.inverse_kinematics_clamped(lifted, q_ref=q_ref)
-                        slide = q_slid - q_ref
+                        slid[len(commands)] = q_slid - q_ref
             commands.append(q_ref)
             trues.append(q_true)
-            slid.append(slide)
         return commands, trues, slid
 
     def actuate_jaws(self, jaw_angle_rad: float, duration_s: float | None = None) -> float:
