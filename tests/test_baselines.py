@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+from types import SimpleNamespace
 
 import gymnasium as gym
 import numpy as np
@@ -13,9 +14,10 @@ from stable_baselines3.common.env_checker import check_env
 
 import dvrk_gym  # noqa: F401
 from dvrk_gym.baselines import AGENTS, BUDGETS, TrainConfig, load_agent, resolve_budget, save_agent, train, wrap_grid_touch
+from dvrk_gym.baselines.agents import build_model
 from dvrk_gym.baselines.budgets import GRID_TOUCH_ID
-from dvrk_gym.baselines.comparison import agent_row, benchmark_agent, calibration_rows, format_comparison
-from dvrk_gym.baselines.training import make_agent_env
+from dvrk_gym.baselines.comparison import agent_contact, agent_row, benchmark_agent, calibration_rows, format_comparison, setting_mismatches
+from dvrk_gym.baselines.training import TrainResult, make_agent_env, make_training_vec_env
 from dvrk_gym.baselines.wrappers import GoalScaling, TargetYawAction, TrainingYaws
 from dvrk_gym.calibration.benchmark import YAW_SETTINGS, CircleErrors, save_table
 from dvrk_gym.calibration.pipeline import SETTINGS_STAMP
@@ -129,6 +131,102 @@ def test_loading_needs_the_settings_written_beside_the_zip(tmp_path):
     (tmp_path / "model.json").write_text(json.dumps({"format": "something else"}))
     with pytest.raises(ValueError, match="not a dvrk_gym baseline"):
         load_agent(tmp_path / "model.zip")
+
+
+def _untrained_agent(tmp_path, **settings):
+    """An agent saved untrained (its files as training writes them), and the path of its zip."""
+    config = TrainConfig(camera_resolution=TINY, overrides=FAST_NETWORK, **settings)
+    env = make_training_vec_env(config)
+    try:
+        model = build_model(config.spec, env, config.seed, config.overrides)
+    finally:
+        env.close()
+    return save_agent(TrainResult(model, config, [], 0, 0.0, 0.0), tmp_path / "model.zip")
+
+
+def test_an_agent_file_records_its_whole_env_and_loads_without_changes(tmp_path):
+    path = _untrained_agent(tmp_path)
+    recorded = json.loads(path.with_suffix(".json").read_text())["env"]
+    assert recorded["id"] == GRID_TOUCH_ID
+    assert recorded["kwargs"] == {**gym.spec(GRID_TOUCH_ID).kwargs, "camera_resolution": list(TINY)}
+    assert recorded["bias_config"]["wrist_settle_lag"] > 0  # the paper preset, resolved
+    agent = load_agent(path)
+    assert agent.env_changes == () and agent.config.env_overrides == {}
+
+
+def test_an_agent_is_evaluated_in_the_world_it_learnt_in_when_defaults_change(tmp_path):
+    path = _untrained_agent(tmp_path)
+    settings_file = path.with_suffix(".json")
+    settings = json.loads(settings_file.read_text())
+    world = settings["env"]
+    world["kwargs"]["contact"] = "rigid"  # as if this version's default had become "compliant" since
+    world["kwargs"]["distance_threshold_m"] = 0.002
+    world["kwargs"]["retired_option"] = 1
+    del world["kwargs"]["correction_noise_m"]
+    world["bias_config"]["wrist_settle_lag"] = 0.5
+    settings_file.write_text(json.dumps(settings))
+    agent = load_agent(path)
+    assert agent.config.env_overrides == {"contact": "rigid", "distance_threshold_m": 0.002}
+    assert agent_contact(agent.config) == "rigid"
+    env = make_agent_env(agent.config, training=False)
+    try:
+        assert env.unwrapped.config.contact == "rigid" and env.unwrapped.config.distance_threshold_m == 0.002
+    finally:
+        env.close()
+    changes = "\n".join(agent.env_changes)
+    for expected in (
+        "contact: learnt with 'rigid'",
+        "distance_threshold_m: learnt with 0.002",
+        "retired_option was 1",
+        "correction_noise_m was not recorded",
+        "(wrist_settle_lag)",
+    ):
+        assert expected in changes
+    assert len(agent.env_changes) == 5
+    calibration = SimpleNamespace(bias="paper", bias_seed=0, camera_resolution=TINY)
+    notes = setting_mismatches(agent, calibration)
+    assert (
+        sum(agent.label in note and "rigid" in note for note in notes) == 2
+    )  # the restored default, and the paper unlike the calibrators'
+
+
+def test_agent_files_without_a_recorded_env_load_on_this_versions_defaults(tmp_path):
+    path = _untrained_agent(tmp_path)
+    settings_file = path.with_suffix(".json")
+    settings = json.loads(settings_file.read_text())
+    del settings["env"]
+    settings_file.write_text(json.dumps(settings))
+    agent = load_agent(path)
+    assert agent.config.env_overrides == {} and len(agent.env_changes) == 1 and "predate" in agent.env_changes[0]
+
+
+@pytest.mark.parametrize(
+    "world, message",
+    [
+        ("not an object", "env must be an object"),
+        ({"id": GRID_TOUCH_ID, "kwargs": [], "bias_config": {}}, "env must be an object"),
+        ({"id": "dvrk_gym/Debridement-v0", "kwargs": {}, "bias_config": {}}, "learns 'dvrk_gym/GridTouch-v0'"),
+    ],
+)
+def test_a_mangled_recorded_env_is_refused_naming_the_file(tmp_path, world, message):
+    path = _untrained_agent(tmp_path)
+    settings_file = path.with_suffix(".json")
+    settings = json.loads(settings_file.read_text())
+    settings["env"] = world
+    settings_file.write_text(json.dumps(settings))
+    with pytest.raises(ValueError, match=message) as raised:
+        load_agent(path)
+    assert "model.json" in str(raised.value)
+
+
+def test_a_recorded_env_this_version_cannot_build_is_refused_clearly(tmp_path):
+    path = _untrained_agent(tmp_path)
+    settings_file = path.with_suffix(".json")
+    settings = json.loads(settings_file.read_text())
+    settings["env"]["kwargs"]["contact"] = "quicksand"
+    settings_file.write_text(json.dumps(settings))
+    with pytest.raises(ValueError, match="cannot build the env the agent learnt in.*quicksand"):
+        load_agent(path)
 
 
 def _fake_calibration_run(folder, mm_by_method):

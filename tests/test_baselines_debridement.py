@@ -298,6 +298,6 @@ def test_an_agent_picks_on_the_paper_it_learnt_on(monkeypatch):
     assert seen["contact"] == "rigid" and seen["bias"] == rigid.bias
     comparison.benchmark_debridement(SimpleNamespace(config=TrainConfig(agent="sac_her")), n_trials=1)
     assert seen["contact"] == "compliant"
-    notes = comparison.setting_mismatches(SimpleNamespace(config=rigid, label="sac_her (5 steps, seed 0)"), PipelineConfig())
+    notes = comparison.setting_mismatches(SimpleNamespace(config=rigid, label="sac_her (5 steps, seed 0)", env_changes=()), PipelineConfig())
     assert notes == ["sac_her (5 steps, seed 0): learnt on the rigid paper and picks on it; the calibrators' picks met the compliant one"]
-    assert comparison.setting_mismatches(SimpleNamespace(config=TrainConfig(agent="sac_her"), label="x"), PipelineConfig()) == []
+    assert comparison.setting_mismatches(SimpleNamespace(config=TrainConfig(agent="sac_her"), label="x", env_changes=()), PipelineConfig()) == []

@@ -9,10 +9,16 @@ crafted file: it rebuilds the model from the JSON and reads only the policy's we
 bounded before anything is built or inflated: the settings JSON's size, the network the
 settings describe (:func:`check_policy_kwargs`), and the zip's declared and actual member
 sizes (:data:`AGENT_FILE_LIMITS`). Even so, only load files this tool wrote, or that you trust.
+
+The JSON also records the world the agent learnt in, in full (:func:`env_record`: every
+``gym.make`` keyword of its env, defaults included, and the cable bias its preset named).
+A later version whose defaults differ (the paper's ``contact``, say) evaluates the agent
+with the recorded values, and :attr:`LoadedAgent.env_changes` says what differed.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import io
 import json
 import pickle
@@ -26,6 +32,8 @@ from stable_baselines3.common.base_class import BaseAlgorithm
 from dvrk_gym.baselines.agents import ALGORITHMS
 from dvrk_gym.baselines.training import TrainConfig, TrainResult, make_agent_env
 from dvrk_gym.baselines.wrappers import GOAL_CENTER_M, GOAL_HALF_RANGE_M
+from dvrk_gym.envs import ENV_CONFIGS
+from dvrk_gym.sim.robot.bias import resolve_bias
 from dvrk_gym.utils.atomic import atomic_path, atomic_write_json
 from dvrk_gym.utils.bounded_zip import ArchiveLimits, open_archive, read_member
 from dvrk_gym.utils.checks import check_bool, check_int
@@ -42,6 +50,8 @@ MAX_LAYERS = 16
 MAX_LAYER_UNITS = 4096
 """Bounds of the networks a settings file may describe: hidden layers, and units per layer."""
 _POLICY_KEYS = {"net_arch", "use_sde", "n_critics"}
+DISPLAY_ONLY = ("render_resolution", "renderer")
+"""Env keywords that change only what ``render()`` shows, left out of :attr:`LoadedAgent.env_changes`."""
 
 
 @dataclass(frozen=True)
@@ -53,12 +63,16 @@ class LoadedAgent:
         config: its training settings (the env to evaluate it on follows from them).
         env_steps: env steps (robot moves) it was trained with.
         path: the zip it came from.
+        env_changes: how this version's env differs from the one the agent learnt in, one
+            line each (empty: none). Keywords whose default changed are set back to the
+            recorded values in ``config.env_overrides``; a changed instrument is only noted.
     """
 
     model: BaseAlgorithm
     config: TrainConfig
     env_steps: int
     path: Path
+    env_changes: tuple[str, ...] = ()
 
     @property
     def label(self) -> str:
@@ -86,12 +100,58 @@ def save_agent(result: TrainResult, path: Path) -> Path:
         "config": result.config.to_dict(),
         "policy_kwargs": _policy_kwargs(result.model),
         "goal_scaling": {"center_m": list(GOAL_CENTER_M), "half_range_m": GOAL_HALF_RANGE_M},
+        "env": env_record(result.config),
         "env_steps": result.env_steps,
         "train_seconds": result.train_seconds,
         "steps_per_second": result.steps_per_second,
     }
     atomic_write_json(settings_path(path), settings, indent=1)
     return path
+
+
+def env_record(config: TrainConfig) -> dict[str, Any]:
+    """The world an agent of ``config`` learns in, as JSON values: ``id`` (its env),
+    ``kwargs`` (every field of its env's config, the one ``gym.make`` builds from the
+    agent's keywords over the env's defaults) and ``bias_config`` (the :class:`~dvrk_gym.sim.robot.bias.BiasConfig` its bias
+    preset stands for in this version).
+
+    Raises:
+        ValueError: ``config``'s env keywords do not make a valid env config.
+    """
+    env_config = ENV_CONFIGS[config.spec.env_id](**config.env_kwargs())
+    kwargs = dataclasses.asdict(env_config)
+    record = {"id": config.spec.env_id, "kwargs": kwargs, "bias_config": dataclasses.asdict(resolve_bias(env_config.bias))}
+    return json.loads(json.dumps(record))
+
+
+def _recorded_world(config: TrainConfig, recorded: Any) -> tuple[TrainConfig, tuple[str, ...]]:
+    """``config`` with the recorded values of every env keyword whose default has changed,
+    and one line per difference between the recorded world and this version's."""
+    if recorded is None:
+        return config, (f"its settings predate recorded envs: evaluated on this version's {config.spec.env_id} defaults",)
+    if not isinstance(recorded, dict) or not isinstance(recorded.get("kwargs"), dict) or not isinstance(recorded.get("bias_config"), dict):
+        raise ValueError(f"env must be an object with 'kwargs' and 'bias_config' objects, got {recorded!r}"[:300])
+    if recorded.get("id") != config.spec.env_id:
+        raise ValueError(f"env id {recorded.get('id')!r}, but agent {config.agent!r} learns {config.spec.env_id!r}")
+    current = env_record(config)
+    mine, now = recorded["kwargs"], current["kwargs"]
+    restore, changes = {}, []
+    for key in sorted((set(mine) | set(now)) - set(DISPLAY_ONLY)):
+        if key not in now:
+            changes.append(f"{key} was {mine[key]!r} in training; this version has no such setting")
+        elif key not in mine:
+            changes.append(f"{key} was not recorded in training; evaluated with this version's {now[key]!r}")
+        elif mine[key] != now[key]:
+            restore[key] = mine[key]
+            changes.append(f"{key}: learnt with {mine[key]!r}, this version's default is {now[key]!r}; evaluated with {mine[key]!r}")
+    drifted = sorted(
+        k
+        for k in set(recorded["bias_config"]) | set(current["bias_config"])
+        if recorded["bias_config"].get(k) != current["bias_config"].get(k)
+    )
+    if drifted:
+        changes.append(f"the {config.bias!r} instrument changed since training ({', '.join(drifted)}); evaluated on this version's")
+    return dataclasses.replace(config, env_overrides={**config.env_overrides, **restore}), tuple(changes)
 
 
 def _policy_kwargs(model: BaseAlgorithm) -> dict[str, Any]:
@@ -197,9 +257,13 @@ def load_agent(path: Path) -> LoadedAgent:
     settings = _read_settings(path)
     try:
         config = TrainConfig(**settings["config"])
+        config, env_changes = _recorded_world(config, settings.get("env"))
     except (TypeError, ValueError) as error:
         raise ValueError(f"{settings_path(path)}: bad training settings: {error}") from None
-    env = make_agent_env(config, training=False)
+    try:
+        env = make_agent_env(config, training=False)
+    except (TypeError, ValueError) as error:
+        raise ValueError(f"{settings_path(path)}: this version cannot build the env the agent learnt in: {error}") from None
     try:
         algorithm = ALGORITHMS[config.spec.algorithm]
         model = algorithm("MultiInputPolicy", env, policy_kwargs=settings["policy_kwargs"], device="cpu", **_inference_only(algorithm))
@@ -209,7 +273,7 @@ def load_agent(path: Path) -> LoadedAgent:
     finally:
         env.close()
     model.policy.set_training_mode(False)
-    return LoadedAgent(model, config, int(settings["env_steps"]), path)
+    return LoadedAgent(model, config, int(settings["env_steps"]), path, env_changes)
 
 
 def _inference_only(algorithm: type[BaseAlgorithm]) -> dict[str, Any]:

@@ -140,9 +140,15 @@ def agent_contact(config: TrainConfig) -> str:
     return str(config.env_kwargs().get("contact", DEFAULT_CONTACT))
 
 
+def env_change_notes(agent: LoadedAgent) -> list[str]:
+    """How this version's env differs from the one ``agent`` learnt in (:attr:`LoadedAgent.env_changes`), one line each."""
+    return [f"{agent.label}: {change}" for change in agent.env_changes]
+
+
 def setting_mismatches(agent: LoadedAgent, calibration: PipelineConfig) -> list[str]:
-    """Differences between an agent's world and a calibration run's that make rows incomparable."""
-    notes = []
+    """Differences between an agent's world and a calibration run's that make rows incomparable
+    (and the env changes of :func:`env_change_notes`)."""
+    notes = env_change_notes(agent)
     for name in ("bias", "bias_seed", "camera_resolution"):
         mine, theirs = getattr(agent.config, name), getattr(calibration, name)
         if mine != theirs:

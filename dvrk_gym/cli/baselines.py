@@ -113,6 +113,7 @@ def _evaluate_touch_grid(agents: list, args: argparse.Namespace) -> list[Path]:
         agent_row,
         benchmark_agent,
         calibration_rows,
+        env_change_notes,
         format_comparison,
         setting_mismatches,
     )
@@ -123,7 +124,8 @@ def _evaluate_touch_grid(agents: list, args: argparse.Namespace) -> list[Path]:
     names = [agent.config.agent for agent in agents]
     keys = names if len(set(names)) == len(names) else [f"{name}#{i + 1}" for i, name in enumerate(names)]  # short, for the paper's table
     table = {key: benchmark_agent(agent, seed=BENCHMARK_SEED + seed, progress=not args.no_progress) for key, agent in zip(keys, agents)}
-    text = format_table(table) + "\n" + "\n".join(f"{key}: {agent.label}, {agent.path}" for key, agent in zip(keys, agents))
+    changes = [f"note: {note}" for agent in agents for note in env_change_notes(agent)]
+    text = format_table(table) + "\n" + "\n".join([*(f"{key}: {agent.label}, {agent.path}" for key, agent in zip(keys, agents)), *changes])
     print(text)
     save_table(table, args.out / "baseline_table.json")
     atomic_write_text(args.out / "baseline_table.txt", text + "\n")
@@ -146,13 +148,15 @@ def _evaluate_debridement(agents: list, args: argparse.Namespace) -> list[Path]:
         benchmark_debridement,
         calibration_debridement_rows,
         debridement_row,
+        env_change_notes,
         format_debridement_comparison,
         setting_mismatches,
     )
     from dvrk_gym.evaluation.trials import format_trial_table
 
     seed = args.seed if args.seed is not None else 0
-    texts, rows, notes = [], [], []
+    texts, rows = [], []
+    notes = [note for agent in agents for note in env_change_notes(agent)]
     for agent in agents:
         trials = benchmark_debridement(agent, args.trials, seed=seed, fragment=args.fragment, progress=not args.no_progress)
         texts.append(format_trial_table(trials, agent.label, args.fragment, seed))

@@ -16,7 +16,7 @@ import numpy as np
 
 from dvrk_gym import paper
 from dvrk_gym.baselines.checkpoints import load_agent, save_agent
-from dvrk_gym.baselines.comparison import agent_row, benchmark_agent
+from dvrk_gym.baselines.comparison import agent_contact, agent_row, benchmark_agent
 from dvrk_gym.baselines.curves import save_curve
 from dvrk_gym.baselines.training import TrainConfig, train
 from dvrk_gym.baselines.transfer import pick_policy
@@ -113,10 +113,17 @@ def rl_debridement(
     model: str, fragment: str, trials: int, picks: int, seed: int, bias: str, bias_seed: int, resolution: tuple[int, int], out: str
 ) -> dict[str, Any]:
     """One debridement cell with a trained GridTouch agent aiming the picks
-    (:func:`~dvrk_gym.baselines.transfer.pick_policy`), as the calibrators aim theirs."""
+    (:func:`~dvrk_gym.baselines.transfer.pick_policy`), as the calibrators aim theirs, on the
+    paper the agent learnt on (:func:`~dvrk_gym.baselines.comparison.agent_contact`)."""
     agent = load_agent(Path(model))
     env = gym.make(
-        "dvrk_gym/Debridement-v0", fragment=fragment, max_picks=picks, bias=bias, bias_seed=bias_seed, camera_resolution=tuple(resolution)
+        "dvrk_gym/Debridement-v0",
+        fragment=fragment,
+        max_picks=picks,
+        bias=bias,
+        bias_seed=bias_seed,
+        camera_resolution=tuple(resolution),
+        contact=agent_contact(agent.config),
     )
     method = f"{agent.config.agent} (RL)"
     return _debridement_cell(
