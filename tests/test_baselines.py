@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import hashlib
 import json
 from types import SimpleNamespace
 
@@ -151,7 +152,7 @@ def test_an_agent_file_records_its_whole_env_and_loads_without_changes(tmp_path)
     assert recorded["kwargs"] == {**gym.spec(GRID_TOUCH_ID).kwargs, "camera_resolution": list(TINY)}
     assert recorded["bias_config"]["wrist_settle_lag"] > 0  # the paper preset, resolved
     agent = load_agent(path)
-    assert agent.env_changes == () and agent.config.env_overrides == {}
+    assert agent.env_changes == {} and agent.config.env_overrides == {}
 
 
 def test_an_agent_is_evaluated_in_the_world_it_learnt_in_when_defaults_change(tmp_path):
@@ -173,21 +174,21 @@ def test_an_agent_is_evaluated_in_the_world_it_learnt_in_when_defaults_change(tm
         assert env.unwrapped.config.contact == "rigid" and env.unwrapped.config.distance_threshold_m == 0.002
     finally:
         env.close()
-    changes = "\n".join(agent.env_changes)
-    for expected in (
-        "contact: learnt with 'rigid'",
-        "distance_threshold_m: learnt with 0.002",
-        "retired_option was 1",
-        "correction_noise_m was not recorded",
-        "(wrist_settle_lag)",
-    ):
-        assert expected in changes
-    assert len(agent.env_changes) == 5
+    expected = {
+        "contact": "contact: learnt with 'rigid'",
+        "distance_threshold_m": "distance_threshold_m: learnt with 0.002",
+        "retired_option": "retired_option was 1",
+        "correction_noise_m": "correction_noise_m was not recorded",
+        "bias_config": "(wrist_settle_lag)",
+    }
+    assert sorted(agent.env_changes) == sorted(expected)
+    assert all(expected[key] in line for key, line in agent.env_changes.items())
     calibration = SimpleNamespace(bias="paper", bias_seed=0, camera_resolution=TINY)
     notes = setting_mismatches(agent, calibration)
-    assert (
-        sum(agent.label in note and "rigid" in note for note in notes) == 2
-    )  # the restored default, and the paper unlike the calibrators'
+    assert len(notes) == 6 and all(note.startswith(agent.label) for note in notes)
+    assert "learnt on the rigid paper and touches on it" in notes[-1]
+    picks = setting_mismatches(agent, calibration, picks=True)  # transferred: only the paper and the instrument reach a pick
+    assert len(picks) == 3 and "picks on it" in picks[-1] and not any("distance_threshold_m" in note for note in picks)
 
 
 def test_agent_files_without_a_recorded_env_load_on_this_versions_defaults(tmp_path):
@@ -197,7 +198,7 @@ def test_agent_files_without_a_recorded_env_load_on_this_versions_defaults(tmp_p
     del settings["env"]
     settings_file.write_text(json.dumps(settings))
     agent = load_agent(path)
-    assert agent.config.env_overrides == {} and len(agent.env_changes) == 1 and "predate" in agent.env_changes[0]
+    assert agent.config.env_overrides == {} and list(agent.env_changes) == ["env"] and "predate" in agent.env_changes["env"]
 
 
 @pytest.mark.parametrize(
@@ -217,6 +218,30 @@ def test_a_mangled_recorded_env_is_refused_naming_the_file(tmp_path, world, mess
     with pytest.raises(ValueError, match=message) as raised:
         load_agent(path)
     assert "model.json" in str(raised.value)
+
+
+@pytest.mark.parametrize("key, value", [("bias_seed", 7), ("camera_resolution", [640, 360]), ("reward_type", "sparse")])
+def test_a_recorded_env_contradicting_the_training_settings_is_refused(tmp_path, key, value):
+    path = _untrained_agent(tmp_path)
+    settings_file = path.with_suffix(".json")
+    settings = json.loads(settings_file.read_text())
+    settings["env"]["kwargs"][key] = value
+    settings_file.write_text(json.dumps(settings))
+    with pytest.raises(ValueError, match=f"env records {key} = .*but the training settings give"):
+        load_agent(path)
+
+
+def test_an_agent_zip_not_written_with_its_settings_is_refused(tmp_path):
+    path = _untrained_agent(tmp_path)
+    first = json.loads(path.with_suffix(".json").read_text())
+    assert first["zip_sha256"] == hashlib.sha256(path.read_bytes()).hexdigest()
+    other = _untrained_agent(tmp_path / "other", seed=1)
+    path.write_bytes(other.read_bytes())  # another run's weights beside these settings, as a save cut between its two files leaves
+    with pytest.raises(ValueError, match="is not the zip model.json was written with"):
+        load_agent(path)
+    del first["zip_sha256"]  # files saved before the digest was recorded still load
+    path.with_suffix(".json").write_text(json.dumps(first))
+    assert load_agent(path).env_steps == 0
 
 
 def test_a_recorded_env_this_version_cannot_build_is_refused_clearly(tmp_path):

@@ -298,6 +298,36 @@ def test_an_agent_picks_on_the_paper_it_learnt_on(monkeypatch):
     assert seen["contact"] == "rigid" and seen["bias"] == rigid.bias
     comparison.benchmark_debridement(SimpleNamespace(config=TrainConfig(agent="sac_her")), n_trials=1)
     assert seen["contact"] == "compliant"
-    notes = comparison.setting_mismatches(SimpleNamespace(config=rigid, label="sac_her (5 steps, seed 0)", env_changes=()), PipelineConfig())
+    notes = comparison.setting_mismatches(
+        SimpleNamespace(config=rigid, label="sac_her (5 steps, seed 0)", env_changes={}), PipelineConfig(), picks=True
+    )
     assert notes == ["sac_her (5 steps, seed 0): learnt on the rigid paper and picks on it; the calibrators' picks met the compliant one"]
-    assert comparison.setting_mismatches(SimpleNamespace(config=TrainConfig(agent="sac_her"), label="x", env_changes=()), PipelineConfig()) == []
+    assert (
+        comparison.setting_mismatches(SimpleNamespace(config=TrainConfig(agent="sac_her"), label="x", env_changes={}), PipelineConfig())
+        == []
+    )
+
+
+def test_a_pick_agent_picks_with_every_keyword_of_its_training_env(monkeypatch):
+    """A pick agent's other training keywords (its timing, restored ones included) reach its
+    evaluation's env; the protocol's own (fragment, picks, action mode) do not; a GridTouch
+    agent's GridTouch keywords have no part in a pick."""
+    from dvrk_gym.baselines import comparison
+
+    seen = {}
+    monkeypatch.setattr(comparison, "pick_policy", lambda agent: "policy")
+    monkeypatch.setattr(comparison, "run_debridement", lambda policy, *args, **world: seen.update(world) or [])
+    picker = TrainConfig(agent="sac_pick", env_overrides={"timing": FAST_PICKS, "max_picks": 3, "remove_failed": False})
+    comparison.benchmark_debridement(SimpleNamespace(config=picker), n_trials=1)
+    assert seen["env_kwargs"] == {"timing": FAST_PICKS, "remove_failed": False} and seen["contact"] == "compliant"
+    seen.clear()
+    toucher = TrainConfig(agent="sac_her", env_overrides={"distance_threshold_m": 0.002})
+    comparison.benchmark_debridement(SimpleNamespace(config=toucher), n_trials=1)
+    assert seen["env_kwargs"] == {}
+
+
+def test_run_debridement_refuses_env_keywords_that_repeat_its_arguments():
+    from dvrk_gym.evaluation.trials import run_debridement
+
+    with pytest.raises(ValueError, match=r"repeat run_debridement's own arguments: \['contact'\]"):
+        run_debridement(lambda observation: None, 1, 0, env_kwargs={"contact": "rigid"})

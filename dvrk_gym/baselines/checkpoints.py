@@ -19,10 +19,11 @@ with the recorded values, and :attr:`LoadedAgent.env_changes` says what differed
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import io
 import json
 import pickle
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -63,8 +64,9 @@ class LoadedAgent:
         config: its training settings (the env to evaluate it on follows from them).
         env_steps: env steps (robot moves) it was trained with.
         path: the zip it came from.
-        env_changes: how this version's env differs from the one the agent learnt in, one
-            line each (empty: none). Keywords whose default changed are set back to the
+        env_changes: how this version's env differs from the one the agent learnt in: the
+            ``gym.make`` keyword (``bias_config``: the instrument; ``env``: nothing recorded)
+            -> one line (empty: none). Keywords whose default changed are set back to the
             recorded values in ``config.env_overrides``; a changed instrument is only noted.
     """
 
@@ -72,7 +74,7 @@ class LoadedAgent:
     config: TrainConfig
     env_steps: int
     path: Path
-    env_changes: tuple[str, ...] = ()
+    env_changes: dict[str, str] = field(default_factory=dict)
 
     @property
     def label(self) -> str:
@@ -92,9 +94,6 @@ def save_agent(result: TrainResult, path: Path) -> Path:
         The zip's path.
     """
     path = Path(path).with_suffix(".zip")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with atomic_path(path) as temporary:
-        result.model.save(temporary)
     settings = {
         "format": FORMAT,
         "config": result.config.to_dict(),
@@ -104,9 +103,22 @@ def save_agent(result: TrainResult, path: Path) -> Path:
         "env_steps": result.env_steps,
         "train_seconds": result.train_seconds,
         "steps_per_second": result.steps_per_second,
-    }
+    }  # built before anything is written: a setting that cannot be saved leaves the old files as they were
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with atomic_path(path) as temporary:
+        result.model.save(temporary)
+        settings["zip_sha256"] = _zip_sha256(Path(temporary))
     atomic_write_json(settings_path(path), settings, indent=1)
     return path
+
+
+def _zip_sha256(path: Path) -> str:
+    """The SHA-256 of an agent's zip, read in chunks after checking its size."""
+    size = path.stat().st_size
+    if size > AGENT_FILE_LIMITS.max_file_bytes:
+        raise ValueError(f"{path}: {size:,} bytes; an agent's zip has at most {AGENT_FILE_LIMITS.max_file_bytes:,}")
+    with open(path, "rb") as file:
+        return hashlib.file_digest(file, "sha256").hexdigest()
 
 
 def env_record(config: TrainConfig) -> dict[str, Any]:
@@ -124,34 +136,40 @@ def env_record(config: TrainConfig) -> dict[str, Any]:
     return json.loads(json.dumps(record))
 
 
-def _recorded_world(config: TrainConfig, recorded: Any) -> tuple[TrainConfig, tuple[str, ...]]:
-    """``config`` with the recorded values of every env keyword whose default has changed,
-    and one line per difference between the recorded world and this version's."""
+def _recorded_world(config: TrainConfig, recorded: Any) -> tuple[TrainConfig, dict[str, str]]:
+    """``config`` with the recorded values of every env keyword whose default has changed, and
+    the differences between the recorded world and this version's: keyword (``bias_config``
+    for the instrument) -> one line.
+
+    Raises:
+        ValueError: the record is mangled, or contradicts ``config`` on a keyword ``config`` sets.
+    """
     if recorded is None:
-        return config, (f"its settings predate recorded envs: evaluated on this version's {config.spec.env_id} defaults",)
+        return config, {"env": f"its settings predate recorded envs: evaluated on this version's {config.spec.env_id} defaults"}
     if not isinstance(recorded, dict) or not isinstance(recorded.get("kwargs"), dict) or not isinstance(recorded.get("bias_config"), dict):
         raise ValueError(f"env must be an object with 'kwargs' and 'bias_config' objects, got {recorded!r}"[:300])
     if recorded.get("id") != config.spec.env_id:
         raise ValueError(f"env id {recorded.get('id')!r}, but agent {config.agent!r} learns {config.spec.env_id!r}")
     current = env_record(config)
     mine, now = recorded["kwargs"], current["kwargs"]
-    restore, changes = {}, []
+    for key in config.env_kwargs():  # set by the training settings themselves: the record must agree
+        if key in mine and mine[key] != now[key]:
+            raise ValueError(f"env records {key} = {mine[key]!r}, but the training settings give {now[key]!r}")
+    restore, changes = {}, {}
     for key in sorted((set(mine) | set(now)) - set(DISPLAY_ONLY)):
         if key not in now:
-            changes.append(f"{key} was {mine[key]!r} in training; this version has no such setting")
+            changes[key] = f"{key} was {mine[key]!r} in training; this version has no such setting"
         elif key not in mine:
-            changes.append(f"{key} was not recorded in training; evaluated with this version's {now[key]!r}")
+            changes[key] = f"{key} was not recorded in training; evaluated with this version's {now[key]!r}"
         elif mine[key] != now[key]:
             restore[key] = mine[key]
-            changes.append(f"{key}: learnt with {mine[key]!r}, this version's default is {now[key]!r}; evaluated with {mine[key]!r}")
-    drifted = sorted(
-        k
-        for k in set(recorded["bias_config"]) | set(current["bias_config"])
-        if recorded["bias_config"].get(k) != current["bias_config"].get(k)
-    )
+            changes[key] = f"{key}: learnt with {mine[key]!r}, this version's default is {now[key]!r}; evaluated with {mine[key]!r}"
+    was, is_now = recorded["bias_config"], current["bias_config"]
+    drifted = sorted(k for k in set(was) | set(is_now) if was.get(k) != is_now.get(k))
     if drifted:
-        changes.append(f"the {config.bias!r} instrument changed since training ({', '.join(drifted)}); evaluated on this version's")
-    return dataclasses.replace(config, env_overrides={**config.env_overrides, **restore}), tuple(changes)
+        fields = ", ".join(drifted)
+        changes["bias_config"] = f"the {config.bias!r} instrument changed since training ({fields}); evaluated on this version's"
+    return dataclasses.replace(config, env_overrides={**config.env_overrides, **restore}), changes
 
 
 def _policy_kwargs(model: BaseAlgorithm) -> dict[str, Any]:
@@ -251,10 +269,17 @@ def load_agent(path: Path) -> LoadedAgent:
 
     Raises:
         FileNotFoundError: the zip or its settings JSON is missing.
-        ValueError: the files are not an agent of this tool, or do not match this version.
+        ValueError: the files are not an agent of this tool, do not match this version, or the
+            zip is not the one its settings were written with.
     """
     path = Path(path)
     settings = _read_settings(path)
+    recorded_digest = settings.get("zip_sha256")  # absent from files saved before it was recorded
+    if recorded_digest is not None and recorded_digest != _zip_sha256(path):
+        raise ValueError(
+            f"{path} is not the zip {settings_path(path).name} was written with (another run's, changed since, "
+            "or a save cut short): train the agent again, or put its own files side by side"
+        )
     try:
         config = TrainConfig(**settings["config"])
         config, env_changes = _recorded_world(config, settings.get("env"))

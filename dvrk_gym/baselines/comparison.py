@@ -25,11 +25,12 @@ import logging
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from dvrk_gym import paper
-from dvrk_gym.baselines.budgets import GRID_TOUCH_ID, PHASE2_TOUCHES
+from dvrk_gym.baselines.budgets import DEBRIDEMENT_ID, GRID_TOUCH_ID, PHASE2_TOUCHES
 from dvrk_gym.baselines.checkpoints import LoadedAgent
 from dvrk_gym.baselines.training import TrainConfig, make_agent_env
 from dvrk_gym.baselines.transfer import pick_policy
@@ -140,22 +141,52 @@ def agent_contact(config: TrainConfig) -> str:
     return str(config.env_kwargs().get("contact", DEFAULT_CONTACT))
 
 
-def env_change_notes(agent: LoadedAgent) -> list[str]:
-    """How this version's env differs from the one ``agent`` learnt in (:attr:`LoadedAgent.env_changes`), one line each."""
-    return [f"{agent.label}: {change}" for change in agent.env_changes]
+PICKS_CARRY = ("contact", "bias_config", "env")
+"""What of a GridTouch agent's training env its transferred picks meet (keys of
+:attr:`LoadedAgent.env_changes`): the paper and the instrument; GridTouch's own keywords
+(the touch's approach, the reward) have no part in a pick."""
+PROTOCOL_KEYWORDS = ("fragment", "max_picks", "action_mode")
+"""Debridement-v0 keywords the paper's trial protocol sets, whatever the agent learnt on."""
 
 
-def setting_mismatches(agent: LoadedAgent, calibration: PipelineConfig) -> list[str]:
-    """Differences between an agent's world and a calibration run's that make rows incomparable
-    (and the env changes of :func:`env_change_notes`)."""
-    notes = env_change_notes(agent)
+def pick_env_kwargs(config: TrainConfig) -> dict[str, Any]:
+    """The Debridement-v0 keywords of an agent's picks, beside the protocol's: its instrument,
+    the paper it learnt on (:func:`agent_contact`) and, for a pick agent, every other keyword
+    of its training env (the values :func:`~dvrk_gym.baselines.checkpoints.load_agent`
+    restored included)."""
+    world: dict[str, Any] = {
+        "bias": config.bias,
+        "bias_seed": config.bias_seed,
+        "camera_resolution": config.camera_resolution,
+        "contact": agent_contact(config),
+    }
+    if config.spec.env_id == DEBRIDEMENT_ID:
+        world.update({key: value for key, value in config.env_kwargs().items() if key not in (*world, *PROTOCOL_KEYWORDS)})
+    return world
+
+
+def env_change_notes(agent: LoadedAgent, picks: bool = False) -> list[str]:
+    """How this version's env differs from the one ``agent`` learnt in (:attr:`LoadedAgent.env_changes`),
+    one line each; with ``picks``, for a GridTouch agent only what its picks meet (:data:`PICKS_CARRY`)."""
+    changes = agent.env_changes
+    if picks and agent.config.spec.env_id == GRID_TOUCH_ID:
+        changes = {key: line for key, line in changes.items() if key in PICKS_CARRY}
+    return [f"{agent.label}: {line}" for line in changes.values()]
+
+
+def setting_mismatches(agent: LoadedAgent, calibration: PipelineConfig, picks: bool = False) -> list[str]:
+    """Differences between an agent's world and a calibration run's that make rows incomparable,
+    on the touch grid or (``picks``) in debridement, and the env changes of :func:`env_change_notes`."""
+    notes = env_change_notes(agent, picks)
     for name in ("bias", "bias_seed", "camera_resolution"):
         mine, theirs = getattr(agent.config, name), getattr(calibration, name)
         if mine != theirs:
             notes.append(f"{agent.label}: {name} {mine!r}, but the calibration run used {theirs!r}")
     contact = agent_contact(agent.config)
     if contact != DEFAULT_CONTACT:
-        notes.append(f"{agent.label}: learnt on the {contact} paper and picks on it; the calibrators' picks met the {DEFAULT_CONTACT} one")
+        moves = "picks" if picks else "touches"
+        theirs = f"the calibrators' {moves} met the {DEFAULT_CONTACT} one"
+        notes.append(f"{agent.label}: learnt on the {contact} paper and {moves} on it; {theirs}")
     return notes
 
 
@@ -220,15 +251,11 @@ def benchmark_debridement(
     agent: LoadedAgent, n_trials: int = DEBRIDEMENT_TRIALS, seed: int = 0, fragment: str = "pumpkin_seed", progress: bool = False
 ) -> list[Trial]:
     """The agent's debridement trials (GridTouch agents transferred by :func:`pick_policy`), in its
-    world: its instrument, and the paper it learnt on (:func:`agent_contact`)."""
-    config = agent.config
-    world = {
-        "bias": config.bias,
-        "bias_seed": config.bias_seed,
-        "camera_resolution": config.camera_resolution,
-        "contact": agent_contact(config),
-    }
-    return run_debridement(pick_policy(agent), n_trials, seed, fragment, **world, progress=progress)
+    world (:func:`pick_env_kwargs`): its instrument, the paper it learnt on, and a pick agent's
+    other training keywords."""
+    world = pick_env_kwargs(agent.config)
+    base = {key: world.pop(key) for key in ("bias", "bias_seed", "camera_resolution", "contact")}
+    return run_debridement(pick_policy(agent), n_trials, seed, fragment, **base, env_kwargs=world, progress=progress)
 
 
 def calibration_debridement_rows(

@@ -11,10 +11,12 @@ mapped onto the base-frame box as in training; Debridement's pick box is GridTou
 
 The paper is the same in both envs (:mod:`dvrk_gym.sim.table.contact`): a GridTouch touch
 sent under it goes on down and its jaws slide along it, and a pick's jaws, lowered onto it,
-stall on a floor just above it and slide by as much at the same depth under that floor. A
+stall on a floor just above it and slide by as much for a command as deep under the paper. A
 GridTouch agent that learnt to send its touches deep and aim against the slide therefore
-picks where it touched. (With GridTouch's paper compliant and the picks' rigid, as before
-the picks slid, the agents' deep, slide-aimed commands missed most fragments: the README.)
+picks near where it touched: a pick closes its jaws ``grip_depth_m`` (2 mm) under the
+command, so it goes that much deeper than the touch and slides about 1.5 mm further.
+(With GridTouch's paper compliant and the picks' rigid, as before the picks slid, the
+agents' deep, slide-aimed commands missed most fragments: the README.)
 
 A pick agent (Debridement-v0) gets the same raw-observation interface, through the
 functions its training wrapper uses.

@@ -201,11 +201,13 @@ def plot_error_maps(table: dict[str, dict[str, CircleErrors]], path: Path) -> Pa
         plt.close(fig)
 
 
-def save_table(table: dict[str, dict[str, CircleErrors]], path: Path, protocol: str | None = None) -> Path:
+def save_table(table: dict[str, dict[str, CircleErrors]], path: Path, protocol: str | None = None, notes: Sequence[str] = ()) -> Path:
     """Write the summary and the per-circle errors as JSON, with the ``protocol`` the
-    predictions were sent by (:data:`~dvrk_gym.evaluation.table_protocol.PROTOCOLS`), if given."""
+    predictions were sent by (:data:`~dvrk_gym.evaluation.table_protocol.PROTOCOLS`), if given,
+    and ``notes`` (lines on how the rows were made, such as an agent's env changes)."""
     data = {
         "protocol": protocol,
+        "notes": list(notes),
         "summary": table_summary(table),
         "per_circle": {
             method: {label: {"pixel": e.pixel.tolist(), "mm": e.mm.tolist(), "yaw": e.yaw.tolist()} for label, e in settings.items()}

@@ -127,7 +127,7 @@ def _evaluate_touch_grid(agents: list, args: argparse.Namespace) -> list[Path]:
     changes = [f"note: {note}" for agent in agents for note in env_change_notes(agent)]
     text = format_table(table) + "\n" + "\n".join([*(f"{key}: {agent.label}, {agent.path}" for key, agent in zip(keys, agents)), *changes])
     print(text)
-    save_table(table, args.out / "baseline_table.json")
+    save_table(table, args.out / "baseline_table.json", notes=[note for agent in agents for note in env_change_notes(agent)])
     atomic_write_text(args.out / "baseline_table.txt", text + "\n")
     written = [args.out / "baseline_table.json", args.out / "baseline_table.txt"]
     if calibration is not None:
@@ -156,7 +156,7 @@ def _evaluate_debridement(agents: list, args: argparse.Namespace) -> list[Path]:
 
     seed = args.seed if args.seed is not None else 0
     texts, rows = [], []
-    notes = [note for agent in agents for note in env_change_notes(agent)]
+    notes = [note for agent in agents for note in env_change_notes(agent, picks=True)]
     for agent in agents:
         trials = benchmark_debridement(agent, args.trials, seed=seed, fragment=args.fragment, progress=not args.no_progress)
         texts.append(format_trial_table(trials, agent.label, args.fragment, seed))
@@ -167,7 +167,7 @@ def _evaluate_debridement(agents: list, args: argparse.Namespace) -> list[Path]:
             args.calibration, args.trials, seed, args.fragment, resolution, progress=not args.no_progress
         )
         rows = calibrators + rows
-        notes = [note for agent in agents for note in setting_mismatches(agent, calibration)]
+        notes = [note for agent in agents for note in setting_mismatches(agent, calibration, picks=True)]
     text = "\n\n".join(texts + [format_debridement_comparison(rows, notes)])
     print()
     print(text)

@@ -11,6 +11,7 @@ it as JSON (and text) with a picture of the outcome grid.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -89,6 +90,7 @@ def run_debridement(
     max_picks: int | None = None,
     progress: bool = False,
     contact: str = DEFAULT_CONTACT,
+    env_kwargs: Mapping[str, Any] | None = None,
 ) -> list[Trial]:
     """``n_trials`` debridement trials of ``policy`` on a fresh Debridement-v0 (primitive mode), closed after.
 
@@ -103,6 +105,7 @@ def run_debridement(
         max_picks: picks per trial (None: the env's, the paper's eight).
         progress: show a progress bar.
         contact: the paper under the picks, Debridement-v0's ``contact`` ("compliant" or "rigid").
+        env_kwargs: other Debridement-v0 keywords (``timing``, ``gripper``...), None: its defaults.
     """
     settings: dict[str, Any] = {
         "fragment": fragment,
@@ -113,6 +116,10 @@ def run_debridement(
     }
     if max_picks is not None:
         settings["max_picks"] = max_picks
+    clashing = sorted(set(settings) & set(env_kwargs or {}))
+    if clashing:
+        raise ValueError(f"env_kwargs must not repeat run_debridement's own arguments: {clashing}")
+    settings.update(env_kwargs or {})
     env = gym.make("dvrk_gym/Debridement-v0", **settings)
     try:
         return run_trials(env, policy, n_trials, seed=seed, progress=progress)

@@ -105,7 +105,7 @@ def debridement(
         trials,
         seed,
         out,
-        {"method": method, "calibrator": calibrator, "fragment": fragment},
+        {"method": method, "calibrator": calibrator, "fragment": fragment, "contact": env.unwrapped.config.contact},
     )
 
 
@@ -116,6 +116,7 @@ def rl_debridement(
     (:func:`~dvrk_gym.baselines.transfer.pick_policy`), as the calibrators aim theirs, on the
     paper the agent learnt on (:func:`~dvrk_gym.baselines.comparison.agent_contact`)."""
     agent = load_agent(Path(model))
+    contact = agent_contact(agent.config)
     env = gym.make(
         "dvrk_gym/Debridement-v0",
         fragment=fragment,
@@ -123,7 +124,7 @@ def rl_debridement(
         bias=bias,
         bias_seed=bias_seed,
         camera_resolution=tuple(resolution),
-        contact=agent_contact(agent.config),
+        contact=contact,
     )
     method = f"{agent.config.agent} (RL)"
     return _debridement_cell(
@@ -133,7 +134,7 @@ def rl_debridement(
         trials,
         seed,
         out,
-        {"method": method, "calibrator": None, "agent": agent.label, "fragment": fragment},
+        {"method": method, "calibrator": None, "agent": agent.label, "fragment": fragment, "contact": contact},
     )
 
 
