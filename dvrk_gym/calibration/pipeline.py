@@ -29,14 +29,15 @@ from dvrk_gym.calibration.benchmark import (
     save_table,
     table_summary,
 )
-from dvrk_gym.calibration.models.dnn import DNNCalibrator
+from dvrk_gym.calibration.models.dnn import MAX_EPOCHS, DNNCalibrator
 from dvrk_gym.calibration.models.rigid import RigidBodyCalibrator
 from dvrk_gym.calibration.models.two_phase import TwoPhaseCalibrator
 from dvrk_gym.calibration.phase1 import Phase1Data, run_paper_phase1
 from dvrk_gym.calibration.phase2 import Phase2Data, collect_phase2
 from dvrk_gym.evaluation.table_protocol import PROTOCOL_LINES, PROTOCOLS
+from dvrk_gym.sim.robot.bias import BIAS_PRESETS
 from dvrk_gym.utils.atomic import atomic_write_text
-from dvrk_gym.utils.checks import check_choice
+from dvrk_gym.utils.checks import check_choice, check_int_fields, check_resolution
 from dvrk_gym.utils.run_folder import RunFolder, read_settings
 
 logger = logging.getLogger(__name__)
@@ -51,9 +52,15 @@ BENCHMARK_SEED_OFFSET = BENCHMARK_SEED
 """The benchmark's seed is the run's seed plus this (so run seed 0 gives calibration_table's default)."""
 
 
+MAX_TRAJECTORIES = 10_000
+MAX_STEPS_PER_TRAJECTORY = 10_000
+"""Bounds of a run's Phase I (the paper: 57 trajectories of about 92 poses)."""
+
+
 @dataclass(frozen=True)
 class PipelineConfig:
-    """Settings of a calibration run (the paper's budgets by default).
+    """Settings of a calibration run (the paper's budgets by default), checked when made, so
+    that a bad value is refused before a run folder is stamped with it.
 
     Attributes:
         n_trajectories: Phase I trajectories (the paper: 57).
@@ -72,6 +79,18 @@ class PipelineConfig:
     bias_seed: int = 0
     camera_resolution: tuple[int, int] = paper.ENDOSCOPE_RESOLUTION_PX
     seed: int = 0
+
+    def __post_init__(self) -> None:
+        bounds = {
+            "n_trajectories": (1, MAX_TRAJECTORIES),
+            "steps_per_trajectory": (1, MAX_STEPS_PER_TRAJECTORY),
+            "dnn_epochs": (1, MAX_EPOCHS),
+            "bias_seed": (0, 2**31 - 1),
+            "seed": (0, 2**31 - 1),
+        }
+        check_int_fields("PipelineConfig", self, bounds)
+        check_choice("PipelineConfig.bias", self.bias, sorted(BIAS_PRESETS))
+        object.__setattr__(self, "camera_resolution", check_resolution("PipelineConfig.camera_resolution", self.camera_resolution))
 
     def env_kwargs(self) -> dict[str, Any]:
         return {"bias": self.bias, "bias_seed": self.bias_seed, "camera_resolution": tuple(self.camera_resolution)}

@@ -12,6 +12,7 @@ from pathlib import Path
 from dvrk_gym import paper
 from dvrk_gym.cli.options import add_instrument_options, add_progress_option, writable_folder
 from dvrk_gym.utils.atomic import atomic_write_json, atomic_write_text
+from dvrk_gym.utils.checks import check_int
 
 LOAD_WARNING = (
     "Models are read back without unpickling (the policy weights with torch.load(weights_only=True), "
@@ -32,7 +33,7 @@ def _run_train(args: argparse.Namespace) -> int:
         raise ValueError(f"--reward chooses GridTouch's reward; {args.algo} learns Debridement-v0 with its shaped pick reward")
     if not picks and args.fragment is not None:
         raise ValueError(f"--fragment is for the pick agents; {args.algo} learns GridTouch-v0")
-    overrides = {} if args.learning_starts is None else {"learning_starts": args.learning_starts}
+    overrides = {} if args.learning_starts is None else {"learning_starts": check_int("--learning-starts", args.learning_starts, 0, 10**9)}
     env_overrides = {} if args.reward is None else {"reward_type": args.reward}
     if args.fragment is not None:
         env_overrides["fragment"] = args.fragment

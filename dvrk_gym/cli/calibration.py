@@ -10,6 +10,7 @@ from dvrk_gym import paper
 from dvrk_gym.cli.options import add_instrument_options, add_progress_option, writable_folder
 from dvrk_gym.evaluation.table_protocol import PROTOCOL_LINES, PROTOCOLS
 from dvrk_gym.utils.atomic import atomic_path, atomic_write_json
+from dvrk_gym.utils.checks import check_int
 
 
 def _add_world_options(parser: argparse.ArgumentParser) -> None:
@@ -23,8 +24,14 @@ def _add_budget_options(parser: argparse.ArgumentParser) -> None:
 
 
 def _config(args: argparse.Namespace):
-    from dvrk_gym.calibration.pipeline import PipelineConfig
+    """The run's PipelineConfig, its options checked by their flags' names before any folder is touched."""
+    from dvrk_gym.calibration.models.dnn import MAX_EPOCHS
+    from dvrk_gym.calibration.pipeline import MAX_TRAJECTORIES, PipelineConfig
 
+    check_int("--trajectories", args.trajectories, 1, MAX_TRAJECTORIES)
+    check_int("--epochs", args.epochs, 1, MAX_EPOCHS)
+    check_int("--bias-seed", args.bias_seed, 0, 2**31 - 1)
+    check_int("--seed", args.seed, 0, 2**31 - 1)
     return PipelineConfig(
         n_trajectories=args.trajectories,
         dnn_epochs=args.epochs,
@@ -66,7 +73,8 @@ def _run_collect(args: argparse.Namespace) -> int:
 def _run_calibrate(args: argparse.Namespace) -> int:
     from dvrk_gym.calibration.pipeline import CALIBRATOR_FILES, run_calibration
 
-    result = run_calibration(writable_folder(args.out), _config(args), progress=not args.no_progress, benchmark=False)
+    config = _config(args)  # checked before the folder is made or stamped
+    result = run_calibration(writable_folder(args.out), config, progress=not args.no_progress, benchmark=False)
     phase1 = result["phase1"]
     print(f"Phase I: {phase1.n_raw} raw, {phase1.n_kept} kept; Phase II: {len(result['phase2'].circle)} corrections")
     print(f"models in {args.out}: {', '.join(CALIBRATOR_FILES.values())} (skops forests, safetensors weights: no pickles)")
@@ -82,7 +90,8 @@ def _run_evaluate(args: argparse.Namespace) -> int:
     from dvrk_gym.calibration.pipeline import run_calibration
 
     protocol = args.protocol or "paper"
-    result = run_calibration(writable_folder(args.out), _config(args), progress=not args.no_progress, benchmark=True, protocol=protocol)
+    config = _config(args)  # checked before the folder is made or stamped
+    result = run_calibration(writable_folder(args.out), config, progress=not args.no_progress, benchmark=True, protocol=protocol)
     print(PROTOCOL_LINES[protocol])
     print(format_table(result["table"]))
     print(f"wrote {args.out / 'calibration_table.json'}, {args.out / 'calibration_table.txt'}, {args.out / 'calibration_error_maps.png'}")
@@ -90,8 +99,12 @@ def _run_evaluate(args: argparse.Namespace) -> int:
 
 
 def _evaluate_policy(args: argparse.Namespace) -> int:
+    from dvrk_gym.envs import ENV_CONFIGS
     from dvrk_gym.evaluation.episodes import evaluate_policy, load_policy_factory, summarize_metric
 
+    if args.env not in ENV_CONFIGS:
+        raise ValueError(f"--env must be one of dvrk_gym's envs {sorted(ENV_CONFIGS)}, got {args.env!r}")
+    check_int("--episodes", args.episodes, 1, 10**6)
     factory = load_policy_factory(args.policy)  # a bad name fails before any env is built
     try:
         options = json.loads(args.options) if args.options else None
@@ -122,7 +135,7 @@ def _run_search(args: argparse.Namespace) -> int:
     from dvrk_gym.calibration.phase1 import Phase1Data
     from dvrk_gym.calibration.search import format_table, plot_search, run_search, search_caption
 
-    writable_folder(args.out)
+    check_int("--folds", args.folds, 2, 1000)
     if args.data == "paper":
         X, y = load_paper_phase1()
         source = "the authors' real Phase I data"
@@ -130,6 +143,9 @@ def _run_search(args: argparse.Namespace) -> int:
         clean = Phase1Data.load(args.data).cleaned()
         X, y = clean.X, clean.y
         source = str(args.data)
+    if args.folds > len(X):
+        raise ValueError(f"--folds {args.folds}: the data has only {len(X)} rows")
+    writable_folder(args.out)
     split = args.split or ("contiguous" if args.data == "paper" else "shuffled")
     shuffle, progress = split == "shuffled", not args.no_progress
     results = run_search(X, y, folds=args.folds, seed=args.seed, quick=args.quick, shuffle=shuffle, progress=progress)

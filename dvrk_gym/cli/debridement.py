@@ -31,7 +31,10 @@ def _run_debride(args: argparse.Namespace) -> int:
     model_file = args.calibration / CALIBRATOR_FILES[args.calibrator]
     retired = args.calibration / RETIRED_CALIBRATOR_FILES[args.calibrator]  # load_calibrator says how to remake it
     if not args.calibrate and not model_file.exists() and not retired.exists():
-        found = "has no " + model_file.name if args.calibration.is_dir() else "does not exist"
+        if args.calibration.is_dir():
+            found = "has no " + model_file.name
+        else:
+            found = "is a file, not a folder" if args.calibration.exists() else "does not exist"
         raise FileNotFoundError(
             f"--calibration {args.calibration} {found}; give the folder of a calibration run ('dvrk-gym calibrate'), "
             "or add --calibrate to run the calibration there first"

@@ -13,6 +13,7 @@ from dvrk_gym.cli.calibration import add_commands as add_calibration_commands
 from dvrk_gym.cli.debridement import add_commands as add_debridement_commands
 from dvrk_gym.cli.demo import add_commands as add_demo_commands
 from dvrk_gym.cli.fidelity import add_commands as add_fidelity_commands
+from dvrk_gym.cli.options import remove_empty_created_folders
 from dvrk_gym.cli.reproduce import add_commands as add_reproduce_commands
 from dvrk_gym.cli.sweep import add_commands as add_sweep_commands
 from dvrk_gym.utils.run_folder import RunFolderBusy
@@ -52,9 +53,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         return int(args.func(args))
     except (ValueError, OSError, RunFolderBusy) as error:  # bad input, unwritable output, a folder in use: one line, status 2
+        remove_empty_created_folders()
         print(f"dvrk-gym {args.command}: error: {_one_line(error)}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
+        remove_empty_created_folders()
         print(f"dvrk-gym {args.command}: interrupted (cached stages are kept: the same command resumes)", file=sys.stderr)
         return 130
 

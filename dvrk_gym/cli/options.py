@@ -4,6 +4,7 @@ progress, and where the work runs (local processes or a Dask cluster)."""
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import tempfile
 from pathlib import Path
@@ -87,8 +88,22 @@ def make_executor(args: argparse.Namespace) -> Executor:
     return local_executor(args.workers)
 
 
+_created: list[Path] = []
+"""Folders :func:`writable_folder` made in this process, deepest first."""
+
+
+def remove_empty_created_folders() -> None:
+    """Remove the folders :func:`writable_folder` made that are still empty, deepest first (a
+    command refused after making its ``--out`` leaves nothing behind); folders with files stay."""
+    while _created:
+        folder = _created.pop(0)
+        with contextlib.suppress(OSError):  # not empty, or gone: leave it
+            folder.rmdir()
+
+
 def writable_folder(path: Path, what: str = "--out") -> Path:
     """``path`` as an output folder that exists and can be written, checked before any work starts.
+    The folders it makes are removed by :func:`remove_empty_created_folders` if nothing is written in them.
 
     Raises:
         NotADirectoryError: ``path`` (or a parent) is a file.
@@ -98,6 +113,7 @@ def writable_folder(path: Path, what: str = "--out") -> Path:
     for parent in (path, *path.parents):
         if parent.exists() and not parent.is_dir():
             raise NotADirectoryError(f"{what} {path}: {parent} is a file, not a folder")
+    _created.extend(folder for folder in (path, *path.parents) if not folder.exists())  # deepest first
     try:
         path.mkdir(parents=True, exist_ok=True)
         with tempfile.NamedTemporaryFile(dir=path, prefix=".write-check-"):

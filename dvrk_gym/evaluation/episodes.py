@@ -131,11 +131,20 @@ def evaluate_policy(
         options: reset options, fixed or a function of the episode index.
         progress: show a progress bar.
         **env_kwargs: ``gym.make`` keywords (``bias``, ``bias_seed``, ``camera_resolution``...).
+
+    Raises:
+        ValueError: the factory cannot be imported, or raises a TypeError on the env.
     """
     make_policy = load_policy_factory(factory) if isinstance(factory, str) else factory
     env = gym.make(env_id, **env_kwargs)
     try:
-        return run_episodes(env, make_policy(env), n_episodes, seed=seed, options=options, progress=progress)
+        try:
+            policy = make_policy(env)
+        except TypeError as error:  # most often a factory that does not take the env
+            raise ValueError(
+                f"the policy factory {factory!r} failed on the env ({error}); it must take the env and return a policy"
+            ) from None
+        return run_episodes(env, policy, n_episodes, seed=seed, options=options, progress=progress)
     finally:
         env.close()
 

@@ -15,6 +15,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from dvrk_gym.calibration.pipeline import PipelineConfig
 from dvrk_gym.envs.base import check_action
 from dvrk_gym.envs.debridement_config import DebridementConfig
 from dvrk_gym.envs.exploration import ExplorationConfig
@@ -64,6 +65,9 @@ INT_FIELDS = [
     (GridTouchConfig, "bias_seed", 0, 2**31 - 1),
     (GripperConfig, "grasp_steps", 1, 10_000),
     (WorldConfig, "bias_seed", 0, 2**31 - 1),
+    (PipelineConfig, "n_trajectories", 1, 10_000),
+    (PipelineConfig, "dnn_epochs", 1, 10**7),
+    (PipelineConfig, "seed", 0, 2**31 - 1),
 ]
 
 
@@ -230,3 +234,17 @@ def test_envs_refuse_to_be_copied_or_pickled(make_env, env_id, copier, word):
     with pytest.raises(TypeError, match=f"cannot be {word}: it owns a PyBullet physics server"):
         copier(target)
     env.reset(seed=0)  # the env itself is untouched
+
+
+def test_a_refused_first_reset_leaves_the_env_usable_without_gymnasiums_passive_checker():
+    """The README's caveat: Gymnasium's passive checker (gym.make's default) breaks after a
+    refused first reset; the env itself does not, as ``disable_env_checker=True`` shows."""
+    env = gym.make("dvrk_gym/GridTouch-v0", camera_resolution=(320, 180), disable_env_checker=True)
+    try:
+        with pytest.raises(ValueError, match="unknown reset option"):
+            env.reset(options={"yawn": 0.0})
+        env.reset(seed=0)
+        _, reward, terminated, _, _ = env.step(np.array([0.04, 0.04, -0.15, 0.0], dtype=np.float32))
+        assert terminated and np.isfinite(reward)
+    finally:
+        env.close()

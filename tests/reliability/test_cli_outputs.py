@@ -150,3 +150,41 @@ def test_evaluate_refuses_options_that_are_not_a_json_object(capsys, tmp_path):
     for options in ("{yaw: 0}", "[1]"):
         _fails_in_one_line(capsys, [*argv, "--options", options], "--options must be a JSON object")
     assert not (tmp_path / "out").exists()
+
+
+REFUSED_BEFORE_ANY_WORK = [
+    (["calibrate", "--epochs", "-1"], "--epochs"),
+    (["collect", "--trajectories", "-3"], "--trajectories"),
+    (["evaluate", "--trajectories", "0"], "--trajectories"),
+    (["demo", "--circles", "0"], "--circles"),
+    (["evaluate", "--env", "dvrk_gym/Nope-v0", "--policy", "os:getcwd"], "--env"),
+    (["evaluate", "--env", "CartPole-v1", "--policy", "os:getcwd"], "--env"),
+    (["evaluate", "--env", "dvrk_gym/GridTouch-v0", "--policy", "os:getcwd", "--episodes", "-1"], "--episodes"),
+    (["search", "--folds", "1"], "--folds"),
+    (["reproduce", "--workers", "-1"], "workers"),
+    (["baseline", "evaluate", "--model", "missing.zip"], "missing.zip"),
+    (["baseline", "train", "--learning-starts", "-1", "--steps", "10"], "--learning-starts"),
+]
+
+
+@pytest.mark.parametrize("argv, word", REFUSED_BEFORE_ANY_WORK, ids=[" ".join(argv[:3]) for argv, _ in REFUSED_BEFORE_ANY_WORK])
+def test_a_refused_command_leaves_no_folder_and_no_stamp(capsys, tmp_path, argv, word):
+    """A bad option is refused by its flag's name, and neither the ``--out`` folder (nor a
+    parent it would have made) nor a stamp with the bad value is left: the corrected command
+    then runs in the same folder."""
+    out = tmp_path / "new" / "run"
+    _fails_in_one_line(capsys, [*argv, "--out", str(out)], word)
+    assert not (tmp_path / "new").exists()
+
+
+def test_a_refused_command_keeps_an_existing_folder_and_its_files(capsys, tmp_path):
+    (tmp_path / "notes.txt").write_text("mine")
+    _fails_in_one_line(capsys, ["calibrate", "--epochs", "-1", "--out", str(tmp_path)], "--epochs")
+    assert files_in(tmp_path) == {"notes.txt"}
+
+
+def test_debride_names_a_file_given_as_the_calibration_folder(capsys, tmp_path):
+    (tmp_path / "notes.txt").write_text("not a run")
+    _fails_in_one_line(
+        capsys, ["debride", "--calibration", str(tmp_path / "notes.txt"), "--out", str(tmp_path / "o")], "is a file, not a folder"
+    )
