@@ -61,11 +61,16 @@ def test_settings_refuse_an_empty_or_bad_grid_and_a_bad_budget():
         ({"seeds": (True,)}, "non-negative integers"),
         ({"calibrators": ()}, "calibrators is empty"),
         ({"calibrators": ("rbt", "svm")}, "unknown calibrators"),
-        ({"pipeline": PipelineConfig(bias="wobbly")}, "unknown bias preset"),
-        ({"pipeline": PipelineConfig(dnn_epochs=0)}, "dnn_epochs is 0"),
+        ({"pipeline": {"bias": "paper"}}, "pipeline must be a PipelineConfig"),
     ):
         with pytest.raises(ValueError, match=message):
             SweepSettings(**kwargs)
+    for kwargs, message in (
+        ({"bias": "wobbly"}, "PipelineConfig.bias must be one of"),
+        ({"dnn_epochs": 0}, "PipelineConfig.dnn_epochs must be"),
+    ):
+        with pytest.raises(ValueError, match=message):  # refused before a sweep can be set up with it
+            PipelineConfig(**kwargs)
 
 
 def test_units_are_instrument_and_seed_and_the_stamp_leaves_the_grid_out():

@@ -13,7 +13,6 @@ from dataclasses import dataclass
 from typing import Any
 
 from dvrk_gym.calibration.pipeline import CALIBRATOR_FILES, PipelineConfig
-from dvrk_gym.sim.robot.bias import resolve_bias
 
 CALIBRATORS: tuple[str, ...] = tuple(CALIBRATOR_FILES)
 """The calibrators a sweep knows, by their command-line names: ``rbt``, ``dnn``, ``dnn+rf``."""
@@ -71,13 +70,8 @@ class SweepSettings:
         if unknown:
             raise ValueError(f"unknown calibrators {unknown}; expected some of {list(CALIBRATORS)}")
         _check_unique(self.calibrators, "calibrators")
-        resolve_bias(self.pipeline.bias)  # an unknown preset fails here, not in every unit
-        budget = {"n_trajectories": self.pipeline.n_trajectories, "steps_per_trajectory": self.pipeline.steps_per_trajectory}
-        for name, value in {**budget, "dnn_epochs": self.pipeline.dnn_epochs}.items():
-            if value < 1:
-                raise ValueError(f"pipeline.{name} is {value}; expected at least 1")
-        if len(self.pipeline.camera_resolution) != 2 or min(self.pipeline.camera_resolution) < 1:
-            raise ValueError(f"pipeline.camera_resolution is {self.pipeline.camera_resolution}; expected (width, height) in pixels, >= 1")
+        if not isinstance(self.pipeline, PipelineConfig):  # which checks its own budget and world when made
+            raise ValueError(f"pipeline must be a PipelineConfig, got {type(self.pipeline).__name__}")
 
     def units(self) -> list[Unit]:
         """The units, instruments first then seeds, in the order given."""
