@@ -24,7 +24,6 @@ import dataclasses
 import time
 from pathlib import Path
 
-import gymnasium as gym
 from bench_pick_parts import add_what_if_arguments, apply_what_ifs
 
 import dvrk_gym  # noqa: F401
@@ -34,31 +33,32 @@ from dvrk_gym.calibration.policy import CalibratedPolicy
 from dvrk_gym.envs.debridement import fragment_target
 from dvrk_gym.envs.debridement_config import DEFAULT_PICK_TIMING
 from dvrk_gym.envs.picks import PHASES
-from dvrk_gym.evaluation.trials import run_trials, totals
+from dvrk_gym.evaluation.trials import run_debridement, totals
 from dvrk_gym.paper import DEBRIDEMENT_PHASE_S as PAPER_PHASE_S
-from dvrk_gym.sim.table.contact import CONTACTS
+from dvrk_gym.sim.table.contact import CONTACTS, DEFAULT_CONTACT
 
 
 def bench_cell(
     folder: Path, calibrator_name: str, fragment: str, trials: int, seed: int, resolution: tuple[int, int], **env_kwargs: object
 ) -> dict:
-    """Run one cell of the table; returns its totals and the wall seconds per trial.
-    ``env_kwargs`` go to ``gym.make`` (``contact``, ``timing``)."""
+    """Run one cell of the table as ``dvrk-gym debride`` does (``run_debridement``); returns its
+    totals and the wall seconds per trial (the env's construction included). ``env_kwargs`` go to
+    ``gym.make`` (``contact``, ``timing``)."""
     calibrator, settings = load_calibrator(folder, calibrator_name)
-    env = gym.make(
-        "dvrk_gym/Debridement-v0",
-        fragment=fragment,
+    contact = str(env_kwargs.pop("contact", DEFAULT_CONTACT))
+    start = time.perf_counter()
+    results = run_debridement(
+        CalibratedPolicy(calibrator, target=fragment_target),
+        trials,
+        seed,
+        fragment,
         bias=settings["bias"],
         bias_seed=int(settings["bias_seed"]),
         camera_resolution=resolution,
-        **env_kwargs,
+        contact=contact,
+        env_kwargs=env_kwargs,
     )
-    try:
-        start = time.perf_counter()
-        results = run_trials(env, CalibratedPolicy(calibrator, target=fragment_target), trials, seed=seed, progress=False)
-        wall = (time.perf_counter() - start) / trials
-    finally:
-        env.close()
+    wall = (time.perf_counter() - start) / trials
     return {**totals(results), "wall_s_per_trial": wall, "rows": [",".join(t.outcomes) for t in results]}
 
 

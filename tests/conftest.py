@@ -62,3 +62,15 @@ def small_calibration(tmp_path_factory) -> Path:
     )
     assert made.returncode == 0, made.stderr[-2000:]
     return folder
+
+
+def tool_to_tip_m(yaw: float):
+    """Where the closed jaw tip lies from the tool position commanded at ``yaw`` (rad), metres,
+    without cable bias: what a perfect calibration subtracts from a target (tests only)."""
+    from dvrk_gym.envs.grid_touch import tool_pose
+    from dvrk_gym.sim.physics.scene import WORKSPACE_CENTER_M
+    from dvrk_gym.sim.robot import ik
+    from dvrk_gym.sim.robot import kinematics as kin
+
+    reference = tool_pose(WORKSPACE_CENTER_M + [0.0, 0.0, 0.01], yaw)
+    return kin.touch_point(ik.inverse_kinematics(reference)) - reference[:3, 3]

@@ -7,14 +7,11 @@ import gymnasium as gym
 import numpy as np
 import pytest
 from benchmark_scripts import ROOT, load_script, run_script, script_path
-from conftest import SMALL
+from conftest import SMALL, tool_to_tip_m
 
 import dvrk_gym  # noqa: F401  (registers the envs)
 from dvrk_gym.calibration.policy import calibrator_input
 from dvrk_gym.envs.debridement import fragment_target
-from dvrk_gym.envs.grid_touch import tool_pose
-from dvrk_gym.sim.physics.scene import WORKSPACE_CENTER_M
-from dvrk_gym.sim.robot import ik
 from dvrk_gym.sim.robot import kinematics as kin
 
 pick_depths = load_script("pick_depths")
@@ -31,9 +28,7 @@ class TrueCamera:
 
     def predict(self, X: np.ndarray) -> np.ndarray:
         point = self.camera.to_world(X[:, :3])[0] - [0.0, 0.0, self.drop_m]
-        reference = tool_pose(WORKSPACE_CENTER_M + [0.0, 0.0, 0.01], float(X[0, 3]))
-        offset = kin.touch_point(ik.inverse_kinematics(reference)) - reference[:3, 3]
-        return (point - offset)[None]
+        return (point - tool_to_tip_m(float(X[0, 3])))[None]
 
 
 @pytest.mark.parametrize("drop_mm", [0.0, 3.0])

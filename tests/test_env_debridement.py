@@ -9,14 +9,13 @@ import math
 
 import numpy as np
 import pytest
-from conftest import SMALL, json_from_fresh_process
+from conftest import SMALL, json_from_fresh_process, tool_to_tip_m
 
 from dvrk_gym.envs.debridement import fragment_target
 from dvrk_gym.envs.grid_touch import tool_pose
 from dvrk_gym.envs.picks import PHASES
 from dvrk_gym.paper import DEBRIDEMENT_PHASE_S as PAPER_PHASE_S
 from dvrk_gym.sim.physics.scene import WORKSPACE_CENTER_M
-from dvrk_gym.sim.robot import ik
 from dvrk_gym.sim.robot import kinematics as kin
 from dvrk_gym.sim.table import judge
 from dvrk_gym.sim.table.contact import COMPLIANT
@@ -60,10 +59,7 @@ def oracle_action(fragment, along_m: float = 0.0, across_m: float = 0.0) -> np.n
     along /= np.linalg.norm(along)
     across = np.array([-along[1], along[0], 0.0])
     tip = fragment.position() + along_m * along + across_m * across
-    reference = tool_pose(WORKSPACE_CENTER_M + [0.0, 0.0, 0.01], yaw)
-    q = ik.inverse_kinematics(reference)
-    command = tip - (kin.touch_point(q) - reference[:3, 3])
-    return np.array([*command, yaw], dtype=np.float32)
+    return np.array([*(tip - tool_to_tip_m(yaw)), yaw], dtype=np.float32)
 
 
 # ---------------------------------------------------------------------------- the scene
