@@ -239,15 +239,33 @@ def test_constructor_keywords_are_the_config_fields_with_the_same_defaults_and_d
 
 @pytest.mark.parametrize("env_id", ENV_IDS)
 def test_registered_episode_length_is_what_the_defaults_give(env_id):
-    from dvrk_gym.envs.debridement_config import DebridementConfig
     from dvrk_gym.envs.exploration import ExplorationConfig
 
     expected = {
         "dvrk_gym/CalibrationExploration-v0": ExplorationConfig().max_steps,
         "dvrk_gym/GridTouch-v0": None,  # one touch terminates the episode: no time limit to truncate it
-        "dvrk_gym/Debridement-v0": DebridementConfig().max_picks,
+        "dvrk_gym/Debridement-v0": None,  # a trial terminates after max_picks picks; delta mode truncates after max_steps
     }
     assert gym.spec(env_id).max_episode_steps == expected[env_id]
+
+
+def test_debridement_ends_its_own_episodes_in_both_modes():
+    """The registry sets no time limit: a primitive trial ends terminated (not truncated)
+    after max_picks picks, and a delta-mode episode runs past eight steps to max_steps."""
+    env = gym.make("dvrk_gym/Debridement-v0", camera_resolution=SMALL, max_picks=2)
+    try:
+        env.reset(seed=0)
+        ends = [env.step(np.array([0.03, 0.04, -0.15, 0.0], dtype=np.float32))[2:4] for _ in range(2)]
+    finally:
+        env.close()
+    assert ends == [(False, False), (True, False)]
+    env = gym.make("dvrk_gym/Debridement-v0", camera_resolution=SMALL, action_mode="delta", max_steps=12)
+    try:
+        env.reset(seed=0)
+        ends = [env.step(np.zeros(4, dtype=np.float32))[2:4] for _ in range(12)]
+    finally:
+        env.close()
+    assert ends[:11] == [(False, False)] * 11 and ends[11] == (False, True)
 
 
 @pytest.mark.parametrize("env_id", ENV_IDS)

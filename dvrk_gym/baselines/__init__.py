@@ -11,7 +11,8 @@ poses and Phase II touches; and ten times that).
   agent sees it (the pick target, ``(bx, by, bz)`` in [-1, 1], a shaped reward).
 - :mod:`~dvrk_gym.baselines.agents`: the agents, one table row each (SAC + HER, SAC, SAC on picks).
 - :mod:`~dvrk_gym.baselines.training`: training with a learning curve.
-- :mod:`~dvrk_gym.baselines.checkpoints`: save (SB3 zip + JSON), load without unpickling.
+- :mod:`~dvrk_gym.baselines.checkpoints`: save (SB3 zip + JSON recording the whole env and the zip's
+  digest), load without unpickling, in the env the agent learnt in.
 - :mod:`~dvrk_gym.baselines.curves`: learning curves as JSON and figures.
 - :mod:`~dvrk_gym.baselines.transfer`: any agent as a Debridement-v0 policy (:func:`pick_policy`).
 - :mod:`~dvrk_gym.baselines.comparison`: the calibrators' benchmarks (touch grid,

@@ -7,13 +7,13 @@ keyword given to ``gym.make`` replaces its default. A keyword the env does not t
 ``TypeError`` naming the ones it takes; a bad value raises ``ValueError`` saying what is
 allowed.
 
-Each id is also registered with the episode length its defaults give as
-``max_episode_steps``: CalibrationExploration-v0 93 poses (one of the paper's Phase I
-trajectories), Debridement-v0 eight picks (one trial). GridTouch-v0 has none: every
-episode is one touch, which ends it (``terminated``); a time limit of one step would also
-mark that touch ``truncated``, which it is not. An env also ends its episodes itself
-(``max_steps``, ``max_picks``); if you raise those, raise ``max_episode_steps`` with them,
-e.g. ``gym.make("dvrk_gym/Debridement-v0", action_mode="delta", max_episode_steps=600)``.
+CalibrationExploration-v0 is registered with the episode length its defaults give as
+``max_episode_steps``: 93 poses (one of the paper's Phase I trajectories; if you raise
+``max_steps``, raise it with them). The other two end every episode themselves and have
+none: GridTouch-v0's one touch ends it (``terminated``), and Debridement-v0 terminates a
+trial after ``max_picks`` picks, or truncates it after ``max_steps`` control steps in delta
+mode. A time limit would mark the last touch or pick ``truncated`` too, which it is not
+(and one of eight steps cut a delta-mode episode at 0.8 s).
 
 The configs are read from modules that load neither PyBullet nor SciPy
 (:mod:`~dvrk_gym.envs.configs`, :mod:`~dvrk_gym.envs.debridement_config`), so that
@@ -46,7 +46,7 @@ ENV_CONFIGS: dict[str, type[EnvConfig]] = {
 EPISODE_STEPS = {
     "dvrk_gym/CalibrationExploration-v0": ExplorationConfig().max_steps,
     "dvrk_gym/GridTouch-v0": None,
-    "dvrk_gym/Debridement-v0": DebridementConfig().max_picks,
+    "dvrk_gym/Debridement-v0": None,
 }
 """Steps of one episode with each env's defaults, for Gymnasium's TimeLimit (None: the env always
 terminates its episodes itself)."""
