@@ -180,7 +180,8 @@ def comparison(args: argparse.Namespace, steps: int, pick_steps: int) -> None:
         label = agent.label + (" via pick_policy" if agent.config.spec.env_id == GRID_TOUCH_ID else "")
         debridement.append(debridement_row(label, agent.env_steps, benchmark_debridement(agent, args.trials, seed=0), str(agent.path)))
     print()
-    print(format_debridement_comparison(debridement, notes))
+    pick_notes = [note for agent in agents for note in setting_mismatches(agent, calibration, picks=True)]
+    print(format_debridement_comparison(debridement, pick_notes))
     print(f"(debridement trials: {time.perf_counter() - start:.0f} s)")
     print(f"\nwrote models and curves under {args.out}")
 

@@ -231,6 +231,14 @@ def test_a_recorded_env_contradicting_the_training_settings_is_refused(tmp_path,
         load_agent(path)
 
 
+def test_a_nested_setting_gaining_a_field_is_no_contradiction():
+    from dvrk_gym.baselines.checkpoints import _agrees
+
+    assert _agrees({"grip_depth_m": 0.002}, {"grip_depth_m": 0.002, "new_field_s": 1.0})
+    assert not _agrees({"grip_depth_m": 0.002}, {"grip_depth_m": 0.001, "new_field_s": 1.0})
+    assert _agrees([640, 360], [640, 360]) and not _agrees([640, 360], [320, 180])
+
+
 def test_an_agent_zip_not_written_with_its_settings_is_refused(tmp_path):
     path = _untrained_agent(tmp_path)
     first = json.loads(path.with_suffix(".json").read_text())

@@ -191,3 +191,13 @@ def test_the_papers_numbers_agree_with_each_other():
     assert paper.PHASE1_POSES_PER_TRAJECTORY == 93 and paper.PHASE2_TOUCHES == 175
     assert sum(paper.DEBRIDEMENT_PHASE_S.values()) == pytest.approx(paper.TRIAL_S / paper.FRAGMENTS_PER_TRIAL, rel=0.02)
     assert paper.REAL_PHASE1_ROWS == paper.PHASE1_KEPT_SAMPLES
+
+
+def test_a_profile_is_held_to_the_calibrations_own_bounds():
+    """A profile the calibration would refuse is refused when it is made, before a run folder is stamped."""
+    from dvrk_gym.calibration.pipeline import MAX_STEPS_PER_TRAJECTORY, MAX_TRAJECTORIES
+    from dvrk_gym.reproduce.profiles import Profile
+
+    for field, bound in (("n_trajectories", MAX_TRAJECTORIES), ("steps_per_trajectory", MAX_STEPS_PER_TRAJECTORY)):
+        with pytest.raises(ValueError, match=f"{field} must be an int in \\[1, {bound}\\]"):
+            Profile(name="big", **{field: bound + 1})

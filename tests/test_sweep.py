@@ -62,6 +62,7 @@ def test_settings_refuse_an_empty_or_bad_grid_and_a_bad_budget():
         ({"calibrators": ()}, "calibrators is empty"),
         ({"calibrators": ("rbt", "svm")}, "unknown calibrators"),
         ({"pipeline": {"bias": "paper"}}, "pipeline must be a PipelineConfig"),
+        ({"bias_seeds": (2**31,)}, "up to 2147483647"),  # refused here, not after the folder is stamped
     ):
         with pytest.raises(ValueError, match=message):
             SweepSettings(**kwargs)

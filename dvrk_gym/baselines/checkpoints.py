@@ -117,8 +117,11 @@ def _zip_sha256(path: Path) -> str:
     size = path.stat().st_size
     if size > AGENT_FILE_LIMITS.max_file_bytes:
         raise ValueError(f"{path}: {size:,} bytes; an agent's zip has at most {AGENT_FILE_LIMITS.max_file_bytes:,}")
+    digest = hashlib.sha256()
     with open(path, "rb") as file:
-        return hashlib.file_digest(file, "sha256").hexdigest()
+        for chunk in iter(lambda: file.read(2**20), b""):
+            digest.update(chunk)
+    return digest.hexdigest()
 
 
 def env_record(config: TrainConfig) -> dict[str, Any]:
@@ -134,6 +137,14 @@ def env_record(config: TrainConfig) -> dict[str, Any]:
     kwargs = dataclasses.asdict(env_config)
     record = {"id": config.spec.env_id, "kwargs": kwargs, "bias_config": dataclasses.asdict(resolve_bias(env_config.bias))}
     return json.loads(json.dumps(record))
+
+
+def _agrees(recorded: Any, current: Any) -> bool:
+    """Whether a recorded value is the current one; nested settings (dicts) are compared on the
+    fields both have, so a field added since (at its default) is no contradiction."""
+    if isinstance(recorded, dict) and isinstance(current, dict):
+        return all(_agrees(recorded[key], current[key]) for key in recorded.keys() & current.keys())
+    return bool(recorded == current)
 
 
 def _recorded_world(config: TrainConfig, recorded: Any) -> tuple[TrainConfig, dict[str, str]]:
@@ -153,7 +164,7 @@ def _recorded_world(config: TrainConfig, recorded: Any) -> tuple[TrainConfig, di
     current = env_record(config)
     mine, now = recorded["kwargs"], current["kwargs"]
     for key in config.env_kwargs():  # set by the training settings themselves: the record must agree
-        if key in mine and mine[key] != now[key]:
+        if key in mine and not _agrees(mine[key], now[key]):
             raise ValueError(f"env records {key} = {mine[key]!r}, but the training settings give {now[key]!r}")
     restore, changes = {}, {}
     for key in sorted((set(mine) | set(now)) - set(DISPLAY_ONLY)):

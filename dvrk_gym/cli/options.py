@@ -101,6 +101,25 @@ def remove_empty_created_folders() -> None:
             folder.rmdir()
 
 
+def _make_folders(path: Path) -> None:
+    """Make ``path`` and its missing parents one level at a time, recording in ``_created``
+    only those this call made (not one another process made meanwhile)."""
+    resolved = path.resolve()  # "new/../keep" names ./keep, not a folder "new" to remove
+    for folder in reversed([resolved, *resolved.parents]):
+        if folder.exists():
+            continue
+        try:
+            folder.mkdir()
+        except FileExistsError:  # made meanwhile by someone else: theirs
+            continue
+        _created.insert(0, folder)  # deepest first
+
+
+def forget_created_folders() -> None:
+    """Forget the folders :func:`writable_folder` made (a command that succeeded keeps them)."""
+    _created.clear()
+
+
 def writable_folder(path: Path, what: str = "--out") -> Path:
     """``path`` as an output folder that exists and can be written, checked before any work starts.
     The folders it makes are removed by :func:`remove_empty_created_folders` if nothing is written in them.
@@ -113,9 +132,8 @@ def writable_folder(path: Path, what: str = "--out") -> Path:
     for parent in (path, *path.parents):
         if parent.exists() and not parent.is_dir():
             raise NotADirectoryError(f"{what} {path}: {parent} is a file, not a folder")
-    _created.extend(folder for folder in (path, *path.parents) if not folder.exists())  # deepest first
     try:
-        path.mkdir(parents=True, exist_ok=True)
+        _make_folders(path)
         with tempfile.NamedTemporaryFile(dir=path, prefix=".write-check-"):
             pass
     except PermissionError:

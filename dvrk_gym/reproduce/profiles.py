@@ -11,6 +11,7 @@ from typing import Any
 
 from dvrk_gym import paper
 from dvrk_gym.baselines.budgets import AGENT_ENVS, GRID_TOUCH_ID
+from dvrk_gym.calibration.pipeline import MAX_STEPS_PER_TRAJECTORY, MAX_TRAJECTORIES
 from dvrk_gym.utils.checks import check_choice, check_int, check_resolution
 
 SEARCHES = ("paper", "quick")
@@ -59,7 +60,9 @@ class Profile:
             raise ValueError(f"rl_agents must be a list of agent names, got {self.rl_agents!r}")
         object.__setattr__(self, "rl_agents", tuple(self.rl_agents))
         check_choice("search", self.search, SEARCHES)
-        for name in ("n_trajectories", "steps_per_trajectory", "dnn_epochs", "debridement_trials", "debridement_picks", "rl_eval_points"):
+        check_int("n_trajectories", self.n_trajectories, 1, MAX_TRAJECTORIES)  # the calibration's own bounds
+        check_int("steps_per_trajectory", self.steps_per_trajectory, 1, MAX_STEPS_PER_TRAJECTORY)
+        for name in ("dnn_epochs", "debridement_trials", "debridement_picks", "rl_eval_points"):
             check_int(name, getattr(self, name), 1, _MAX_COUNT)
         grid_agents = sorted(name for name, env_id in AGENT_ENVS.items() if env_id == GRID_TOUCH_ID)
         unknown = [agent for agent in self.rl_agents if agent not in grid_agents]

@@ -107,12 +107,16 @@ def _as_ints(values: Any, name: str) -> tuple[int, ...]:
         raise ValueError(f"{name} is {values!r}; expected non-negative integers") from None
 
 
+MAX_SEED = 2**31 - 1
+"""The largest instrument or seed a unit takes (:class:`~dvrk_gym.calibration.pipeline.PipelineConfig`'s)."""
+
+
 def _check_seeds(values: tuple[int, ...], name: str) -> None:
     if not values:
         raise ValueError(f"{name} is empty; expected at least one non-negative integer")
-    bad = [value for value in values if value < 0]
+    bad = [value for value in values if not 0 <= value <= MAX_SEED]
     if bad:
-        raise ValueError(f"{name} has {bad}; expected non-negative integers")
+        raise ValueError(f"{name} has {bad}; expected non-negative integers up to {MAX_SEED}")
     _check_unique(values, name)
 
 

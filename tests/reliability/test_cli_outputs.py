@@ -188,3 +188,24 @@ def test_debride_names_a_file_given_as_the_calibration_folder(capsys, tmp_path):
     _fails_in_one_line(
         capsys, ["debride", "--calibration", str(tmp_path / "notes.txt"), "--out", str(tmp_path / "o")], "is a file, not a folder"
     )
+
+
+def test_a_refused_command_keeps_an_empty_folder_the_user_had(capsys, tmp_path):
+    """Only folders the command made go: an existing empty --out (here named through a folder
+    that does not exist, "new/../keep") stays, refused after the folder check or not."""
+    keep = tmp_path / "keep"
+    keep.mkdir()
+    _fails_in_one_line(capsys, ["baseline", "evaluate", "--model", "missing.zip", "--out", str(keep)], "missing.zip")
+    _fails_in_one_line(
+        capsys, ["baseline", "evaluate", "--model", "missing.zip", "--out", str(tmp_path / "new" / ".." / "keep")], "missing"
+    )
+    assert keep.is_dir() and not (tmp_path / "new").exists()
+
+
+def test_a_refused_command_does_not_remove_folders_an_earlier_call_made(capsys, tmp_path):
+    """In one process (tests, notebooks), a folder an earlier call made is not this command's to remove."""
+    from dvrk_gym.cli.options import writable_folder
+
+    made = writable_folder(tmp_path / "made")  # as an earlier command in this process would
+    _fails_in_one_line(capsys, ["baseline", "evaluate", "--model", "missing.zip", "--out", str(tmp_path / "other")], "missing.zip")
+    assert made.is_dir() and not (tmp_path / "other").exists()
