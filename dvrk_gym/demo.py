@@ -9,6 +9,7 @@ saves the stereo pair of the last touch as PNG (``dvrk-gym demo`` prints it all)
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -75,7 +76,7 @@ class DemoResult:
     images: dict[str, Path]
 
 
-def _touch(world: DvrkWorld, index: int, grid: list[StereoDetection], rng: np.random.Generator) -> Touch:
+def _touch(world: DvrkWorld, index: int, grid: Sequence[StereoDetection], rng: np.random.Generator) -> Touch:
     """Touch circle ``index`` from above, at the yaw its index picks, and record it."""
     yaw = float(kin.PAPER_YAWS_RAD[index % len(kin.PAPER_YAWS_RAD)])
     target = grid_circle_centers()[index]

@@ -198,7 +198,7 @@ def _text_table(title: str, header: str, lines: Sequence[str], notes: Sequence[s
     return "\n".join([title, header, *lines, *(f"note: {note}" for note in notes)])
 
 
-def format_comparison(rows: list[ComparisonRow], notes: list[str] = ()) -> str:
+def format_comparison(rows: list[ComparisonRow], notes: Sequence[str] = ()) -> str:
     """Method, robot moves, mean mm and pixel error over the 35 circles x 6 settings."""
     return _text_table(
         "Touch error over the 35 circles x 6 yaw settings, for the robot moves each method used",
@@ -285,7 +285,8 @@ def calibration_debridement_rows(
         raise ValueError(f"unknown calibrator(s) {unknown}; valid: {list(CALIBRATORS)}")
     config = _pipeline_config(folder)
     moves = calibrator_moves(config)
-    resolution = tuple(camera_resolution or config.camera_resolution)
+    width, height = camera_resolution or config.camera_resolution
+    resolution = (int(width), int(height))
     rows = []
     for name in calibrators:
         path = folder / CALIBRATOR_FILES[name]

@@ -10,7 +10,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -47,7 +47,7 @@ def load_curve(path: Path) -> list[CurvePoint]:
     return points
 
 
-def plot_curves(curves: dict[str, Sequence[CurvePoint]], path: Path, title: str = "", metric: str = "mm_error") -> Path:
+def plot_curves(curves: Mapping[str, Sequence[CurvePoint]], path: Path, title: str = "", metric: str = "mm_error") -> Path:
     """One line per agent against env steps: mean touch error (mm, log scale) or success rate.
 
     The paper's DNN+RF result (touch error, or debridement success on pumpkin seeds) is

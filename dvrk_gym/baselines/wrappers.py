@@ -13,12 +13,13 @@ the yaw of each training episode.
 
 from __future__ import annotations
 
-from typing import Any, SupportsFloat
+from typing import Any, SupportsFloat, cast
 
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 from gymnasium.wrappers import RescaleAction
+from numpy.typing import ArrayLike
 
 from dvrk_gym.envs.grid_touch import N_CIRCLES
 from dvrk_gym.sim.robot.kinematics import PAPER_YAWS_RAD
@@ -31,7 +32,7 @@ TRAINING_YAWS = ("paper", "random")
 """How training episodes choose their yaw: a tour of the 35 circles per paper yaw, or a random yaw each."""
 
 
-def scale_goal(goal_m: np.ndarray, center_m: np.ndarray = GOAL_CENTER_M, half_range_m: float = GOAL_HALF_RANGE_M) -> np.ndarray:
+def scale_goal(goal_m: np.ndarray, center_m: ArrayLike = GOAL_CENTER_M, half_range_m: float = GOAL_HALF_RANGE_M) -> np.ndarray:
     """Camera-frame points (..., 3) in metres to ``(goal - center) / half_range`` (float32)."""
     return ((np.asarray(goal_m, dtype=np.float64) - np.asarray(center_m, dtype=np.float64)) / half_range_m).astype(np.float32)
 
@@ -45,7 +46,9 @@ class TargetYawAction(gym.ActionWrapper):
     def __init__(self, env: gym.Env) -> None:
         super().__init__(env)
         box = env.action_space
-        self.action_space = spaces.Box(box.low[:3], box.high[:3], dtype=box.dtype)
+        if not isinstance(box, spaces.Box):
+            raise TypeError(f"TargetYawAction wraps a Box action space, got {box}")
+        self.action_space = spaces.Box(box.low[:3], box.high[:3], dtype=cast(Any, box.dtype))
         self._yaw = 0.0
 
     def reset(self, **kwargs: Any) -> tuple[Any, dict[str, Any]]:
@@ -74,8 +77,10 @@ class GoalScaling(gym.ObservationWrapper):
         self.center_m = np.asarray(center_m, dtype=np.float64)
         self.half_range_m = float(half_range_m)
         scaled = {}
+        if not isinstance(env.observation_space, spaces.Dict):
+            raise TypeError(f"GoalScaling wraps a Dict observation space, got {env.observation_space}")
         for key, box in env.observation_space.spaces.items():
-            if key in ("achieved_goal", "desired_goal"):
+            if key in ("achieved_goal", "desired_goal") and isinstance(box, spaces.Box):
                 box = spaces.Box(self._scale(box.low), self._scale(box.high), dtype=np.float32)
             scaled[key] = box
         self.observation_space = spaces.Dict(scaled)
@@ -107,7 +112,8 @@ class GoalScaling(gym.ObservationWrapper):
 
     def compute_reward(self, achieved_goal: np.ndarray, desired_goal: np.ndarray, info: Any) -> np.ndarray:
         """The env's reward for scaled goals (..., 3), vectorised (HER calls this)."""
-        return self.env.unwrapped.compute_reward(self.unscale(achieved_goal), self.unscale(desired_goal), info)
+        goal_env: Any = self.env.unwrapped  # GridTouch-v0, whose compute_reward HER calls
+        return goal_env.compute_reward(self.unscale(achieved_goal), self.unscale(desired_goal), info)
 
 
 class TrainingYaws(gym.Wrapper):
@@ -154,6 +160,6 @@ def wrap_grid_touch(env: gym.Env, training_yaws: str | None = None) -> gym.Env:
     if training_yaws is not None:
         env = TrainingYaws(env, training_yaws)
     env = TargetYawAction(env)
-    unit = np.ones(env.action_space.shape, dtype=np.float32)
+    unit = np.ones(env.action_space.shape or (), dtype=np.float32)
     env = RescaleAction(env, min_action=-unit, max_action=unit)
     return GoalScaling(env)  # outermost, so that ``env.compute_reward`` is found (SB3's check_env)

@@ -27,7 +27,7 @@ from dvrk_gym.calibration.pipeline import (
 
 logger = logging.getLogger(__name__)
 
-CALIBRATOR_LOADERS = {"rbt": RigidBodyCalibrator, "dnn": DNNCalibrator, "dnn+rf": TwoPhaseCalibrator}
+CALIBRATOR_LOADERS: dict[str, Any] = {"rbt": RigidBodyCalibrator, "dnn": DNNCalibrator, "dnn+rf": TwoPhaseCalibrator}
 """The class that reads each calibrator's model file, by the calibrator's name."""
 
 

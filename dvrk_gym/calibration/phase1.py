@@ -17,6 +17,7 @@ both cameras, sends the left one (:func:`clean_mask`).
 from __future__ import annotations
 
 from dataclasses import dataclass, fields
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -105,6 +106,8 @@ class PaperExplorationPolicy:
         return np.array([self.rng.uniform(*SAFE_X_M), self.rng.uniform(*SAFE_Y_M), TARGET_Z_M])
 
     def _advance(self) -> None:
+        if self._position is None:  # set by reset, which the first call makes
+            raise RuntimeError("the policy advances from a position: call it with an observation first")
         offset = self._target - self._position
         distance = float(np.linalg.norm(offset))
         if distance <= self.step_m:  # the authors' next trajectory: from a corner, with its own orientation
@@ -211,7 +214,8 @@ def clean_mask(left_px: np.ndarray, right_px: np.ndarray, left_to_right: np.ndar
 
 def grid_left_to_right_map(env: gym.Env) -> np.ndarray:
     """:func:`left_to_right_map` of the grid circles as the env's endoscope sees them (pixels only)."""
-    grid = env.unwrapped.world.observe_grid()
+    unwrapped: Any = env.unwrapped  # CalibrationExploration-v0
+    grid = unwrapped.world.observe_grid()
     return left_to_right_map(np.array([d.left_uv for d in grid]), np.array([d.right_uv for d in grid]))
 
 
@@ -253,7 +257,8 @@ def collect_phase1(env: gym.Env, policy: PaperExplorationPolicy, n_trajectories:
             rows["camera_position"].append(_or_nan(info["marker_camera_position"], 3))
             rows["trajectory"].append(k)
     arrays = {name: np.array(values) for name, values in rows.items()}
-    width = env.unwrapped.config.camera_resolution[0]
+    unwrapped: Any = env.unwrapped
+    width = unwrapped.config.camera_resolution[0]
     kept = clean_mask(arrays["left_px"], arrays["right_px"], grid_left_to_right_map(env), width)
     return Phase1Data(**arrays, kept=kept)
 
@@ -278,7 +283,7 @@ def run_paper_phase1(
         camera_resolution: the endoscope's image size (width, height), pixels.
         progress: show a progress bar.
     """
-    world = {"bias": bias, "bias_seed": bias_seed, "camera_resolution": tuple(camera_resolution)}
+    world: dict[str, Any] = {"bias": bias, "bias_seed": bias_seed, "camera_resolution": tuple(camera_resolution)}
     env = gym.make("dvrk_gym/CalibrationExploration-v0", max_steps=steps_per_trajectory, **world)
     try:
         return collect_phase1(env, PaperExplorationPolicy(seed=seed), n_trajectories, seed=seed, progress=progress)

@@ -98,7 +98,8 @@ class PipelineConfig:
     @classmethod
     def from_settings(cls, settings: dict[str, Any]) -> PipelineConfig:
         """The config of a run folder's stamp (JSON: the resolution comes back as a list)."""
-        return cls(**{key: (tuple(value) if key == "camera_resolution" else value) for key, value in settings.items()})
+        values: dict[str, Any] = {key: (tuple(value) if key == "camera_resolution" else value) for key, value in settings.items()}
+        return cls(**values)
 
 
 def read_pipeline_settings(folder: str | os.PathLike) -> dict[str, Any] | None:

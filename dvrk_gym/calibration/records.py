@@ -11,7 +11,7 @@ import io
 import math
 from dataclasses import fields
 from os import PathLike
-from typing import TypeVar
+from typing import Any, TypeVar, cast
 
 import numpy as np
 
@@ -77,12 +77,12 @@ class ArrayRecord:
     def save(self, path: str | PathLike) -> None:
         """Write every field to an ``.npz`` file at exactly ``path`` (no suffix added), atomically."""
         with atomic_open(path) as stream:
-            np.savez(stream, **{f.name: getattr(self, f.name) for f in fields(self)})
+            np.savez(stream, **{f.name: getattr(self, f.name) for f in fields(cast(Any, self))})
 
     @classmethod
     def load(cls: type[_Record], path: str | PathLike) -> _Record:
         """Read a file written by :meth:`save`; refuse files of another kind or with pickles."""
-        names = {f.name for f in fields(cls)}
+        names = {f.name for f in fields(cast(Any, cls))}
         try:
             data = read_npz_arrays(path)
         except ValueError as error:

@@ -129,7 +129,6 @@ def _evaluate_policy(args: argparse.Namespace) -> int:
 
 
 def _run_search(args: argparse.Namespace) -> int:
-    import numpy as np
 
     from dvrk_gym.calibration.datasets import load_paper_phase1
     from dvrk_gym.calibration.phase1 import Phase1Data
@@ -166,7 +165,7 @@ def _run_search(args: argparse.Namespace) -> int:
         for r in results
     ]
     atomic_write_json(args.out / "model_search.json", rows, indent=1)
-    print(f"wrote {args.out / 'model_search.png'}, {args.out / 'model_search.json'} ({np.size(results)} models)")
+    print(f"wrote {args.out / 'model_search.png'}, {args.out / 'model_search.json'} ({len(results)} models)")
     return 0
 
 

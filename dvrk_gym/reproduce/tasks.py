@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -105,8 +106,20 @@ def debridement(
         trials,
         seed,
         out,
-        {"method": method, "calibrator": calibrator, "fragment": fragment, "contact": env.unwrapped.config.contact},
+        {"method": method, "calibrator": calibrator, "fragment": fragment, "contact": _contact(env)},
     )
+
+
+def _contact(env: gym.Env) -> str:
+    """The paper under a Debridement-v0's picks (its config's ``contact``)."""
+    unwrapped: Any = env.unwrapped
+    return str(unwrapped.config.contact)
+
+
+def _resolution(resolution: Sequence[int]) -> tuple[int, int]:
+    """An image size (width, height) in pixels, from JSON's list."""
+    width, height = resolution
+    return int(width), int(height)
 
 
 def rl_debridement(
@@ -170,7 +183,13 @@ def rl_agent(
 ) -> dict[str, Any]:
     """Train an RL agent on GridTouch-v0 and benchmark it like the calibrators."""
     config = TrainConfig(
-        agent=agent, steps=steps, seed=seed, bias=bias, bias_seed=bias_seed, camera_resolution=tuple(resolution), eval_points=eval_points
+        agent=agent,
+        steps=steps,
+        seed=seed,
+        bias=bias,
+        bias_seed=bias_seed,
+        camera_resolution=_resolution(resolution),
+        eval_points=eval_points,
     )
     result = train(config, progress=False)
     folder = Path(out)

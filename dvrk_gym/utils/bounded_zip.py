@@ -48,6 +48,7 @@ def open_archive(source: str | os.PathLike | bytes, limits: ArchiveLimits = Arch
         FileNotFoundError: no such file.
         ArchiveLimitError: not a zip archive, or larger than the limits.
     """
+    opened: io.BytesIO | Path
     if isinstance(source, bytes):
         name, size, opened = "archive in memory", len(source), io.BytesIO(source)
     else:

@@ -41,7 +41,7 @@ WRIST_PITCH_OFFSET, WRIST_YAW_OFFSET, ROLL_LOWER, ROLL_UPPER, JAW_LENGTH, INSERT
 ROLL_BRANCHES, LOWER, UPPER = 13, 18, 24  # 5, 6 and 6 entries
 ARM_SIZE = 30
 # The order of the ``model`` vector's entries.
-MODEL_FIELDS = ("settle_lag", "outer_gain_yaw", "outer_gain_pitch", "outer_stretch_rad", "sag_m", "wrist_stretch")
+MODEL_FIELDS: tuple[str, ...] = ("settle_lag", "outer_gain_yaw", "outer_gain_pitch", "outer_stretch_rad", "sag_m", "wrist_stretch")
 MODEL_FIELDS += tuple(f"offset_{i}" for i in range(6))
 MODEL_FIELDS += ("outer_unloaded_yaw_rad", "outer_unloaded_pitch_rad", "outer_scale_rad", "wrist_scale_rad")
 
@@ -49,7 +49,7 @@ _jit = numba.njit(cache=True, fastmath=False, nogil=True)
 
 
 @_jit
-def _then_link(f, link, q):  # type: ignore[no-untyped-def]
+def _then_link(f, link, q):
     ca, sa, a, theta_offset, d_offset = link[0], link[1], link[2], link[3], link[4]
     if link[5] != 0.0:
         theta, d = theta_offset + 0.0, d_offset + q
@@ -75,7 +75,7 @@ def _then_link(f, link, q):  # type: ignore[no-untyped-def]
 
 
 @_jit
-def last_frame(q, links):  # type: ignore[no-untyped-def]
+def last_frame(q, links):
     """ik.last_frame_floats: the chain's last frame (row-major 3x4) for joints ``q`` (n,)."""
     first = links[0]
     ca, sa, a, theta_offset, d_offset = first[0], first[1], first[2], first[3], first[4]
@@ -91,14 +91,14 @@ def last_frame(q, links):  # type: ignore[no-untyped-def]
 
 
 @_jit
-def _square(x, two):  # type: ignore[no-untyped-def]
+def _square(x, two):
     """Python's ``x ** 2``: the C library's pow, ``two`` (2.0) given at run time so that LLVM
     cannot make it ``x * x``."""
     return x**two
 
 
 @_jit
-def _split(x):  # type: ignore[no-untyped-def]
+def _split(x):
     """Veltkamp's split of ``x`` into two halves of 26 bits: x == hi + lo exactly."""
     t = x * 134217729.0  # 2 ** 27 + 1
     hi = t - (t - x)
@@ -106,7 +106,7 @@ def _split(x):  # type: ignore[no-untyped-def]
 
 
 @_jit
-def _two_product(x, y):  # type: ignore[no-untyped-def]
+def _two_product(x, y):
     """Dekker's exact product: x * y == p + e exactly, p the rounded product."""
     x_hi, x_lo = _split(x)
     y_hi, y_lo = _split(y)
@@ -115,7 +115,7 @@ def _two_product(x, y):  # type: ignore[no-untyped-def]
 
 
 @_jit
-def _hypot(a, b):  # type: ignore[no-untyped-def]
+def _hypot(a, b):
     """sqrt(a^2 + b^2) of finite ``a``, ``b``, correctly rounded but in rare cases, as
     Python's math.hypot is (the C library's is within an ulp, and differs from it in about
     one case in 200): the sum of squares in double-double, its rounded square root, and one
@@ -137,7 +137,7 @@ def _hypot(a, b):  # type: ignore[no-untyped-def]
 
 
 @_jit
-def _wrap(angle):  # type: ignore[no-untyped-def]
+def _wrap(angle):
     """ik._wrap: Python's float % (fmod, then the divisor's sign), written out."""
     x, period = -angle + math.pi, 2 * math.pi
     mod = np.fmod(x, period)
@@ -150,7 +150,7 @@ def _wrap(angle):  # type: ignore[no-untyped-def]
 
 
 @_jit
-def inverse_kinematics(p, r6, q_ref_roll, arm, outer_links, out):  # type: ignore[no-untyped-def]
+def inverse_kinematics(p, r6, q_ref_roll, arm, outer_links, out):
     """ik.inverse_kinematics_floats into ``out`` (6,); False where it gives None. ``p`` (3,) m,
     ``r6`` (9,) the wrist-yaw frame's rotation, row-major."""
     two = arm[TWO]
@@ -209,7 +209,7 @@ def inverse_kinematics(p, r6, q_ref_roll, arm, outer_links, out):  # type: ignor
 
 
 @_jit
-def advance(q_cmd, state, model, coupling, radii, arm, new_state, out):  # type: ignore[no-untyped-def]
+def advance(q_cmd, state, model, coupling, radii, arm, new_state, out):
     """CableModel._advance_floats for the command ``q_cmd`` (6,): the cables' state after the move
     into ``new_state`` (as ``state``: the plays, then the motors), its noiseless true joints into ``out``."""
     n_plays = state.shape[0] - 1
@@ -255,7 +255,7 @@ def advance(q_cmd, state, model, coupling, radii, arm, new_state, out):  # type:
 
 
 @_jit
-def touch_point(q, links, arm, out):  # type: ignore[no-untyped-def]
+def touch_point(q, links, arm, out):
     """ik.touch_point_floats into ``out`` (3,) m for joints ``q`` (6,) of the chain ``links``."""
     jaw_length = arm[JAW_LENGTH]
     f = last_frame(q, links)
@@ -267,7 +267,7 @@ def touch_point(q, links, arm, out):  # type: ignore[no-untyped-def]
 
 
 @_jit
-def true_tip(position, r6, q_ref_roll, state, model, true_links, coupling, radii, arm, outer_links, out):  # type: ignore[no-untyped-def]
+def true_tip(position, r6, q_ref_roll, state, model, true_links, coupling, radii, arm, outer_links, out):
     """Where the jaws would truly be (``out``, (3,) m) if commanded to ``position`` (3,) m at the
     wrist-yaw rotation ``r6`` now, the cables in ``state`` (not changed); False (``out``
     untouched) where the inverse kinematics hands over."""
@@ -279,7 +279,7 @@ def true_tip(position, r6, q_ref_roll, state, model, true_links, coupling, radii
 
 
 @_jit
-def peek_tip(command, state, model, true_links, coupling, radii, arm, out):  # type: ignore[no-untyped-def]
+def peek_tip(command, state, model, true_links, coupling, radii, arm, out):
     """Where the jaws would truly be (``out``, (3,) m) after a noiseless move to ``command`` (6,), the cables in ``state`` (not changed)."""
     q_true = np.empty(6)
     advance(command, state, model, coupling, radii, arm, np.empty_like(state), q_true)

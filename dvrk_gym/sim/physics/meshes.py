@@ -109,7 +109,8 @@ def _ring(radius: float, z: float, segments: int) -> np.ndarray:
 
 def discs(centers: np.ndarray, radius_m: float, segments: int = DEFAULT_SEGMENTS) -> Mesh:
     """Flat discs facing +z, one triangle fan each, centred at ``centers`` (N, 3), metres."""
-    vertices, faces = [], []
+    vertices: list[np.ndarray] = []
+    faces: list[np.ndarray] = []
     for center in np.asarray(centers, dtype=float):
         base = len(vertices) * (segments + 1)
         vertices.append(np.vstack([center, center + _ring(radius_m, 0.0, segments)]))
@@ -151,7 +152,9 @@ def box(size_m: tuple[float, float, float] = (1.0, 1.0, 1.0)) -> Mesh:
     """A box of full sizes ``size_m`` (x, y, z), centred at the origin (metres): four
     vertices and two triangles per face, each face with its own normal."""
     half = np.asarray(size_m, dtype=float) / 2
-    vertices, normals, faces = [], [], []
+    vertices: list[np.ndarray] = []
+    normals: list[np.ndarray] = []
+    faces: list[Any] = []
     for axis in range(3):
         u, v = (axis + 1) % 3, (axis + 2) % 3
         for sign in (-1.0, 1.0):

@@ -36,7 +36,7 @@ def grid_errors(model: CableModel, yaw_rad: float) -> tuple[np.ndarray, np.ndarr
     reported, errors = [], []
     for x in xs:
         for y in ys:
-            pose = kin.pose_from_euler(np.array([x, y, GRID_Z_M]), yaw_rad, pitch, roll)
+            pose = kin.pose_from_euler(np.array([x, y, GRID_Z_M]), yaw_rad, float(pitch), float(roll))
             q_cmd = ik.inverse_kinematics(pose)
             model.reset(q_cmd)
             true = kin.touch_point(model.true_joints(q_cmd), model.true_dh)

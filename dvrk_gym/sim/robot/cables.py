@@ -32,6 +32,7 @@ the per-move ones are the functions below. Joint vectors follow
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 
@@ -140,6 +141,7 @@ def gravity_sag(q: np.ndarray, config: BiasConfig) -> np.ndarray:
     return _least_squares(jacobian, rotation)
 
 
+_lstsq_gufunc: Any
 try:  # numpy >= 2: lstsq's own LAPACK routine, without the wrapper's checks and error state
     from numpy.linalg._umath_linalg import lstsq as _lstsq_gufunc
 except ImportError:  # pragma: no cover - older numpy names it differently

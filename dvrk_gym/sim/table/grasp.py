@@ -308,6 +308,8 @@ class Gripper:
 
     def _try_pierce(self, fragment: Fragment) -> bool:
         """Pierce ``fragment`` with a jaw tip pressing end-on into it with its pierce force."""
+        if fragment.kind.pierce_force_n is None:  # only pierceable kinds come here
+            return False
         depth = fragment.kind.pierce_force_n / fragment.kind.stiffness_n_m
         for i, link in enumerate(JAW_LINKS):
             touch = self._touches[i].get(fragment.body_id)

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
@@ -112,7 +113,8 @@ def sample_layout(
         raise ValueError(f"n = {n} fragments asked for but only {len(sizes)} sizes given")
     low, high = (np.asarray(v, dtype=float) for v in (region or phantom_region()))
     for _ in range(20):
-        positions, yaws = [], []
+        positions: list[Any] = []
+        yaws: list[Any] = []
         for i in range(n):
             placed = _place_one(rng, sizes[i], sizes[:i], positions, yaws, low, high, min_gap_m, max_tries)
             if placed is None:
