@@ -13,7 +13,7 @@ from dvrk_gym.cli.calibration import add_commands as add_calibration_commands
 from dvrk_gym.cli.debridement import add_commands as add_debridement_commands
 from dvrk_gym.cli.demo import add_commands as add_demo_commands
 from dvrk_gym.cli.fidelity import add_commands as add_fidelity_commands
-from dvrk_gym.cli.options import forget_created_folders, remove_empty_created_folders
+from dvrk_gym.cli.options import check_instrument_options, forget_created_folders, remove_empty_created_folders
 from dvrk_gym.cli.reproduce import add_commands as add_reproduce_commands
 from dvrk_gym.cli.sweep import add_commands as add_sweep_commands
 from dvrk_gym.utils.run_folder import RunFolderBusy
@@ -52,6 +52,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
     forget_created_folders()  # only this command's folders are removed if it is refused
     try:
+        check_instrument_options(args)
         return int(args.func(args))
     except (ValueError, OSError, RunFolderBusy) as error:  # bad input, unwritable output, a folder in use: one line, status 2
         remove_empty_created_folders()

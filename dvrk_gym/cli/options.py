@@ -10,8 +10,23 @@ import tempfile
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from dvrk_gym.utils.checks import check_int, check_resolution
+
 if TYPE_CHECKING:
     from dvrk_gym.parallel.executors import Executor
+
+
+def check_instrument_options(args: argparse.Namespace) -> None:
+    """Check ``--bias-seed`` and ``--resolution`` by their flags' names, for every command that
+    has them, before the command runs (a config deeper down would name its own field).
+
+    Raises:
+        ValueError: a value out of range.
+    """
+    if getattr(args, "bias_seed", None) is not None:
+        check_int("--bias-seed", args.bias_seed, 0, 2**31 - 1)
+    if getattr(args, "resolution", None) is not None:
+        check_resolution("--resolution", args.resolution)
 
 
 def add_instrument_options(parser: argparse.ArgumentParser, resolution: bool = True, note: str = "") -> None:

@@ -164,6 +164,9 @@ REFUSED_BEFORE_ANY_WORK = [
     (["reproduce", "--workers", "-1"], "workers"),
     (["baseline", "evaluate", "--model", "missing.zip"], "missing.zip"),
     (["baseline", "train", "--learning-starts", "-1", "--steps", "10"], "--learning-starts"),
+    (["demo", "--bias-seed", "-1"], "--bias-seed"),
+    (["fidelity", "--resolution", "5", "5"], "--resolution"),
+    (["debride", "--calibrate", "--bias-seed", "-1"], "--bias-seed"),
 ]
 
 
