@@ -41,6 +41,7 @@ from dvrk_gym.calibration.policy import CalibratedPolicy
 from dvrk_gym.envs.debridement import fragment_target
 from dvrk_gym.evaluation.trials import Trial, run_debridement, totals
 from dvrk_gym.sim.table.contact import DEFAULT_CONTACT
+from dvrk_gym.utils.checks import check_resolution
 
 logger = logging.getLogger(__name__)
 
@@ -150,19 +151,14 @@ PROTOCOL_KEYWORDS = ("fragment", "max_picks", "action_mode")
 
 
 def pick_env_kwargs(config: TrainConfig) -> dict[str, Any]:
-    """The Debridement-v0 keywords of an agent's picks, beside the protocol's: its instrument,
-    the paper it learnt on (:func:`agent_contact`) and, for a pick agent, every other keyword
-    of its training env (the values :func:`~dvrk_gym.baselines.checkpoints.load_agent`
-    restored included)."""
-    world: dict[str, Any] = {
-        "bias": config.bias,
-        "bias_seed": config.bias_seed,
-        "camera_resolution": config.camera_resolution,
-        "contact": agent_contact(config),
-    }
-    if config.spec.env_id == DEBRIDEMENT_ID:
-        world.update({key: value for key, value in config.env_kwargs().items() if key not in (*world, *PROTOCOL_KEYWORDS)})
-    return world
+    """The Debridement-v0 keywords of an agent's picks beyond its instrument, its paper
+    (:func:`agent_contact`) and the protocol's: for a pick agent, every other keyword of its
+    training env (the values :func:`~dvrk_gym.baselines.checkpoints.load_agent` restored
+    included); for a GridTouch agent, none."""
+    if config.spec.env_id != DEBRIDEMENT_ID:
+        return {}
+    own = ("bias", "bias_seed", "camera_resolution", "contact", *PROTOCOL_KEYWORDS)
+    return {key: value for key, value in config.env_kwargs().items() if key not in own}
 
 
 def env_change_notes(agent: LoadedAgent, picks: bool = False) -> list[str]:
@@ -251,11 +247,21 @@ def benchmark_debridement(
     agent: LoadedAgent, n_trials: int = DEBRIDEMENT_TRIALS, seed: int = 0, fragment: str = "pumpkin_seed", progress: bool = False
 ) -> list[Trial]:
     """The agent's debridement trials (GridTouch agents transferred by :func:`pick_policy`), in its
-    world (:func:`pick_env_kwargs`): its instrument, the paper it learnt on, and a pick agent's
-    other training keywords."""
-    world = pick_env_kwargs(agent.config)
-    base = {key: world.pop(key) for key in ("bias", "bias_seed", "camera_resolution", "contact")}
-    return run_debridement(pick_policy(agent), n_trials, seed, fragment, **base, env_kwargs=world, progress=progress)
+    world: its instrument, the paper it learnt on (:func:`agent_contact`), and a pick agent's
+    other training keywords (:func:`pick_env_kwargs`)."""
+    config = agent.config
+    return run_debridement(
+        pick_policy(agent),
+        n_trials,
+        seed,
+        fragment,
+        bias=config.bias,
+        bias_seed=config.bias_seed,
+        camera_resolution=config.camera_resolution,
+        contact=agent_contact(config),
+        env_kwargs=pick_env_kwargs(config),
+        progress=progress,
+    )
 
 
 def calibration_debridement_rows(
@@ -285,8 +291,7 @@ def calibration_debridement_rows(
         raise ValueError(f"unknown calibrator(s) {unknown}; valid: {list(CALIBRATORS)}")
     config = _pipeline_config(folder)
     moves = calibrator_moves(config)
-    width, height = camera_resolution or config.camera_resolution
-    resolution = (int(width), int(height))
+    resolution = check_resolution("camera_resolution", camera_resolution or config.camera_resolution)
     rows = []
     for name in calibrators:
         path = folder / CALIBRATOR_FILES[name]

@@ -24,13 +24,13 @@ def _add_budget_options(parser: argparse.ArgumentParser) -> None:
 
 
 def _config(args: argparse.Namespace):
-    """The run's PipelineConfig, its options checked by their flags' names before any folder is touched."""
+    """The run's PipelineConfig, its options checked by their flags' names before any folder is
+    touched (``--bias-seed`` and ``--resolution`` as every command's, in ``main``)."""
     from dvrk_gym.calibration.models.dnn import MAX_EPOCHS
     from dvrk_gym.calibration.pipeline import MAX_TRAJECTORIES, PipelineConfig
 
     check_int("--trajectories", args.trajectories, 1, MAX_TRAJECTORIES)
     check_int("--epochs", args.epochs, 1, MAX_EPOCHS)
-    check_int("--bias-seed", args.bias_seed, 0, 2**31 - 1)
     check_int("--seed", args.seed, 0, 2**31 - 1)
     return PipelineConfig(
         n_trajectories=args.trajectories,

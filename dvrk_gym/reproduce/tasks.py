@@ -33,6 +33,8 @@ from dvrk_gym.sim.robot.bias import resolve_bias
 from dvrk_gym.sim.robot.bias_field import grid_rigid_means, plot_field
 from dvrk_gym.sim.robot.bias_statistics import bias_statistics
 from dvrk_gym.sim.robot.cables import CableModel
+from dvrk_gym.sim.table.contact import DEFAULT_CONTACT
+from dvrk_gym.utils.checks import check_resolution
 
 MM_PER_M = 1e3
 
@@ -90,14 +92,7 @@ def debridement(
 ) -> dict[str, Any]:
     """One cell of the paper's debridement table: ``trials`` trials with a calibrator."""
     model, settings = load_calibrator(Path(calibration_folder), calibrator)
-    env = gym.make(
-        "dvrk_gym/Debridement-v0",
-        fragment=fragment,
-        max_picks=picks,
-        bias=settings["bias"],
-        bias_seed=int(settings["bias_seed"]),
-        camera_resolution=tuple(resolution),
-    )
+    env = _debridement_env(fragment, picks, settings["bias"], int(settings["bias_seed"]), resolution, DEFAULT_CONTACT)
     method = paper.METHOD_LABELS[calibrator]
     return _debridement_cell(
         env,
@@ -106,20 +101,21 @@ def debridement(
         trials,
         seed,
         out,
-        {"method": method, "calibrator": calibrator, "fragment": fragment, "contact": _contact(env)},
+        {"method": method, "calibrator": calibrator, "fragment": fragment, "contact": DEFAULT_CONTACT},
     )
 
 
-def _contact(env: gym.Env) -> str:
-    """The paper under a Debridement-v0's picks (its config's ``contact``)."""
-    unwrapped: Any = env.unwrapped
-    return str(unwrapped.config.contact)
-
-
-def _resolution(resolution: Sequence[int]) -> tuple[int, int]:
-    """An image size (width, height) in pixels, from JSON's list."""
-    width, height = resolution
-    return int(width), int(height)
+def _debridement_env(fragment: str, picks: int, bias: str, bias_seed: int, resolution: Sequence[int], contact: str) -> gym.Env:
+    """Debridement-v0 for one cell of the table: ``picks`` picks a trial, on the ``contact`` paper."""
+    return gym.make(
+        "dvrk_gym/Debridement-v0",
+        fragment=fragment,
+        max_picks=picks,
+        bias=bias,
+        bias_seed=bias_seed,
+        camera_resolution=check_resolution("resolution", resolution),
+        contact=contact,
+    )
 
 
 def rl_debridement(
@@ -130,15 +126,7 @@ def rl_debridement(
     paper the agent learnt on (:func:`~dvrk_gym.baselines.comparison.agent_contact`)."""
     agent = load_agent(Path(model))
     contact = agent_contact(agent.config)
-    env = gym.make(
-        "dvrk_gym/Debridement-v0",
-        fragment=fragment,
-        max_picks=picks,
-        bias=bias,
-        bias_seed=bias_seed,
-        camera_resolution=tuple(resolution),
-        contact=contact,
-    )
+    env = _debridement_env(fragment, picks, bias, bias_seed, resolution, contact)
     method = f"{agent.config.agent} (RL)"
     return _debridement_cell(
         env,
@@ -188,7 +176,7 @@ def rl_agent(
         seed=seed,
         bias=bias,
         bias_seed=bias_seed,
-        camera_resolution=_resolution(resolution),
+        camera_resolution=check_resolution("resolution", resolution),
         eval_points=eval_points,
     )
     result = train(config, progress=False)
