@@ -27,6 +27,8 @@ def _run_train(args: argparse.Namespace) -> int:
     from dvrk_gym.baselines.curves import plot_curves, save_curve
     from dvrk_gym.baselines.training import TrainConfig, train
 
+    if args.steps is not None:
+        check_int("--steps", args.steps, 1, 10**9)
     steps = resolve_budget(args.budget, args.steps)
     picks = AGENT_ENVS[args.algo] == DEBRIDEMENT_ID
     if picks and args.reward is not None:

@@ -12,6 +12,11 @@ from dvrk_gym.evaluation.table_protocol import PROTOCOL_LINES, PROTOCOLS
 from dvrk_gym.utils.atomic import atomic_path, atomic_write_json
 from dvrk_gym.utils.checks import check_int
 
+DEFAULT_POLICY_ENV = "dvrk_gym/GridTouch-v0"
+"""The env ``evaluate --policy`` runs on without ``--env``."""
+DEFAULT_POLICY_EPISODES = 35
+"""Episodes ``evaluate --policy`` runs without ``--episodes`` (one per printed circle)."""
+
 
 def _add_world_options(parser: argparse.ArgumentParser) -> None:
     add_instrument_options(parser)
@@ -86,6 +91,10 @@ def _run_evaluate(args: argparse.Namespace) -> int:
         if args.protocol is not None:
             raise ValueError("--protocol is how the calibrators' predictions are sent; a --policy sends its own actions as they are")
         return _evaluate_policy(args)
+    given = [flag for flag in ("--env", "--episodes", "--options") if getattr(args, flag[2:]) is not None]
+    if given:
+        verb = "applies" if len(given) == 1 else "apply"
+        raise ValueError(f"{' and '.join(given)} {verb} to --policy only; without --policy, evaluate runs the paper's calibration table")
     from dvrk_gym.calibration.benchmark import format_table
     from dvrk_gym.calibration.pipeline import run_calibration
 
@@ -102,6 +111,8 @@ def _evaluate_policy(args: argparse.Namespace) -> int:
     from dvrk_gym.envs import ENV_CONFIGS
     from dvrk_gym.evaluation.episodes import evaluate_policy, load_policy_factory, summarize_metric
 
+    args.env = args.env or DEFAULT_POLICY_ENV
+    args.episodes = DEFAULT_POLICY_EPISODES if args.episodes is None else args.episodes
     if args.env not in ENV_CONFIGS:
         raise ValueError(f"--env must be one of dvrk_gym's envs {sorted(ENV_CONFIGS)}, got {args.env!r}")
     check_int("--episodes", args.episodes, 1, 10**6)
@@ -195,8 +206,8 @@ def add_commands(subparsers: argparse._SubParsersAction) -> None:
     )
     evaluate.add_argument("--out", type=Path, default=Path("dvrk_gym_out/calibration"), help="output folder (default: %(default)s)")
     evaluate.add_argument("--policy", help="evaluate another policy: 'package.module:factory', factory(env) returns the policy")
-    evaluate.add_argument("--env", default="dvrk_gym/GridTouch-v0", help="environment for --policy (default: %(default)s)")
-    evaluate.add_argument("--episodes", type=int, default=35, help="episodes for --policy (default: %(default)s)")
+    evaluate.add_argument("--env", help=f"environment for --policy (default: {DEFAULT_POLICY_ENV})")
+    evaluate.add_argument("--episodes", type=int, help=f"episodes for --policy (default: {DEFAULT_POLICY_EPISODES})")
     evaluate.add_argument("--options", help='reset options for --policy as JSON, e.g. \'{"yaw": "random"}\'')
     evaluate.add_argument(
         "--protocol",

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import re
 import sys
 from collections.abc import Callable, Sequence
 
@@ -16,15 +17,27 @@ from dvrk_gym.cli.fidelity import add_commands as add_fidelity_commands
 from dvrk_gym.cli.options import check_instrument_options, forget_created_folders, remove_empty_created_folders
 from dvrk_gym.cli.reproduce import add_commands as add_reproduce_commands
 from dvrk_gym.cli.sweep import add_commands as add_sweep_commands
+from dvrk_gym.sim.physics.quiet_import import import_pybullet_quietly
 from dvrk_gym.utils.run_folder import RunFolderBusy
 
 Command = Callable[[argparse.Namespace], int]
 
 
-def _one_line(error: BaseException) -> str:
-    """An error's message on one line (an OSError without its own words gets its errno's)."""
-    text = str(error) or type(error).__name__
-    return " ".join(text.split())
+_CONFIG_FIELD = re.compile(r"\b[A-Z]\w*Config\.(\w+)\b")
+"""A config's field as a check names it: ``TrainConfig.n_envs``."""
+
+
+def _one_line(error: BaseException, args: argparse.Namespace) -> str:
+    """An error's message on one line (an OSError without its own words gets its errno's),
+    naming the command's flag where a config deeper down named its own field
+    (``TrainConfig.n_envs`` -> ``--n-envs``: every flag's dest is its name, dashes as underscores)."""
+    text = " ".join((str(error) or type(error).__name__).split())
+
+    def flag(match: re.Match[str]) -> str:
+        field = match.group(1)
+        return f"--{field.replace('_', '-')}" if getattr(args, field, None) is not None else match.group(0)
+
+    return _CONFIG_FIELD.sub(flag, text)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -51,12 +64,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
     forget_created_folders()  # only this command's folders are removed if it is refused
+    import_pybullet_quietly()  # its build-time banner would make every error two lines
     try:
         check_instrument_options(args)
         return int(args.func(args))
     except (ValueError, OSError, RunFolderBusy) as error:  # bad input, unwritable output, a folder in use: one line, status 2
         remove_empty_created_folders()
-        print(f"dvrk-gym {args.command}: error: {_one_line(error)}", file=sys.stderr)
+        print(f"dvrk-gym {args.command}: error: {_one_line(error, args)}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         remove_empty_created_folders()

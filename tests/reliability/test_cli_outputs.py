@@ -167,6 +167,12 @@ REFUSED_BEFORE_ANY_WORK = [
     (["demo", "--bias-seed", "-1"], "--bias-seed"),
     (["fidelity", "--resolution", "5", "5"], "--resolution"),
     (["debride", "--calibrate", "--bias-seed", "-1"], "--bias-seed"),
+    (["baseline", "train", "--algo", "sac", "--n-envs", "0"], "--n-envs"),
+    (["baseline", "train", "--algo", "sac", "--eval-points", "-1"], "--eval-points"),
+    (["baseline", "train", "--algo", "sac", "--seed", "-1"], "--seed"),
+    (["baseline", "train", "--algo", "sac", "--steps", "-1"], "--steps"),
+    (["evaluate", "--episodes", "3"], "--policy only"),
+    (["evaluate", "--env", "dvrk_gym/GridTouch-v0", "--options", "{}"], "--env and --options apply to --policy only"),
 ]
 
 
@@ -176,8 +182,17 @@ def test_a_refused_command_leaves_no_folder_and_no_stamp(capsys, tmp_path, argv,
     parent it would have made) nor a stamp with the bad value is left: the corrected command
     then runs in the same folder."""
     out = tmp_path / "new" / "run"
-    _fails_in_one_line(capsys, [*argv, "--out", str(out)], word)
+    err = _fails_in_one_line(capsys, [*argv, "--out", str(out)], word)
+    assert "Config." not in err  # the flag's name, not a config field's deeper down
     assert not (tmp_path / "new").exists()
+
+
+def test_a_refused_command_prints_one_line_without_pybullets_banner():
+    """In a fresh process (where PyBullet's import prints its build time on stderr) a refused
+    command's stderr is its one error line."""
+    done = run_cli("baseline", "train", "--algo", "sac", "--n-envs", "0", timeout_s=120.0)
+    assert done.returncode == 2
+    assert done.stderr.splitlines() == ["dvrk-gym baseline: error: --n-envs must be an int in [1, 64], got 0"], done.stderr
 
 
 def test_a_refused_command_keeps_an_existing_folder_and_its_files(capsys, tmp_path):
