@@ -1,5 +1,6 @@
 """RL Zoo trains and replays GridTouch-v0 with the hyperparameters the package ships (no user file)."""
 
+import os
 import subprocess
 import sys
 
@@ -9,9 +10,17 @@ pytest.importorskip("rl_zoo3")
 
 
 def _zoo(command: str, *arguments: str, cwd) -> subprocess.CompletedProcess:
+    """Run ``python -m rl_zoo3.COMMAND`` in ``cwd``; SB3's logger folder goes there too (its
+    default is a new /tmp/SB3-<date> folder per run, which the suite would leave behind)."""
     env_args = ["--algo", "sac", "--env", "dvrk_gym/GridTouch-v0", "--gym-packages", "dvrk_gym", "-f", str(cwd / "logs")]
+    environment = {**os.environ, "SB3_LOGDIR": str(cwd / "sb3_log")}
     return subprocess.run(
-        [sys.executable, "-m", f"rl_zoo3.{command}", *env_args, *arguments], cwd=cwd, capture_output=True, text=True, timeout=900
+        [sys.executable, "-m", f"rl_zoo3.{command}", *env_args, *arguments],
+        cwd=cwd,
+        capture_output=True,
+        text=True,
+        timeout=900,
+        env=environment,
     )
 
 
