@@ -2,7 +2,7 @@
 
 from pathlib import Path
 
-SAME_BYTES = ("calibration/*.npz", "calibration/calibration_table.json", "debridement/*.json")
+SAME_BYTES = ("calibration/*.npz", "calibration/*.zip", "calibration/calibration_table.json", "debridement/*.json")
 """The files of a run folder that two runs with the same settings write byte for byte: the
 calibrators' models and Phase I/II data, the calibration table and every debridement cell."""
 

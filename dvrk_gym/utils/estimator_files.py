@@ -21,6 +21,7 @@ What it returns is of a trusted type, but its values are the file's: the caller 
 
 from __future__ import annotations
 
+import io
 import json
 import zipfile
 from collections.abc import Iterator, Sequence
@@ -67,8 +68,42 @@ class EstimatorFileError(ValueError):
 
 
 def dump_estimator(estimator: Any) -> bytes:
-    """``estimator`` as skops bytes (deflated)."""
-    return skops.io.dumps(estimator, compression=zipfile.ZIP_DEFLATED)
+    """``estimator`` as skops bytes (deflated), the same bytes for the same estimator in any
+    process (:func:`_canonical`)."""
+    return _canonical(skops.io.dumps(estimator, compression=zipfile.ZIP_DEFLATED))
+
+
+def _canonical(data: bytes) -> bytes:
+    """A skops archive written again so that equal estimators give equal bytes.
+
+    skops names each object by its ``id()`` (the schema's ``__id__`` fields and its arrays'
+    ``<id>.npy`` members) and stamps each member with the time: two saves of one forest
+    differ. Here the ids are numbered in the schema's order, the arrays named after them,
+    and every member dated 1980-01-01, as the model files around them are. Equal ids stay
+    equal (skops reads them as shared references), so the same object is read back.
+    """
+    with zipfile.ZipFile(io.BytesIO(data)) as archive:
+        schema = json.loads(archive.read(SCHEMA))
+        numbers: dict[int, int] = {}
+        files: dict[str, str] = {}
+        stack = [schema]
+        while stack:  # depth first, in the schema's order
+            item = stack.pop()
+            if isinstance(item, dict):
+                if isinstance(item.get("__id__"), int):
+                    item["__id__"] = numbers.setdefault(item["__id__"], len(numbers) + 1)
+                if isinstance(item.get("file"), str):
+                    item["file"] = files.setdefault(item["file"], f"{len(files)}.npy")
+                stack.extend(reversed(list(item.values())))
+            elif isinstance(item, list):
+                stack.extend(reversed(item))
+        members = {SCHEMA: json.dumps(schema, indent=2).encode("utf-8")}
+        members.update({new: archive.read(old) for old, new in files.items()})
+    out = io.BytesIO()
+    with zipfile.ZipFile(out, "w", compression=zipfile.ZIP_DEFLATED) as archive:
+        for name, content in members.items():
+            archive.writestr(zipfile.ZipInfo(name, date_time=(1980, 1, 1, 0, 0, 0)), content, compress_type=zipfile.ZIP_DEFLATED)
+    return out.getvalue()
 
 
 def _nodes(schema: Any) -> Iterator[dict[str, Any]]:
