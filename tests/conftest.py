@@ -11,7 +11,12 @@ import pytest
 import dvrk_gym  # noqa: F401  (registers the environments)
 
 SMALL = (640, 360)
-ENV_IDS = ["dvrk_gym/CalibrationExploration-v0", "dvrk_gym/GridTouch-v0"]
+ENV_IDS = list(dvrk_gym.ENV_IDS)
+"""Every registered env (test_envs_common.py runs its shared behaviours on each)."""
+ENV_IDS_BUT_DEBRIDEMENT = [env_id for env_id in ENV_IDS if env_id != "dvrk_gym/Debridement-v0"]
+"""For the shared tests that tests/test_env_debridement*.py already run on Debridement-v0 in
+both action modes (the checkers, determinism with the cable history, across processes):
+its picks are the suite's slowest steps."""
 
 
 @pytest.fixture

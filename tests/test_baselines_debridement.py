@@ -26,6 +26,7 @@ from dvrk_gym.baselines.picking import (
     OFFSET_SCALE_MM,
     pick_action,
     pick_observation,
+    pick_yaw,
     shaped_pick_reward,
     unit_to_pick_box,
     wrap_debridement,
@@ -112,7 +113,19 @@ def test_wrapped_pick_sends_the_mapped_command_and_returns_the_shaped_reward(deb
     np.testing.assert_array_equal(observation["observation"], pick_observation(raw))
     assert env.observation_space.contains(observation)
     unit = np.array([0.2, -0.1, -0.3], dtype=np.float32)
+    sent, raw_rewards, raw_step = [], [], debridement_env.step
+
+    def spy(action):
+        sent.append(np.array(action, copy=True))
+        result = raw_step(action)
+        raw_rewards.append(result[1])
+        return result
+
+    debridement_env.step = spy
     observation, reward, terminated, _, info = env.step(unit)
+    assert len(sent) == 1 and sent[0].tobytes() == pick_action(unit, pick_yaw(raw)).tobytes()  # the box's point, the image rule's yaw
+    assert not np.allclose(sent[0][:3], unit)  # not the unit action itself
+    assert info["delivered"] == raw_rewards[0]
     assert reward == pytest.approx(shaped_pick_reward(info["delivered"], info))
     assert info["picks"] == 1 and not terminated
     assert info["true_tip_at_grip"] is not None

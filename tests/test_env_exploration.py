@@ -51,6 +51,11 @@ def test_reported_pose_is_the_command_and_truth_differs_under_paper_bias(make_en
         assert 1e-5 < miss < 3e-3
     nominal_tip_offset = np.linalg.norm(info["true_tip_position"] - info["reported_position"])
     assert 0.008 < nominal_tip_offset < 0.013  # the tip is about a jaw length from the reported point
+    unbiased = make_env("dvrk_gym/CalibrationExploration-v0", bias="none")
+    unbiased.reset(seed=0)
+    *_, unbiased_info = unbiased.step(action)
+    cable_error = np.linalg.norm(info["true_tip_position"] - unbiased_info["true_tip_position"])
+    assert cable_error > 3e-4  # the cables put the tip elsewhere than the same command without bias
 
 
 def test_paper_policy_moves_2_mm_per_pause_with_its_own_and_three_random_rotations():

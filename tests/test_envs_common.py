@@ -1,4 +1,5 @@
-"""Behaviour every environment shares: API conformance, seeding, strict inputs, vector envs."""
+"""Behaviour every environment shares: API conformance, seeding, strict inputs, vector envs (all three envs;
+three tests leave out Debridement-v0, whose own tests run them in both its action modes)."""
 
 import dataclasses
 import importlib
@@ -10,7 +11,7 @@ import gymnasium as gym
 import numpy as np
 import pybullet
 import pytest
-from conftest import ENV_IDS, SMALL, json_from_fresh_process
+from conftest import ENV_IDS, ENV_IDS_BUT_DEBRIDEMENT, SMALL, json_from_fresh_process
 from gymnasium.error import ResetNeeded
 from gymnasium.utils.env_checker import check_env
 from stable_baselines3.common.env_checker import check_env as sb3_check_env
@@ -40,7 +41,7 @@ def _flatten(observations) -> list[float]:
     return [float(v) for obs in observations for key in sorted(obs) for v in np.ravel(obs[key])]
 
 
-@pytest.mark.parametrize("env_id", ENV_IDS)
+@pytest.mark.parametrize("env_id", ENV_IDS_BUT_DEBRIDEMENT)
 def test_passes_gymnasium_and_sb3_checkers(make_env, env_id):
     env = make_env(env_id)
     with warnings.catch_warnings():
@@ -58,7 +59,7 @@ def test_same_seed_and_actions_give_bit_identical_observations(make_env, env_id)
     assert first == second
 
 
-@pytest.mark.parametrize("env_id", ENV_IDS)
+@pytest.mark.parametrize("env_id", ENV_IDS_BUT_DEBRIDEMENT)
 def test_same_seed_and_same_cable_history_give_bit_identical_observations(make_env, env_id):
     a, b = make_env(env_id), make_env(env_id)
     for env in (a, b):
@@ -70,7 +71,7 @@ def test_same_seed_and_same_cable_history_give_bit_identical_observations(make_e
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("env_id", ENV_IDS)
+@pytest.mark.parametrize("env_id", ENV_IDS_BUT_DEBRIDEMENT)
 def test_observations_are_identical_across_processes(make_env, env_id):
     here = _flatten(_rollout(make_env(env_id), seed=3, n=3))
     code = (

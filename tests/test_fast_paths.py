@@ -167,8 +167,9 @@ def test_tool_pose_equals_the_paper_rule_pose_from_its_cache_too():
     for yaw in [*rng.uniform(-np.pi / 2, np.pi / 2, 300), 0.0, -0.0]:  # -0.0 after 0.0 is cached: its own entry
         position = rng.uniform(-0.1, 0.1, 3)
         pitch, roll = kin.paper_pitch_roll(yaw)
-        assert _same(tool_pose(position, yaw), kin.pose_from_euler(position, yaw, float(pitch), float(roll)))
-        assert _same(tool_pose(position, yaw), tool_pose(position, yaw))  # from the cache now
+        expected = kin.pose_from_euler(position, yaw, float(pitch), float(roll))
+        assert _same(tool_pose(position, yaw), expected)
+        assert _same(tool_pose(position, yaw), expected)  # from the cache now
     with pytest.raises(ValueError, match="position"):
         tool_pose(np.array([0.0, np.nan, 0.0]), 0.1)
 

@@ -60,7 +60,7 @@ def test_out_naming_a_file_is_a_one_line_error(capsys, tmp_path, command):
     target = tmp_path / "results.txt"
     target.write_text("keep me")
     start = time.perf_counter()
-    _fails_in_one_line(capsys, [*COMMANDS[command], "--out", str(target)], str(target), "file")
+    _fails_in_one_line(capsys, [*COMMANDS[command], "--out", str(target)], str(target), "is a file, not a folder")
     assert time.perf_counter() - start < 30.0  # refused before any work
     assert target.read_text() == "keep me" and files_in(tmp_path) == {"results.txt"}
 
