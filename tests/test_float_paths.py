@@ -233,7 +233,12 @@ def _on_the_numpy_path(env) -> None:
 
 
 @pytest.mark.parametrize("bias", ["none", "paper", "severe"])
-def test_grid_touch_sees_on_the_float_path_what_it_sees_on_numpys(make_env, bias):
+def test_grid_touch_through_the_worlds_float_moves_sees_what_it_sees_through_numpys(make_env, bias):
+    """The world's float moves, resets and projection give GridTouch the episodes numpy's
+    give, bit for bit. Only those three are swapped: the env's inverse kinematics, true tip,
+    contact probe, pixel noise and triangulation run on the float paths in both envs, and
+    each is compared with numpy's on its own above (and the compiled ones with the Python
+    float paths in test_compiled_paths.py)."""
     envs = [make_env("dvrk_gym/GridTouch-v0", bias=bias, pixel_noise_px=0.5) for _ in range(2)]
     _on_the_numpy_path(envs[1])
     records = []
