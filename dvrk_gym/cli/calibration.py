@@ -23,9 +23,10 @@ def _add_world_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seed", type=int, default=0, help="seeds collection, training and evaluation (default: %(default)s)")
 
 
-def _add_budget_options(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--trajectories", type=int, default=paper.PHASE1_TRAJECTORIES, help="Phase I trajectories (the paper: %(default)s)")
-    parser.add_argument("--epochs", type=int, default=paper.DNN_EPOCHS, help="DNN training epochs (the paper: %(default)s)")
+def _add_budget_options(parser: argparse.ArgumentParser, note: str = "") -> None:
+    """``--trajectories`` and ``--epochs``: the calibration's budget (None when not given: the paper's)."""
+    parser.add_argument("--trajectories", type=int, help=f"Phase I trajectories{note} (default: the paper's {paper.PHASE1_TRAJECTORIES})")
+    parser.add_argument("--epochs", type=int, help=f"DNN training epochs{note} (default: the paper's {paper.DNN_EPOCHS})")
 
 
 def _config(args: argparse.Namespace):
@@ -34,12 +35,14 @@ def _config(args: argparse.Namespace):
     from dvrk_gym.calibration.models.dnn import MAX_EPOCHS
     from dvrk_gym.calibration.pipeline import MAX_TRAJECTORIES, PipelineConfig
 
-    check_int("--trajectories", args.trajectories, 1, MAX_TRAJECTORIES)
-    check_int("--epochs", args.epochs, 1, MAX_EPOCHS)
+    trajectories = paper.PHASE1_TRAJECTORIES if args.trajectories is None else args.trajectories
+    epochs = paper.DNN_EPOCHS if args.epochs is None else args.epochs
+    check_int("--trajectories", trajectories, 1, MAX_TRAJECTORIES)
+    check_int("--epochs", epochs, 1, MAX_EPOCHS)
     check_int("--seed", args.seed, 0, 2**31 - 1)
     return PipelineConfig(
-        n_trajectories=args.trajectories,
-        dnn_epochs=args.epochs,
+        n_trajectories=trajectories,
+        dnn_epochs=epochs,
         bias=args.bias,
         bias_seed=args.bias_seed,
         camera_resolution=tuple(args.resolution),
@@ -90,6 +93,9 @@ def _run_evaluate(args: argparse.Namespace) -> int:
     if args.policy:
         if args.protocol is not None:
             raise ValueError("--protocol is how the calibrators' predictions are sent; a --policy sends its own actions as they are")
+        given = [flag for flag in ("--trajectories", "--epochs") if getattr(args, flag[2:]) is not None]
+        if given:
+            raise ValueError(f"{' and '.join(given)} set the calibration's budget; a --policy is evaluated as it is")
         return _evaluate_policy(args)
     given = [flag for flag in ("--env", "--episodes", "--options") if getattr(args, flag[2:]) is not None]
     if given:
@@ -111,7 +117,7 @@ def _evaluate_policy(args: argparse.Namespace) -> int:
     from dvrk_gym.envs import ENV_CONFIGS
     from dvrk_gym.evaluation.episodes import evaluate_policy, load_policy_factory, summarize_metric
 
-    args.env = args.env or DEFAULT_POLICY_ENV
+    args.env = DEFAULT_POLICY_ENV if args.env is None else args.env
     args.episodes = DEFAULT_POLICY_EPISODES if args.episodes is None else args.episodes
     if args.env not in ENV_CONFIGS:
         raise ValueError(f"--env must be one of dvrk_gym's envs {sorted(ENV_CONFIGS)}, got {args.env!r}")
@@ -216,7 +222,7 @@ def add_commands(subparsers: argparse._SubParsersAction) -> None:
         help="how the calibrators' predictions are sent: 'paper', as the authors' runs did (the rigid body's heights lifted "
         "4-9 mm, and clipped in three settings), or 'raw', as they are (default: paper)",
     )
-    _add_budget_options(evaluate)
+    _add_budget_options(evaluate, note=", without --policy")
     _add_world_options(evaluate)
     add_progress_option(evaluate)
     evaluate.set_defaults(func=_run_evaluate)

@@ -14,7 +14,7 @@ from dvrk_gym.cli.calibration import add_commands as add_calibration_commands
 from dvrk_gym.cli.debridement import add_commands as add_debridement_commands
 from dvrk_gym.cli.demo import add_commands as add_demo_commands
 from dvrk_gym.cli.fidelity import add_commands as add_fidelity_commands
-from dvrk_gym.cli.options import check_instrument_options, forget_created_folders, remove_empty_created_folders
+from dvrk_gym.cli.options import check_common_options, forget_created_folders, remove_empty_created_folders
 from dvrk_gym.cli.reproduce import add_commands as add_reproduce_commands
 from dvrk_gym.cli.sweep import add_commands as add_sweep_commands
 from dvrk_gym.sim.physics.quiet_import import import_pybullet_quietly
@@ -23,8 +23,21 @@ from dvrk_gym.utils.run_folder import RunFolderBusy
 Command = Callable[[argparse.Namespace], int]
 
 
-_CONFIG_FIELD = re.compile(r"\b[A-Z]\w*Config\.(\w+)\b")
-"""A config's field as a check names it: ``TrainConfig.n_envs``."""
+CONFIG_CLASSES = (
+    "BiasConfig",
+    "DebridementConfig",
+    "EnvConfig",
+    "ExplorationConfig",
+    "GridTouchConfig",
+    "GripperConfig",
+    "PipelineConfig",
+    "ReproduceConfig",
+    "TrainConfig",
+    "WorldConfig",
+)
+"""dvrk_gym's config classes, whose checks name a field as ``TrainConfig.n_envs`` (a test keeps the list whole)."""
+_CONFIG_FIELD = re.compile(rf"(?<![\w./\\-])(?:{'|'.join(CONFIG_CLASSES)})\.(\w+)\b")
+"""A config's field as its check names it, not inside a path or a longer name."""
 
 
 def _one_line(error: BaseException, args: argparse.Namespace) -> str:
@@ -66,7 +79,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     forget_created_folders()  # only this command's folders are removed if it is refused
     import_pybullet_quietly()  # its build-time banner would make every error two lines
     try:
-        check_instrument_options(args)
+        check_common_options(args)
         return int(args.func(args))
     except (ValueError, OSError, RunFolderBusy) as error:  # bad input, unwritable output, a folder in use: one line, status 2
         remove_empty_created_folders()

@@ -16,15 +16,17 @@ if TYPE_CHECKING:
     from dvrk_gym.parallel.executors import Executor
 
 
-def check_instrument_options(args: argparse.Namespace) -> None:
-    """Check ``--bias-seed`` and ``--resolution`` by their flags' names, for every command that
-    has them, before the command runs (a config deeper down would name its own field).
+def check_common_options(args: argparse.Namespace) -> None:
+    """Check ``--seed``, ``--bias-seed`` and ``--resolution`` by their flags' names, for every
+    command that has them, before the command runs (a config deeper down would name its own
+    field, and a negative seed would fail only where numpy first draws from it).
 
     Raises:
         ValueError: a value out of range.
     """
-    if getattr(args, "bias_seed", None) is not None:
-        check_int("--bias-seed", args.bias_seed, 0, 2**31 - 1)
+    for name in ("seed", "bias_seed"):
+        if getattr(args, name, None) is not None:
+            check_int(f"--{name.replace('_', '-')}", getattr(args, name), 0, 2**31 - 1)
     if getattr(args, "resolution", None) is not None:
         check_resolution("--resolution", args.resolution)
 

@@ -68,13 +68,13 @@ class ReproduceConfig:
     def __post_init__(self) -> None:
         object.__setattr__(self, "out", Path(self.out))
         if not isinstance(self.profile, Profile):
-            raise ValueError(f"profile must be a Profile, got {type(self.profile).__name__}")
-        check_int("workers", self.workers, 1, 256)
-        check_int("seed", self.seed, 0, 2**31 - 1)
-        check_int("bias_seed", self.bias_seed, 0, 2**31 - 1)
-        check_bool("progress", self.progress)
+            raise ValueError(f"ReproduceConfig.profile must be a Profile, got {type(self.profile).__name__}")
+        check_int("ReproduceConfig.workers", self.workers, 1, 256)
+        check_int("ReproduceConfig.seed", self.seed, 0, 2**31 - 1)
+        check_int("ReproduceConfig.bias_seed", self.bias_seed, 0, 2**31 - 1)
+        check_bool("ReproduceConfig.progress", self.progress)
         if not isinstance(self.bias, str):
-            raise ValueError(f"bias must be a preset name (str), got {self.bias!r}")
+            raise ValueError(f"ReproduceConfig.bias must be a preset name (str), got {self.bias!r}")
         resolve_bias(self.bias)  # a clear error for an unknown preset, before any work
 
     def settings(self) -> dict[str, Any]:

@@ -68,8 +68,8 @@ class EstimatorFileError(ValueError):
 
 
 def dump_estimator(estimator: Any) -> bytes:
-    """``estimator`` as skops bytes (deflated), the same bytes for the same estimator in any
-    process (:func:`_canonical`)."""
+    """``estimator`` as skops bytes (deflated), the same bytes for equal estimators in any
+    process on one platform and zlib (:func:`_canonical`)."""
     return _canonical(skops.io.dumps(estimator, compression=zipfile.ZIP_DEFLATED))
 
 
@@ -78,8 +78,9 @@ def _canonical(data: bytes) -> bytes:
 
     skops names each object by its ``id()`` (the schema's ``__id__`` fields and its arrays'
     ``<id>.npy`` members) and stamps each member with the time: two saves of one forest
-    differ. Here the ids are numbered in the schema's order, the arrays named after them,
-    and every member dated 1980-01-01, as the model files around them are. Equal ids stay
+    differ. Here the ids are numbered in the schema's order (from 1: skops shares no object
+    whose id is 0), the arrays numbered in the order the schema first names them, and every
+    member dated 1980-01-01, as the model files around them are. Equal ids stay
     equal (skops reads them as shared references), so the same object is read back.
     """
     with zipfile.ZipFile(io.BytesIO(data)) as archive:

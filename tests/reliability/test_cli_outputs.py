@@ -6,6 +6,7 @@ folder with no model, a bad profile, a run folder another process owns.
 """
 
 import os
+import re
 import stat
 import subprocess
 import sys
@@ -173,6 +174,14 @@ REFUSED_BEFORE_ANY_WORK = [
     (["baseline", "train", "--algo", "sac", "--steps", "-1"], "--steps"),
     (["evaluate", "--episodes", "3"], "--policy only"),
     (["evaluate", "--env", "dvrk_gym/GridTouch-v0", "--options", "{}"], "--env and --options apply to --policy only"),
+    (["evaluate", "--policy", "os:getcwd", "--env", ""], "--env"),
+    (["evaluate", "--policy", "os:getcwd", "--epochs", "5"], "--epochs set the calibration's budget"),
+    (["sweep", "--epochs", "0"], "--epochs"),
+    (["sweep", "--trajectories", "0"], "--trajectories"),
+    (["reproduce", "--seed", "-1"], "--seed"),
+    (["fidelity", "--trajectories", "0"], "--trajectories"),
+    (["fidelity", "--seed", "-1"], "--seed"),
+    (["debride", "--calibrate", "--seed", "-1"], "--seed"),
 ]
 
 
@@ -185,6 +194,40 @@ def test_a_refused_command_leaves_no_folder_and_no_stamp(capsys, tmp_path, argv,
     err = _fails_in_one_line(capsys, [*argv, "--out", str(out)], word)
     assert "Config." not in err  # the flag's name, not a config field's deeper down
     assert not (tmp_path / "new").exists()
+
+
+def test_every_config_class_is_one_whose_fields_the_errors_name_as_flags():
+    from dvrk_gym.cli.main import CONFIG_CLASSES
+
+    found = {name for path in (ROOT / "dvrk_gym").rglob("*.py") for name in re.findall(r"^class (\w+Config)\b", path.read_text(), re.M)}
+    assert found == set(CONFIG_CLASSES)
+
+
+def test_a_path_that_looks_like_a_config_field_is_left_as_it_is(capsys, tmp_path):
+    data = tmp_path / "LabConfig.data" / "x.npz"
+    _fails_in_one_line(capsys, ["search", "--data", str(data), "--out", str(tmp_path / "o")], str(data))
+
+
+def test_the_quiet_import_passes_on_what_a_failing_import_wrote(tmp_path):
+    """A pybullet whose import writes its banner and a driver's error, then fails: the error's
+    words reach stderr, the banner does not, and the ImportError propagates."""
+    (tmp_path / "pybullet.py").write_text(
+        'import os\nos.write(2, b"pybullet build time: x\\nlibGL error: no driver\\n")\nraise ImportError("no pybullet")\n'
+    )
+    code = (
+        "from dvrk_gym.sim.physics.quiet_import import import_pybullet_quietly\n"
+        "try:\n    import_pybullet_quietly()\nexcept ImportError as error:\n    print('raised:', error)\n"
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", code],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        env={**environment(), "PYTHONPATH": f"{tmp_path}{os.pathsep}{ROOT}"},
+        cwd=ROOT,
+    )
+    assert done.stdout.strip() == "raised: no pybullet"
+    assert done.stderr.splitlines() == ["libGL error: no driver"], done.stderr
 
 
 def test_a_refused_command_prints_one_line_without_pybullets_banner():

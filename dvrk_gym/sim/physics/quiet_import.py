@@ -19,27 +19,34 @@ BANNER_PREFIX = "pybullet build time"
 
 def import_pybullet_quietly() -> None:
     """Import ``pybullet``, dropping its banner from standard error and passing on anything
-    else the import wrote there (a warning, an error's words). Does nothing if it is already
-    imported, or if standard error is not a file descriptor (it then imports as usual)."""
+    else the import wrote there (a warning, an error's words; also when the import fails).
+    Does nothing if it is already imported; imports as usual if standard error is not a file
+    descriptor (a notebook, a test's capture) or no temporary file can be made.
+
+    Raises:
+        ImportError: pybullet cannot be imported (after its words are passed on).
+    """
     if "pybullet" in sys.modules:
         return
     try:
         fd = sys.stderr.fileno()
-    except (AttributeError, OSError, ValueError):  # a replaced sys.stderr (a notebook, a test's capture)
+        captured = tempfile.TemporaryFile()  # noqa: SIM115  (closed by the with below, once the fallback is ruled out)
+    except (AttributeError, OSError, ValueError):
         import pybullet  # noqa: F401
 
         return
-    sys.stderr.flush()
-    saved = os.dup(fd)
-    with tempfile.TemporaryFile() as captured:
-        os.dup2(captured.fileno(), fd)
+    with captured:
+        sys.stderr.flush()
+        saved = os.dup(fd)
         try:
-            import pybullet  # noqa: F401
+            os.dup2(captured.fileno(), fd)
+            try:
+                import pybullet  # noqa: F401
+            finally:
+                os.dup2(saved, fd)
         finally:
-            os.dup2(saved, fd)
             os.close(saved)
-        captured.seek(0)
-        text = captured.read().decode(errors="replace")
-    for line in text.splitlines():
-        if not line.startswith(BANNER_PREFIX):
-            print(line, file=sys.stderr)
+            captured.seek(0)
+            for line in captured.read().decode(errors="replace").splitlines():
+                if not line.startswith(BANNER_PREFIX):
+                    print(line, file=sys.stderr)
