@@ -30,16 +30,12 @@ def _add_budget_options(parser: argparse.ArgumentParser, note: str = "") -> None
 
 
 def _config(args: argparse.Namespace):
-    """The run's PipelineConfig, its options checked by their flags' names before any folder is
-    touched (``--bias-seed`` and ``--resolution`` as every command's, in ``main``)."""
-    from dvrk_gym.calibration.models.dnn import MAX_EPOCHS
-    from dvrk_gym.calibration.pipeline import MAX_TRAJECTORIES, PipelineConfig
+    """The run's PipelineConfig, the paper's budget where ``--trajectories`` or ``--epochs`` is
+    not given (every option is checked by its flag's name in ``main``, before any folder is touched)."""
+    from dvrk_gym.calibration.pipeline import PipelineConfig
 
     trajectories = paper.PHASE1_TRAJECTORIES if args.trajectories is None else args.trajectories
     epochs = paper.DNN_EPOCHS if args.epochs is None else args.epochs
-    check_int("--trajectories", trajectories, 1, MAX_TRAJECTORIES)
-    check_int("--epochs", epochs, 1, MAX_EPOCHS)
-    check_int("--seed", args.seed, 0, 2**31 - 1)
     return PipelineConfig(
         n_trajectories=trajectories,
         dnn_epochs=epochs,

@@ -7,15 +7,12 @@ from pathlib import Path
 
 from dvrk_gym import paper
 from dvrk_gym.cli.options import add_instrument_options, add_progress_option
-from dvrk_gym.utils.checks import check_int
 
 
 def _run_fidelity(args: argparse.Namespace) -> int:
-    from dvrk_gym.calibration.pipeline import MAX_TRAJECTORIES
     from dvrk_gym.fidelity.comparison import run_fidelity
     from dvrk_gym.fidelity.report import format_table, write_report
 
-    check_int("--trajectories", args.trajectories, 1, MAX_TRAJECTORIES)
     run = run_fidelity(
         bias=args.bias,
         bias_seed=args.bias_seed,

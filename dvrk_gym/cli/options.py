@@ -17,9 +17,10 @@ if TYPE_CHECKING:
 
 
 def check_common_options(args: argparse.Namespace) -> None:
-    """Check ``--seed``, ``--bias-seed`` and ``--resolution`` by their flags' names, for every
-    command that has them, before the command runs (a config deeper down would name its own
-    field, and a negative seed would fail only where numpy first draws from it).
+    """Check ``--seed``, ``--bias-seed``, ``--trajectories`` (Phase I's), ``--epochs`` (the
+    DNN's) and ``--resolution`` by their flags' names, for every command that has them, before
+    the command runs (a config deeper down would name its own field, and a negative seed would
+    fail only where numpy first draws from it).
 
     Raises:
         ValueError: a value out of range.
@@ -27,6 +28,14 @@ def check_common_options(args: argparse.Namespace) -> None:
     for name in ("seed", "bias_seed"):
         if getattr(args, name, None) is not None:
             check_int(f"--{name.replace('_', '-')}", getattr(args, name), 0, 2**31 - 1)
+    if getattr(args, "trajectories", None) is not None:
+        from dvrk_gym.calibration.pipeline import MAX_TRAJECTORIES
+
+        check_int("--trajectories", args.trajectories, 1, MAX_TRAJECTORIES)
+    if getattr(args, "epochs", None) is not None:
+        from dvrk_gym.calibration.models.dnn import MAX_EPOCHS
+
+        check_int("--epochs", args.epochs, 1, MAX_EPOCHS)
     if getattr(args, "resolution", None) is not None:
         check_resolution("--resolution", args.resolution)
 

@@ -8,16 +8,12 @@ from pathlib import Path
 
 from dvrk_gym import paper
 from dvrk_gym.cli.options import add_executor_options, add_progress_option, add_resolution_option, make_executor
-from dvrk_gym.utils.checks import check_int
 
 
 def _run_sweep(args: argparse.Namespace) -> int:
-    from dvrk_gym.calibration.models.dnn import MAX_EPOCHS
-    from dvrk_gym.calibration.pipeline import MAX_TRAJECTORIES, PipelineConfig
+    from dvrk_gym.calibration.pipeline import PipelineConfig
     from dvrk_gym.sweep import SweepError, SweepSettings, format_rows, parse_calibrators, parse_int_list, run_sweep
 
-    check_int("--trajectories", args.trajectories, 1, MAX_TRAJECTORIES)  # by the flags' names, not PipelineConfig's fields
-    check_int("--epochs", args.epochs, 1, MAX_EPOCHS)
     settings = SweepSettings(
         bias_seeds=parse_int_list(args.bias_seeds, "--bias-seeds"),
         calibrators=parse_calibrators(args.calibrators),
