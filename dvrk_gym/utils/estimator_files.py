@@ -78,8 +78,8 @@ def _canonical(data: bytes) -> bytes:
 
     skops names each object by its ``id()`` (the schema's ``__id__`` fields and its arrays'
     ``<id>.npy`` members) and stamps each member with the time: two saves of one forest
-    differ. Here the ids are numbered in the schema's order (from 1: skops shares no object
-    whose id is 0), the arrays numbered in the order the schema first names them, and every
+    differ. Here the ids are numbered in the order :func:`_nodes` walks the schema (from 1:
+    skops shares no object whose id is 0), the arrays numbered in the order it meets them, and every
     member dated 1980-01-01, as the model files around them are. Equal ids stay
     equal (skops reads them as shared references), so the same object is read back.
     """
@@ -87,17 +87,11 @@ def _canonical(data: bytes) -> bytes:
         schema = json.loads(archive.read(SCHEMA))
         numbers: dict[int, int] = {}
         files: dict[str, str] = {}
-        stack = [schema]
-        while stack:  # depth first, in the schema's order
-            item = stack.pop()
-            if isinstance(item, dict):
-                if isinstance(item.get("__id__"), int):
-                    item["__id__"] = numbers.setdefault(item["__id__"], len(numbers) + 1)
-                if isinstance(item.get("file"), str):
-                    item["file"] = files.setdefault(item["file"], f"{len(files)}.npy")
-                stack.extend(reversed(list(item.values())))
-            elif isinstance(item, list):
-                stack.extend(reversed(item))
+        for node in _nodes(schema):  # the same walk, so the same numbers, for the same schema
+            if isinstance(node.get("__id__"), int):
+                node["__id__"] = numbers.setdefault(node["__id__"], len(numbers) + 1)
+            if isinstance(node.get("file"), str):
+                node["file"] = files.setdefault(node["file"], f"{len(files)}.npy")
         members = {SCHEMA: json.dumps(schema, indent=2).encode("utf-8")}
         members.update({new: archive.read(old) for old, new in files.items()})
     out = io.BytesIO()
