@@ -36,6 +36,11 @@ from dvrk_gym.envs.exploration import (
 )
 from dvrk_gym.sim.robot.bias import BiasConfig
 
+MAX_TRAJECTORIES = 10_000
+MAX_STEPS_PER_TRAJECTORY = 10_000
+"""Bounds of a run's Phase I (the paper: 57 trajectories of about 92 poses); here, not in the
+pipeline, so that the CLI checks ``--trajectories`` without importing torch."""
+
 MAX_YAW_STEP_RAD = float(np.deg2rad(150.0))
 """The authors' sampler redraws a yaw more than this from the previous one (no extreme flips), rad."""
 

@@ -32,7 +32,7 @@ from dvrk_gym.calibration.benchmark import (
 from dvrk_gym.calibration.models.dnn import MAX_EPOCHS, DNNCalibrator
 from dvrk_gym.calibration.models.rigid import RigidBodyCalibrator
 from dvrk_gym.calibration.models.two_phase import TwoPhaseCalibrator
-from dvrk_gym.calibration.phase1 import Phase1Data, run_paper_phase1
+from dvrk_gym.calibration.phase1 import MAX_STEPS_PER_TRAJECTORY, MAX_TRAJECTORIES, Phase1Data, run_paper_phase1
 from dvrk_gym.calibration.phase2 import Phase2Data, collect_phase2
 from dvrk_gym.evaluation.table_protocol import PROTOCOL_LINES, PROTOCOLS
 from dvrk_gym.sim.robot.bias import BIAS_PRESETS
@@ -50,11 +50,6 @@ RETIRED_CALIBRATOR_FILES = {"rbt": "rbt.npz", "dnn": "dnn.npz", "dnn+rf": "two_p
 """The same in the retired ``.npz`` format, which is no longer read (``calibrate`` makes the new files beside them)."""
 BENCHMARK_SEED_OFFSET = BENCHMARK_SEED
 """The benchmark's seed is the run's seed plus this (so run seed 0 gives calibration_table's default)."""
-
-
-MAX_TRAJECTORIES = 10_000
-MAX_STEPS_PER_TRAJECTORY = 10_000
-"""Bounds of a run's Phase I (the paper: 57 trajectories of about 92 poses)."""
 
 
 @dataclass(frozen=True)

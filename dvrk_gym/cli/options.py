@@ -29,7 +29,7 @@ def check_common_options(args: argparse.Namespace) -> None:
         if getattr(args, name, None) is not None:
             check_int(f"--{name.replace('_', '-')}", getattr(args, name), 0, 2**31 - 1)
     if getattr(args, "trajectories", None) is not None:
-        from dvrk_gym.calibration.pipeline import MAX_TRAJECTORIES
+        from dvrk_gym.calibration.phase1 import MAX_TRAJECTORIES
 
         check_int("--trajectories", args.trajectories, 1, MAX_TRAJECTORIES)
     if getattr(args, "epochs", None) is not None:

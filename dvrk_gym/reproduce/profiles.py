@@ -11,7 +11,7 @@ from typing import Any
 
 from dvrk_gym import paper
 from dvrk_gym.baselines.budgets import AGENT_ENVS, GRID_TOUCH_ID
-from dvrk_gym.calibration.pipeline import MAX_STEPS_PER_TRAJECTORY, MAX_TRAJECTORIES
+from dvrk_gym.calibration.phase1 import MAX_STEPS_PER_TRAJECTORY, MAX_TRAJECTORIES
 from dvrk_gym.utils.checks import check_choice, check_int, check_resolution
 
 SEARCHES = ("paper", "quick")
