@@ -15,12 +15,13 @@ import logging
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
 from stable_baselines3.common.base_class import BaseAlgorithm
-from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecEnv
 from tqdm.auto import tqdm
 
@@ -28,6 +29,7 @@ from dvrk_gym import paper
 from dvrk_gym.baselines.agents import AgentSpec, build_model, get_agent
 from dvrk_gym.baselines.budgets import CALIBRATOR_MOVES, DEBRIDEMENT_ID
 from dvrk_gym.baselines.picking import GripOffsetLog
+from dvrk_gym.baselines.resume import ResetRecorder, TrainingStateError, TrainingStateWriter, restore_training_state
 from dvrk_gym.baselines.wrappers import TRAINING_YAWS
 from dvrk_gym.calibration.benchmark import YAW_SETTINGS
 from dvrk_gym.envs.grid_touch import N_CIRCLES, TOUR
@@ -41,6 +43,9 @@ logger = logging.getLogger(__name__)
 VEC_ENVS = ("dummy", "subproc")
 CURVE_TRIALS = 2
 """Debridement trials (of eight picks) per learning-curve point of a pick agent."""
+SAVE_EVERY = 500
+"""Env steps between two saves of a training's state (a GridTouch agent makes them in about
+40 s, a pick agent in about 4 minutes, on this project's 2-core machine)."""
 
 
 @dataclass(frozen=True)
@@ -171,8 +176,10 @@ def make_agent_env(config: TrainConfig, training: bool) -> gym.Env:
 
 
 def make_training_vec_env(config: TrainConfig) -> VecEnv:
-    """The training vector env: ``n_envs`` copies, one process each with "subproc"."""
-    factories = [lambda: make_agent_env(config, training=True) for _ in range(config.n_envs)]
+    """The training vector env: ``n_envs`` copies, one process each with "subproc"; each
+    env's resets recorded (:class:`~dvrk_gym.baselines.resume.ResetRecorder`), so that its
+    state can be saved between episodes."""
+    factories: list[Callable[[], gym.Env]] = [lambda: ResetRecorder(make_agent_env(config, training=True)) for _ in range(config.n_envs)]
     if config.vec_env == "subproc":
         return SubprocVecEnv(factories, start_method="forkserver")
     return DummyVecEnv(factories)
@@ -198,6 +205,13 @@ def evaluate_pick_curve_point(model: BaseAlgorithm, env: gym.Env, env_steps: int
     offsets = [mm for mm in log.offsets_mm if mm is not None]
     mean_offset = float(np.mean(offsets)) if offsets else float("nan")
     return CurvePoint(env_steps, mean_offset, float("nan"), total["success"] / max(total["picks"], 1), total["time_per_fragment_s"])
+
+
+def _point_fields(saved: Any) -> dict[str, Any]:
+    """A saved curve point's fields, its None errors back to NaN (``time_per_fragment_s`` may be None)."""
+    if not isinstance(saved, dict):
+        raise TypeError(f"a curve point must be a dict, got {saved!r}")
+    return {key: float("nan") if value is None and key != "time_per_fragment_s" else value for key, value in saved.items()}
 
 
 CurveEvaluator = Callable[[BaseAlgorithm, gym.Env, int, int], CurvePoint]
@@ -232,7 +246,35 @@ class LearningCurve(BaseCallback):
         self.seed = seed
         self.points: list[CurvePoint] = []
         self.eval_seconds = 0.0
+        self.resumed = False
         self._bar = tqdm(total=total_steps, desc="training", unit="step", disable=not progress)
+
+    def record(self) -> dict[str, Any]:
+        """The curve so far, JSON values, for a saved training state."""
+        points = [
+            {k: None if isinstance(v, float) and np.isnan(v) else v for k, v in dataclasses.asdict(p).items()} for p in self.points
+        ]  # JSON has no NaN
+        return {"points": points, "marks": [int(m) for m in self.marks], "eval_seconds": self.eval_seconds}
+
+    def restore(self, record: Any, env_steps: int) -> None:
+        """Take up a :meth:`record` saved at ``env_steps``; the training then goes on without
+        evaluating again at its start.
+
+        Raises:
+            ValueError: ``record`` is not one :meth:`record` gives.
+        """
+        if not isinstance(record, dict) or set(record) != {"points", "marks", "eval_seconds"}:
+            raise ValueError("a learning curve's record holds 'points', 'marks' and 'eval_seconds'")
+        try:
+            points = [CurvePoint(**_point_fields(point)) for point in record["points"]]
+            marks = [int(mark) for mark in record["marks"]]
+            eval_seconds = float(record["eval_seconds"])
+        except (TypeError, ValueError) as error:
+            raise ValueError(f"a learning curve's record is malformed ({error})") from None
+        if not points or any(mark <= env_steps for mark in marks):
+            raise ValueError(f"a learning curve's record at {env_steps} env steps must have points and only later marks")
+        self.points, self.marks, self.eval_seconds, self.resumed = points, marks, eval_seconds, True
+        self._bar.update(env_steps)
 
     def evaluate(self) -> None:
         start = time.perf_counter()
@@ -244,7 +286,8 @@ class LearningCurve(BaseCallback):
         logger.info("%d env steps: %.2f mm, %.1f px, success %.2f", point.env_steps, point.mm_error, point.pixel_error, point.success_rate)
 
     def _on_training_start(self) -> None:
-        self.evaluate()
+        if not self.resumed:
+            self.evaluate()
 
     def _on_step(self) -> bool:
         self._bar.update(self.training_env.num_envs)
@@ -258,13 +301,27 @@ class LearningCurve(BaseCallback):
         self._bar.close()
 
 
-def train(config: TrainConfig, progress: bool = True) -> TrainResult:
-    """Train ``config.agent`` for ``config.steps`` env steps, with its learning curve."""
+def train(config: TrainConfig, progress: bool = True, state_path: str | Path | None = None, save_every: int = SAVE_EVERY) -> TrainResult:
+    """Train ``config.agent`` for ``config.steps`` env steps, with its learning curve.
+
+    Args:
+        config: the run's settings.
+        progress: show a progress bar.
+        state_path: where to save the training's state every ``save_every`` env steps
+            (between episodes; :mod:`dvrk_gym.baselines.resume`). If the file exists, the
+            training resumes from it (it must be a state of the same settings, written by this
+            version of dvrk_gym), and ends as a training never stopped would, bit for bit.
+            The file is left in place: delete it once the model is saved. None: no saves.
+        save_every: env steps between saves.
+
+    Raises:
+        TrainingStateError: ``state_path`` exists but cannot be resumed (the message says why).
+    """
     with torch_threads(config.torch_threads):
-        return _train(config, progress)
+        return _train(config, progress, None if state_path is None else Path(state_path), save_every)
 
 
-def _train(config: TrainConfig, progress: bool) -> TrainResult:
+def _train(config: TrainConfig, progress: bool, state_path: Path | None, save_every: int) -> TrainResult:
     train_env = make_training_vec_env(config)  # seeded by the model (env i: seed + i)
     eval_env = make_agent_env(config, training=False)
     try:
@@ -272,12 +329,32 @@ def _train(config: TrainConfig, progress: bool) -> TrainResult:
         curve = LearningCurve(
             eval_env, config.steps, config.eval_points, seed=config.seed + 10_000, progress=progress, evaluate=curve_evaluator(config)
         )
+        wall_before = _resume(state_path, model, curve, config) if state_path is not None and state_path.exists() else 0.0
+        callbacks: list[BaseCallback] = [curve]
         start = time.perf_counter()
-        model.learn(total_timesteps=config.steps, callback=curve)
-        wall = time.perf_counter() - start
+        if state_path is not None:
+            record = lambda: {"curve": curve.record(), "wall_seconds": wall_before + time.perf_counter() - start}  # noqa: E731
+            callbacks.append(TrainingStateWriter(state_path, save_every, config.to_dict(), record))
+        resumed = model.num_timesteps > 0
+        model.learn(total_timesteps=config.steps - model.num_timesteps, callback=CallbackList(callbacks), reset_num_timesteps=not resumed)
+        wall = wall_before + time.perf_counter() - start
     finally:
         train_env.close()
         eval_env.close()
     result = TrainResult(model, config, curve.points, int(model.num_timesteps), wall - curve.eval_seconds, curve.eval_seconds)
     logger.info("%s: %d env steps in %.0f s (%.1f steps/s)", config.agent, result.env_steps, result.train_seconds, result.steps_per_second)
     return result
+
+
+def _resume(state_path: Path, model: BaseAlgorithm, curve: LearningCurve, config: TrainConfig) -> float:
+    """Restore the training state at ``state_path`` into ``model`` and ``curve``; the wall time (s) trained before."""
+    record = restore_training_state(state_path, model, config.to_dict())
+    try:
+        if not 0 < model.num_timesteps < config.steps:
+            raise ValueError(f"it was saved at {model.num_timesteps} env steps, outside the run's (0, {config.steps})")
+        curve.restore(record.get("curve"), model.num_timesteps)
+        wall_seconds = float(record["wall_seconds"])
+    except (KeyError, TypeError, ValueError) as error:
+        raise TrainingStateError(f"{state_path}: not a training state these settings can resume ({error})") from None
+    logger.info("resuming %s at %d of %d env steps from %s", config.agent, model.num_timesteps, config.steps, state_path)
+    return wall_seconds

@@ -126,6 +126,9 @@ class TrainingYaws(gym.Wrapper):
             seeded generator (the benchmark's sixth setting).
     """
 
+    carried_attributes = ("_episodes",)
+    """What one episode leaves to the next reset (see :meth:`dvrk_gym.envs.base.DvrkEnv.carried_state`)."""
+
     def __init__(self, env: gym.Env, mode: str = "paper") -> None:
         if mode not in TRAINING_YAWS:
             raise ValueError(f"training yaw mode must be one of {TRAINING_YAWS}, got {mode!r}")

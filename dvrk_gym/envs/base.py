@@ -122,6 +122,9 @@ class DvrkEnv(gym.Env, Generic[ConfigT]):
     action_names: tuple[str, ...] = ()
     action_space: gym.spaces.Box  # every dvrk_gym env acts through a Box
     option_names: ClassVar[tuple[str, ...]] = ()
+    carried_attributes: ClassVar[tuple[str, ...]] = ()
+    """Attributes of a subclass (JSON values) that one episode leaves to the next reset;
+    part of :meth:`carried_state`."""
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
         """Make the subclass's ``__init__`` refuse unknown keywords clearly (:func:`checking_keywords`)
@@ -201,6 +204,58 @@ class DvrkEnv(gym.Env, Generic[ConfigT]):
             self.world.close()
         super().close()
 
+    # ------------------------------------------------------------------ what carries between episodes
+    def carried_state(self) -> dict[str, Any]:
+        """What this env carries into its next reset, as JSON values.
+
+        A reset restores the physics and starts the episode from this state alone (and the
+        reset's own seed and options): the env's random generator, the cable model's
+        history (:meth:`~dvrk_gym.sim.robot.cables.CableModel.get_state`; NaN entries, a
+        fresh arm's, as None), the commanded joints (rad / m) and the subclass's
+        :attr:`carried_attributes`. So an env built afresh, given this state by
+        :meth:`restore_carried_state` and reset with the same seed and options, starts the
+        same episode bit for bit (a resumed training relies on it).
+        """
+        world = self.world
+        cable = world.cable.get_state()
+        return {
+            "np_random": self.np_random.bit_generator.state,
+            "cable": [[None if np.isnan(x) else float(x) for x in row] for row in cable],
+            "q_cmd": [float(x) for x in world.q_cmd],
+            "attributes": {name: getattr(self, name) for name in self.carried_attributes},
+        }
+
+    def restore_carried_state(self, state: dict[str, Any]) -> None:
+        """Take up a :meth:`carried_state` (of an env made with the same settings); reset next.
+
+        Raises:
+            ValueError: ``state`` is not one :meth:`carried_state` returns.
+        """
+        expected = {"np_random", "cable", "q_cmd", "attributes"}
+        if not isinstance(state, dict) or set(state) != expected:
+            raise ValueError(f"a carried state is a dict with keys {sorted(expected)}, got {_describe(state)}")
+        attributes = state["attributes"]
+        if not isinstance(attributes, dict) or set(attributes) != set(self.carried_attributes):
+            raise ValueError(f"carried attributes must be {sorted(self.carried_attributes)}, got {_describe(attributes)}")
+        try:
+            cable = np.array([[np.nan if x is None else float(x) for x in row] for row in state["cable"]], dtype=float)
+            q_cmd = np.array([float(x) for x in state["q_cmd"]], dtype=float)
+        except (TypeError, ValueError) as error:
+            raise ValueError(f"a carried state's 'cable' and 'q_cmd' must hold numbers ({error})") from None
+        if q_cmd.shape != self.world.q_cmd.shape or not np.isfinite(q_cmd).all():
+            raise ValueError(f"carried 'q_cmd' must be {self.world.q_cmd.shape[0]} finite joint values, got {state['q_cmd']!r}")
+        generator = np.random.Generator(np.random.PCG64())
+        try:
+            generator.bit_generator.state = state["np_random"]
+        except (TypeError, ValueError, KeyError) as error:
+            raise ValueError(f"carried 'np_random' is not a PCG64 generator's state ({error})") from None
+        self.world.cable.set_state(cable)  # checks the shape and the values
+        self.world.q_cmd = q_cmd
+        self.np_random = generator
+        for name, value in attributes.items():
+            setattr(self, name, value)
+        self._needs_reset = True
+
     # ------------------------------------------------------------------ no copies
     def _refuse_copy(self, what: str) -> TypeError:
         return TypeError(
@@ -236,3 +291,10 @@ class DvrkEnv(gym.Env, Generic[ConfigT]):
         if joints_clamped is not None:
             names += [f"joint:{JOINT_NAMES[i]}" for i in np.flatnonzero(joints_clamped)]
         return names
+
+
+def _describe(value: Any) -> str:
+    """A short description of a value that is not what was expected, for error messages."""
+    if isinstance(value, dict):
+        return f"a dict with keys {sorted(map(str, value))}"
+    return f"{type(value).__name__}"

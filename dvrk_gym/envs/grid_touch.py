@@ -141,6 +141,7 @@ class GridTouchEnv(DvrkEnv[GridTouchConfig]):
     config_class = GridTouchConfig
     action_names = ACTION_NAMES
     option_names = ("yaw", "circle", "relax")
+    carried_attributes = ("_next_circle", "_yaw_setting", "_touched")  # the tour, the yaw and where the next episode starts
 
     def __init__(
         self,

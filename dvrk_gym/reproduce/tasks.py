@@ -19,6 +19,7 @@ from dvrk_gym import paper
 from dvrk_gym.baselines.checkpoints import load_agent, save_agent
 from dvrk_gym.baselines.comparison import agent_contact, agent_row, benchmark_agent
 from dvrk_gym.baselines.curves import save_curve
+from dvrk_gym.baselines.resume import STATE_FILE_NAME
 from dvrk_gym.baselines.training import TrainConfig, train
 from dvrk_gym.baselines.transfer import pick_policy
 from dvrk_gym.calibration.benchmark import table_summary
@@ -179,9 +180,12 @@ def rl_agent(
         camera_resolution=check_resolution("resolution", resolution),
         eval_points=eval_points,
     )
-    result = train(config, progress=False)
     folder = Path(out)
+    folder.mkdir(parents=True, exist_ok=True)
+    state_path = folder / STATE_FILE_NAME  # a killed run resumes its training where the last save left it
+    result = train(config, progress=False, state_path=state_path)
     path = save_agent(result, folder / "model.zip")
+    state_path.unlink(missing_ok=True)
     save_curve(result.curve, folder / "learning_curve.json", {"agent": agent, "steps_per_second": result.steps_per_second})
     loaded = load_agent(path)
     settings = benchmark_agent(loaded, seed=benchmark_seed)
