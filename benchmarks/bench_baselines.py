@@ -18,7 +18,9 @@ Duration on 2 shared cores: the throughput part a few minutes; the calibrator's 
 (5,476 steps) about 10-20 minutes per GridTouch agent at 5-10 steps/s under load, and
 about 45-90 minutes for a pick agent at 1-2 picks/s; the calibration run if none is given
 (a few minutes); the debridement trials about a minute per method (15 trials); the 10x
-budget about ten times the training. ``--steps`` shortens the training.
+budget about ten times the training. ``--steps`` shortens the training. Each agent's
+training saves its state in its folder under ``--out`` (``training_state.zip``), so the same
+command, killed, resumes the training it was in (:mod:`dvrk_gym.baselines.resume`).
 """
 
 from __future__ import annotations
@@ -46,6 +48,7 @@ from dvrk_gym.baselines.comparison import (
     setting_mismatches,
 )
 from dvrk_gym.baselines.curves import plot_curves, save_curve
+from dvrk_gym.baselines.resume import STATE_FILE_NAME
 from dvrk_gym.baselines.training import TrainConfig, train
 from dvrk_gym.calibration.benchmark import format_table
 from dvrk_gym.calibration.loading import load_calibrator
@@ -124,9 +127,12 @@ def train_agents(args: argparse.Namespace, steps: int, pick_steps: int, calibrat
             bias=calibration.bias,
             bias_seed=calibration.bias_seed,
         )
+        folder = args.out / f"{agent_name}_{budget}_seed{args.seed}"
+        folder.mkdir(parents=True, exist_ok=True)
         start = time.perf_counter()
-        result = train(config, progress=not args.no_progress)
-        path = save_agent(result, args.out / f"{agent_name}_{budget}_seed{args.seed}" / "model.zip")
+        result = train(config, progress=not args.no_progress, state_path=folder / STATE_FILE_NAME)  # a killed run resumes
+        path = save_agent(result, folder / "model.zip")
+        (folder / STATE_FILE_NAME).unlink(missing_ok=True)
         save_curve(result.curve, path.parent / "learning_curve.json", {"agent": agent_name, "steps_per_second": result.steps_per_second})
         curves.setdefault(is_pick_agent(agent_name), {})[f"{agent_name}, seed {args.seed}"] = result.curve
         print(

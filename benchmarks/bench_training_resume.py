@@ -13,7 +13,9 @@ and kept as the reference; then, ``--kills`` times, the same command (saving eve
 ``--save-every`` / 10 env steps) is started in its own folder and killed with SIGKILL at a
 random moment within the reference's wall time, and run again to the end. Each resume must
 finish, leave no training state and no temporary file, and write a model whose weights and
-learning curve equal the reference's. Prints one line per kill and the counts.
+learning curve equal the reference's. Prints one line per kill (whether a training state,
+and whether the model, had been saved when it was killed: a run killed after saving its model
+trains again from the start, as nothing tells it the model is complete) and the counts.
 """
 
 from __future__ import annotations
@@ -107,7 +109,7 @@ def kills(n_kills: int, steps: int, save_every: int, seed: int, folder: Path) ->
     curve = json.loads((reference / "learning_curve.json").read_text())["points"]
     rng = np.random.default_rng(seed)
     print(f"SIGKILLs of dvrk-gym baseline train --steps {steps} --save-every {save_every} (reference {wall:.1f} s)")
-    identical = leftovers = resumed_from_a_save = 0
+    identical = leftovers = resumed_from_a_save = after_the_model = 0
     for kill in range(n_kills):
         out = folder / f"kill{kill}"
         after = float(rng.uniform(0.1, 0.95) * wall)
@@ -116,7 +118,7 @@ def kills(n_kills: int, steps: int, save_every: int, seed: int, folder: Path) ->
         ended_first = process.poll() is not None
         process.send_signal(signal.SIGKILL)
         process.wait()
-        had_state = (out / STATE_FILE_NAME).exists()
+        had_state, had_model = (out / STATE_FILE_NAME).exists(), (out / "model.zip").exists()
         again = subprocess.run(command(out, steps, save_every, seed), capture_output=True, text=True)
         left = [p.name for p in out.rglob("*") if ".partial" in p.name or p.name == STATE_FILE_NAME] if out.exists() else []
         same = again.returncode == 0 and same_weights(expected, load_agent(out / "model.zip").model.policy)
@@ -124,12 +126,16 @@ def kills(n_kills: int, steps: int, save_every: int, seed: int, folder: Path) ->
         identical += same
         leftovers += len(left)
         resumed_from_a_save += had_state
+        after_the_model += had_model
         print(
-            f"  kill {kill + 1}: at {after:.1f} s{' (had ended)' if ended_first else ''}, state saved: {had_state}, "
+            f"  kill {kill + 1}: at {after:.1f} s{' (had ended)' if ended_first else ''}, state: {had_state}, model: {had_model}, "
             f"rerun exit {again.returncode}, same model and curve: {same}, files left: {left or 'none'}",
             flush=True,
         )
-    print(f"{identical}/{n_kills} identical to the uninterrupted run, {resumed_from_a_save} resumed from a saved state")
+    print(
+        f"{identical}/{n_kills} identical to the uninterrupted run, {resumed_from_a_save} resumed from a saved state, "
+        f"{after_the_model} after the model was saved (trained again)"
+    )
     print(f"{leftovers} files left (training states, temporary files)")
 
 

@@ -84,6 +84,15 @@ def test_resuming_without_the_envs_memory_would_not_be_the_same_run(saved_state,
         train(_config(), progress=False, state_path=saved_state)
 
 
+def test_two_training_envs_resume_bit_for_bit(tmp_path):
+    config = _config("sac", steps=40, n_envs=2)
+    never_stopped = train(config, progress=False)
+    path = tmp_path / "state.zip"
+    train(config, progress=False, state_path=path, save_every=16)
+    assert _state_json(path)["num_timesteps"] == 32 and len(_state_json(path)["envs"]) == 2
+    _same_run(never_stopped, train(config, progress=False, state_path=path))
+
+
 @pytest.mark.slow
 def test_a_pick_agent_resumes_bit_for_bit_mid_way_through_its_trials(tmp_path):
     """sac_pick's episodes are trials of eight picks: its state is saved between trials only."""
