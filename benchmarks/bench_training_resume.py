@@ -2,8 +2,9 @@
 
 Run: python benchmarks/bench_training_resume.py  [--steps 1000] [--save-every 100] [--kills 5] [--kill-steps 300] [--seed 0]
 
-Part 1, the cost: the same training (``sac_her``, the agent's own settings, 320 x 180
-images) run twice in this process, without saves and saving its state every
+Part 1, the cost: after a short warm-up training (imports, compiled kernels), the same
+training (``sac_her``, the agent's own settings, 320 x 180 images) run twice in this
+process, without saves and saving its state every
 ``--save-every`` env steps; prints both wall times and their ratio, the saves' count, mean
 time and size, the time to resume from the last save, and whether the two models have the
 same weights (they must: saving changes nothing).
@@ -21,6 +22,7 @@ trains again from the start, as nothing tells it the model is complete) and the 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import shutil
 import signal
@@ -48,6 +50,7 @@ def same_weights(a: torch.nn.Module, b: torch.nn.Module) -> bool:
 def cost(steps: int, save_every: int, seed: int, folder: Path) -> None:
     """Part 1: one training without saves and one with, side by side in time."""
     config = TrainConfig(agent="sac_her", steps=steps, seed=seed, camera_resolution=RESOLUTION, eval_points=1)
+    train(dataclasses.replace(config, steps=20, overrides={"learning_starts": 10}), progress=False)  # warm-up: imports, compiled kernels
     start = time.perf_counter()
     plain = train(config, progress=False)
     plain_s = time.perf_counter() - start

@@ -153,6 +153,44 @@ def test_a_tampered_state_json_is_refused_naming_the_file(saved_state, edit, mes
     assert str(saved_state) in str(caught.value)
 
 
+def test_a_state_written_with_other_libraries_is_refused_naming_them(saved_state):
+    _edit_json(saved_state, lambda s: s["libraries"].update(torch="0.1"))
+    with pytest.raises(TrainingStateError, match="torch 0.1 there"):
+        train(_config(), progress=False, state_path=saved_state)
+
+
+def test_numbers_too_large_for_a_float_are_refused_clearly(saved_state):
+    with zipfile.ZipFile(saved_state) as archive:
+        text = archive.read(STATE_JSON).decode()
+    state = json.loads(text)
+    state["envs"][0]["layers"][-1]["state"]["q_cmd"][0] = 12345.678
+    _rewrite(saved_state, STATE_JSON, json.dumps(state).replace("12345.678", "1" + "0" * 400).encode())
+    with pytest.raises(TrainingStateError, match="must hold numbers"):
+        train(_config(), progress=False, state_path=saved_state)
+
+
+def test_an_npy_header_claiming_a_huge_array_is_refused_before_allocating(saved_state):
+    with zipfile.ZipFile(saved_state) as archive:
+        name = next(n for n in archive.namelist() if n.endswith("rewards.npy"))
+    header = io.BytesIO()
+    np.lib.format.write_array_header_1_0(header, {"descr": "<f4", "fortran_order": False, "shape": (4 * 10**12,)})
+    _rewrite(saved_state, name, header.getvalue())  # a header only: a few hundred bytes
+    with pytest.raises(TrainingStateError, match="expected float32"):
+        train(_config(), progress=False, state_path=saved_state)
+
+
+@pytest.mark.slow
+def test_a_worker_process_refusing_its_record_is_a_clear_error(tmp_path):
+    """With one process per env, a record a worker refuses comes back as a message, and the
+    worker (and the envs' closing) survive it."""
+    config = _config("sac", steps=24, n_envs=2, vec_env="subproc")
+    path = tmp_path / "state.zip"
+    train(config, progress=False, state_path=path, save_every=8)
+    _edit_json(path, lambda s: s["envs"][1]["layers"][-1]["state"]["cable"].pop())
+    with pytest.raises(TrainingStateError, match="training env 1 refused its recorded reset"):
+        train(config, progress=False, state_path=path)
+
+
 def test_a_state_of_other_settings_names_the_settings_that_differ(saved_state):
     with pytest.raises(TrainingStateError, match="differing in seed, steps"):
         train(_config(steps=60, seed=3), progress=False, state_path=saved_state)
@@ -162,7 +200,7 @@ def test_arrays_of_another_shape_or_holding_objects_are_refused(saved_state):
     with zipfile.ZipFile(saved_state) as archive:
         name = next(n for n in archive.namelist() if n.endswith("actions.npy"))
         actions = np.load(io.BytesIO(archive.read(name)))
-    for bad, message in [(actions[:-1], "expected"), (np.array([{"x": 1}] * len(actions), dtype=object), "pickle")]:
+    for bad, message in [(actions[:-1], "expected"), (np.array([{"x": 1}] * len(actions), dtype=object), "holds object")]:
         stream = io.BytesIO()
         np.save(stream, bad, allow_pickle=True)
         copy = saved_state.with_name(f"bad_{len(message)}.zip")
@@ -201,8 +239,9 @@ def test_a_damaged_file_is_refused_clearly(saved_state, damage):
         train(_config(), progress=False, state_path=saved_state)
 
 
-def test_the_cli_names_the_state_file_the_package_uses():
+def test_the_cli_names_the_state_file_and_the_default_the_package_uses():
     from dvrk_gym.baselines.resume import STATE_FILE_NAME
-    from dvrk_gym.cli.baselines import TRAINING_STATE
+    from dvrk_gym.baselines.training import SAVE_EVERY
+    from dvrk_gym.cli.baselines import DEFAULT_SAVE_EVERY, TRAINING_STATE
 
-    assert TRAINING_STATE == STATE_FILE_NAME
+    assert (TRAINING_STATE, DEFAULT_SAVE_EVERY) == (STATE_FILE_NAME, SAVE_EVERY)

@@ -13,11 +13,15 @@ from dvrk_gym import paper
 from dvrk_gym.cli.options import add_instrument_options, add_progress_option, writable_folder
 from dvrk_gym.utils.atomic import atomic_write_json, atomic_write_text
 from dvrk_gym.utils.checks import check_int
+from dvrk_gym.utils.run_folder import RunFolder
 
 TRAINING_STATE = "training_state.zip"
 """The file in a training's output folder that holds its state until the model is saved
 (``dvrk_gym.baselines.resume.STATE_FILE_NAME``, which a test checks; repeated here so that
 ``--help`` does not import torch)."""
+DEFAULT_SAVE_EVERY = 500
+"""``--save-every``'s default (``dvrk_gym.baselines.training.SAVE_EVERY``, which a test checks;
+repeated here so that ``--help`` does not import torch)."""
 LOAD_WARNING = (
     "Models are read back without unpickling (the policy weights with torch.load(weights_only=True), "
     "the settings from the JSON beside the zip), but only load model files this tool wrote, or that you trust: "
@@ -29,11 +33,11 @@ def _run_train(args: argparse.Namespace) -> int:
     from dvrk_gym.baselines.budgets import AGENT_ENVS, DEBRIDEMENT_ID, resolve_budget
     from dvrk_gym.baselines.checkpoints import save_agent
     from dvrk_gym.baselines.curves import plot_curves, save_curve
-    from dvrk_gym.baselines.training import SAVE_EVERY, TrainConfig, train
+    from dvrk_gym.baselines.training import TrainConfig, train
 
     if args.steps is not None:
         check_int("--steps", args.steps, 1, 10**9)
-    save_every = SAVE_EVERY if args.save_every is None else check_int("--save-every", args.save_every, 1, 10**9)
+    save_every = check_int("--save-every", args.save_every, 1, 10**9)
     steps = resolve_budget(args.budget, args.steps)
     picks = AGENT_ENVS[args.algo] == DEBRIDEMENT_ID
     if picks and args.reward is not None:
@@ -61,11 +65,14 @@ def _run_train(args: argparse.Namespace) -> int:
     out = args.out or Path("dvrk_gym_out/baselines") / f"{args.algo}_{args.budget if args.steps is None else steps}_seed{args.seed}"
     writable_folder(out)  # before training: a folder that cannot hold the model is found now, not after the training
     state_path = out / TRAINING_STATE
-    if state_path.exists():
-        print(f"resuming the training saved in {state_path}")
-    result = train(config, progress=not args.no_progress, state_path=state_path, save_every=save_every)
-    model_path = save_agent(result, out / "model.zip")  # the model first: nothing after it can lose it
-    state_path.unlink(missing_ok=True)  # the run is done: its saved state is not needed any more
+    # The folder is this process's while it trains (a second training there is refused, naming
+    # this one), and the temporary file of a save cut short by a kill is removed.
+    with RunFolder(out):
+        if state_path.exists():
+            print(f"resuming the training saved in {state_path}")
+        result = train(config, progress=not args.no_progress, state_path=state_path, save_every=save_every)
+        model_path = save_agent(result, out / "model.zip")  # the model first: nothing after it can lose it
+        state_path.unlink(missing_ok=True)  # the run is done: its saved state is not needed any more
     label = f"{args.algo}, seed {args.seed}"
     meta = {"agent": args.algo, "seed": args.seed, "env_steps": result.env_steps, "steps_per_second": result.steps_per_second}
     save_curve(result.curve, out / "learning_curve.json", meta)
@@ -238,7 +245,9 @@ def _add_train(subparsers: argparse._SubParsersAction) -> None:
     train.add_argument(
         "--save-every",
         type=int,
-        help=f"env steps between saves of the training's state to OUT/{TRAINING_STATE} (default: 500); a killed run given the same "
+        default=DEFAULT_SAVE_EVERY,
+        help=f"env steps between saves of the training's state to OUT/{TRAINING_STATE} (default: %(default)s; at the first moment "
+        "after that when every training env is between episodes); a killed run given the same "
         "command resumes from it and ends as if never stopped, bit for bit; it is deleted once the model is saved",
     )
     add_progress_option(train)

@@ -240,14 +240,14 @@ class DvrkEnv(gym.Env, Generic[ConfigT]):
         try:
             cable = np.array([[np.nan if x is None else float(x) for x in row] for row in state["cable"]], dtype=float)
             q_cmd = np.array([float(x) for x in state["q_cmd"]], dtype=float)
-        except (TypeError, ValueError) as error:
+        except (TypeError, ValueError, OverflowError) as error:
             raise ValueError(f"a carried state's 'cable' and 'q_cmd' must hold numbers ({error})") from None
         if q_cmd.shape != self.world.q_cmd.shape or not np.isfinite(q_cmd).all():
             raise ValueError(f"carried 'q_cmd' must be {self.world.q_cmd.shape[0]} finite joint values, got {state['q_cmd']!r}")
         generator = np.random.Generator(np.random.PCG64())
         try:
             generator.bit_generator.state = state["np_random"]
-        except (TypeError, ValueError, KeyError) as error:
+        except (TypeError, ValueError, KeyError, OverflowError) as error:
             raise ValueError(f"carried 'np_random' is not a PCG64 generator's state ({error})") from None
         self.world.cable.set_state(cable)  # checks the shape and the values
         self.world.q_cmd = q_cmd

@@ -72,3 +72,26 @@ def test_a_killed_training_resumes_to_the_model_of_one_never_stopped(tmp_path):
     a, b = whole.model.policy.state_dict(), resumed.model.policy.state_dict()
     assert all(torch.equal(a[key], b[key]) for key in a)
     assert _curve(tmp_path / "whole") == _curve(out)
+
+
+def test_a_second_training_in_a_folder_in_use_is_refused_naming_the_first(tmp_path):
+    out = tmp_path / "busy"
+    with open(tmp_path / "first.log", "w") as log:
+        first = subprocess.Popen(
+            cli_command(*TRAIN[:3], "5000", *TRAIN[4:], "--out", str(out)),
+            stdout=log,
+            stderr=subprocess.STDOUT,
+            env=environment(),
+            cwd=ROOT,
+        )
+        try:
+            deadline = time.monotonic() + 120
+            while f'"pid": {first.pid}' not in ((out / "run.lock").read_text() if (out / "run.lock").exists() else ""):
+                assert time.monotonic() < deadline and first.poll() is None, (tmp_path / "first.log").read_text()
+                time.sleep(0.05)
+            second = run_cli(*TRAIN, "--out", str(out))
+        finally:
+            first.send_signal(signal.SIGKILL)
+            first.wait()
+    assert second.returncode == 2
+    assert f"in use by process {first.pid}" in second.stderr

@@ -4,15 +4,16 @@ A training writes its whole state, without pickles, every so many env steps betw
 episodes (:class:`~dvrk_gym.baselines.resume.writer.TrainingStateWriter`): the model's
 weights and optimisers, the replay buffer, the random generators, the learning curve so far,
 and what each training env carries into its next reset
-(:mod:`~dvrk_gym.baselines.resume.snapshots`). :func:`~dvrk_gym.baselines.resume.state_file.restore_training_state`
+(:mod:`~dvrk_gym.baselines.resume.reset_records`). :func:`~dvrk_gym.baselines.resume.restore.restore_training_state`
 puts it back into a model built afresh, and the training goes on as if it had never
 stopped: the same final weights as a run never killed.
 """
 
 from __future__ import annotations
 
-from dvrk_gym.baselines.resume.snapshots import ResetRecorder
-from dvrk_gym.baselines.resume.state_file import TrainingStateError, restore_training_state, save_training_state
+from dvrk_gym.baselines.resume.reset_records import ResetRecorder
+from dvrk_gym.baselines.resume.restore import restore_training_state
+from dvrk_gym.baselines.resume.state_file import TrainingStateError, save_training_state
 from dvrk_gym.baselines.resume.writer import TrainingStateWriter
 
 STATE_FILE_NAME = "training_state.zip"

@@ -10,6 +10,7 @@ from typing import Any
 from stable_baselines3.common.callbacks import BaseCallback
 
 from dvrk_gym.baselines.resume.state_file import save_training_state
+from dvrk_gym.utils.source_fingerprint import source_fingerprint
 
 
 class TrainingStateWriter(BaseCallback):
@@ -35,6 +36,7 @@ class TrainingStateWriter(BaseCallback):
             json.dumps(config, allow_nan=False)
         except (TypeError, ValueError) as error:
             raise ValueError(f"the training settings must be JSON values to be saved with its state ({error})") from None
+        source_fingerprint()  # stamp the code that runs this training now, before its files can be edited (cached per process)
         self.path = Path(path)
         self.every = every
         self.config = config

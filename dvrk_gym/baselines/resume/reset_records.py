@@ -108,19 +108,25 @@ class ResetRecorder(gym.Wrapper):
         except (TypeError, ValueError) as error:
             raise ValueError(f"the last reset's record cannot be saved as JSON ({error})") from None
 
-    def replay_reset(self, record: Any) -> Any:
-        """Take up a :meth:`last_reset` record and reset as it did; the observation.
+    def replay_reset(self, record: Any) -> tuple[Any, str | None]:
+        """Take up a :meth:`last_reset` record and reset as it did.
 
-        Raises:
-            ValueError: ``record`` is not a record of an env built this way.
+        Returns:
+            (the observation, None), or (None, why the record was refused): a refusal is
+            returned, not raised, so that a vector env's worker process survives it and the
+            caller can say what was wrong.
         """
-        if not isinstance(record, dict) or set(record) != {"seed", "options", "layers"}:
-            raise ValueError("a reset record is a dict with keys 'seed', 'options' and 'layers'")
-        seed, options = record["seed"], record["options"]
-        if not (seed is None or (isinstance(seed, int) and not isinstance(seed, bool) and seed >= 0)):
-            raise ValueError(f"a reset record's seed must be None or an int >= 0, got {seed!r}")
-        if not (options is None or isinstance(options, dict)):
-            raise ValueError(f"a reset record's options must be None or a dict, got {options!r}")
-        restore_stack_state(self.env, record["layers"])
-        observation, _ = self.reset(seed=seed, options=options)
-        return observation
+        try:
+            if not isinstance(record, dict) or set(record) != {"seed", "options", "layers"}:
+                raise ValueError("a reset record is a dict with keys 'seed', 'options' and 'layers'")
+            seed, options = record["seed"], record["options"]
+            if not (seed is None or (isinstance(seed, int) and not isinstance(seed, bool) and 0 <= seed < 2**64)):
+                raise ValueError(f"a reset record's seed must be None or an int in [0, 2**64), got {seed!r}")
+            if not (options is None or isinstance(options, dict)):
+                raise ValueError(f"a reset record's options must be None or a dict, got {options!r}")
+            restore_stack_state(self.env, record["layers"])
+            observation, _ = self.reset(seed=seed, options=options)
+        except (ValueError, TypeError, KeyError, IndexError, ArithmeticError) as error:
+            self._last_reset = None  # whatever was restored, this env is not between two known episodes
+            return None, f"{type(error).__name__}: {error}"
+        return observation, None
