@@ -15,8 +15,9 @@ and kept as the reference; then, ``--kills`` times, the same command (saving eve
 random moment within the reference's wall time, and run again to the end. Each resume must
 finish, leave no training state and no temporary file, and write a model whose weights and
 learning curve equal the reference's. Prints one line per kill (whether a training state,
-and whether the model, had been saved when it was killed: a run killed after saving its model
-trains again from the start, as nothing tells it the model is complete) and the counts.
+and whether the model, had been saved when it was killed: the state is deleted only once
+every output is written, so a run killed after saving its model resumes from its last save
+too) and the counts.
 """
 
 from __future__ import annotations
@@ -137,7 +138,7 @@ def kills(n_kills: int, steps: int, save_every: int, seed: int, folder: Path) ->
         )
     print(
         f"{identical}/{n_kills} identical to the uninterrupted run, {resumed_from_a_save} resumed from a saved state, "
-        f"{after_the_model} after the model was saved (trained again)"
+        f"{after_the_model} after the model was saved"
     )
     print(f"{leftovers} files left (training states, temporary files)")
 

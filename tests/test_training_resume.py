@@ -245,3 +245,30 @@ def test_the_cli_names_the_state_file_and_the_default_the_package_uses():
     from dvrk_gym.cli.baselines import DEFAULT_SAVE_EVERY, TRAINING_STATE
 
     assert (TRAINING_STATE, DEFAULT_SAVE_EVERY) == (STATE_FILE_NAME, SAVE_EVERY)
+
+
+def test_a_run_stopped_after_its_model_but_before_its_curve_resumes_and_writes_them_all(tmp_path, monkeypatch, capsys):
+    """The state is deleted only once every output is written: a kill while the curve is drawn
+    resumes from the last save, not from nothing."""
+    import argparse
+
+    import dvrk_gym.baselines.curves as curves
+    from dvrk_gym.cli.baselines import TRAINING_STATE, add_commands
+
+    parser = argparse.ArgumentParser(prog="dvrk-gym")
+    add_commands(parser.add_subparsers(dest="command", required=True))
+    out = tmp_path / "run"
+    command = ["baseline", "train", "--algo", "sac", "--steps", "30", "--learning-starts", "10", "--resolution", "320", "180"]
+    args = parser.parse_args([*command, "--eval-points", "1", "--save-every", "10", "--out", str(out), "--no-progress"])
+
+    def killed(*_, **__):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(curves, "plot_curves", killed)
+    with pytest.raises(KeyboardInterrupt):
+        args.func(args)
+    assert (out / "model.zip").exists() and (out / TRAINING_STATE).exists() and not (out / "learning_curve.png").exists()
+    monkeypatch.undo()
+    assert args.func(args) == 0
+    assert "resuming the training saved in" in capsys.readouterr().out
+    assert (out / "learning_curve.png").exists() and not (out / TRAINING_STATE).exists()

@@ -16,7 +16,7 @@ from dvrk_gym.utils.checks import check_int
 from dvrk_gym.utils.run_folder import RunFolder
 
 TRAINING_STATE = "training_state.zip"
-"""The file in a training's output folder that holds its state until the model is saved
+"""The file in a training's output folder that holds its state until its outputs are written
 (``dvrk_gym.baselines.resume.STATE_FILE_NAME``, which a test checks; repeated here so that
 ``--help`` does not import torch)."""
 DEFAULT_SAVE_EVERY = 500
@@ -72,17 +72,19 @@ def _run_train(args: argparse.Namespace) -> int:
             print(f"resuming the training saved in {state_path}")
         result = train(config, progress=not args.no_progress, state_path=state_path, save_every=save_every)
         model_path = save_agent(result, out / "model.zip")  # the model first: nothing after it can lose it
-        state_path.unlink(missing_ok=True)  # the run is done: its saved state is not needed any more
-    label = f"{args.algo}, seed {args.seed}"
-    meta = {"agent": args.algo, "seed": args.seed, "env_steps": result.env_steps, "steps_per_second": result.steps_per_second}
-    save_curve(result.curve, out / "learning_curve.json", meta)
-    env_name = AGENT_ENVS[args.algo].split("/")[-1]
-    plot_curves(
-        {label: result.curve},
-        out / "learning_curve.png",
-        title=f"{args.algo} on {env_name} (bias {args.bias}, seed {args.seed})",
-        metric="success_rate" if picks else "mm_error",
-    )
+        label = f"{args.algo}, seed {args.seed}"
+        meta = {"agent": args.algo, "seed": args.seed, "env_steps": result.env_steps, "steps_per_second": result.steps_per_second}
+        save_curve(result.curve, out / "learning_curve.json", meta)
+        env_name = AGENT_ENVS[args.algo].split("/")[-1]
+        plot_curves(
+            {label: result.curve},
+            out / "learning_curve.png",
+            title=f"{args.algo} on {env_name} (bias {args.bias}, seed {args.seed})",
+            metric="success_rate" if picks else "mm_error",
+        )
+        # Every output is written: the saved state is not needed any more. (Killed before this,
+        # the same command resumes from it and writes them all again.)
+        state_path.unlink(missing_ok=True)
     first, final = result.curve[0], result.curve[-1]
     print(
         f"{args.algo}: {result.env_steps} env steps in {result.train_seconds:.0f} s "
@@ -248,7 +250,7 @@ def _add_train(subparsers: argparse._SubParsersAction) -> None:
         default=DEFAULT_SAVE_EVERY,
         help=f"env steps between saves of the training's state to OUT/{TRAINING_STATE} (default: %(default)s; at the first moment "
         "after that when every training env is between episodes); a killed run given the same "
-        "command resumes from it and ends as if never stopped, bit for bit; it is deleted once the model is saved",
+        "command resumes from it and ends as if never stopped, bit for bit; it is deleted once every output is written",
     )
     add_progress_option(train)
     train.set_defaults(func=_run_train)

@@ -185,11 +185,11 @@ def rl_agent(
     state_path = folder / STATE_FILE_NAME  # a killed run resumes its training where the last save left it
     result = train(config, progress=False, state_path=state_path)
     path = save_agent(result, folder / "model.zip")
-    state_path.unlink(missing_ok=True)
     save_curve(result.curve, folder / "learning_curve.json", {"agent": agent, "steps_per_second": result.steps_per_second})
     loaded = load_agent(path)
     settings = benchmark_agent(loaded, seed=benchmark_seed)
     row = agent_row(loaded, settings)
+    state_path.unlink(missing_ok=True)  # the task's result is complete; killed before this, it resumes from the last save
     return {
         "agent": agent,
         "label": loaded.label,

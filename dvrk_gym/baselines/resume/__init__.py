@@ -17,7 +17,7 @@ from dvrk_gym.baselines.resume.state_file import TrainingStateError, save_traini
 from dvrk_gym.baselines.resume.writer import TrainingStateWriter
 
 STATE_FILE_NAME = "training_state.zip"
-"""The file in a training's output folder that holds its state until its model is saved
+"""The file in a training's output folder that holds its state until its outputs are written
 (``dvrk-gym baseline train``, and ``dvrk-gym reproduce``'s RL stage)."""
 
 __all__ = ["STATE_FILE_NAME", "ResetRecorder", "TrainingStateError", "TrainingStateWriter", "restore_training_state", "save_training_state"]
