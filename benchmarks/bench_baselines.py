@@ -20,7 +20,8 @@ about 45-90 minutes for a pick agent at 1-2 picks/s; the calibration run if none
 (a few minutes); the debridement trials about a minute per method (15 trials); the 10x
 budget about ten times the training. ``--steps`` shortens the training. Each agent's
 training saves its state in its folder under ``--out`` (``training_state.zip``), so the same
-command, killed, resumes the training it was in (:mod:`dvrk_gym.baselines.resume`).
+command, killed, resumes the training it was in (:mod:`dvrk_gym.baselines.resume`); the
+agents it had finished are trained again.
 """
 
 from __future__ import annotations
@@ -132,8 +133,8 @@ def train_agents(args: argparse.Namespace, steps: int, pick_steps: int, calibrat
         start = time.perf_counter()
         result = train(config, progress=not args.no_progress, state_path=folder / STATE_FILE_NAME)  # a killed run resumes
         path = save_agent(result, folder / "model.zip")
-        (folder / STATE_FILE_NAME).unlink(missing_ok=True)
         save_curve(result.curve, path.parent / "learning_curve.json", {"agent": agent_name, "steps_per_second": result.steps_per_second})
+        (folder / STATE_FILE_NAME).unlink(missing_ok=True)  # its outputs are written
         curves.setdefault(is_pick_agent(agent_name), {})[f"{agent_name}, seed {args.seed}"] = result.curve
         print(
             f"{agent_name}: trained {result.env_steps} steps at {result.steps_per_second:.2f} steps/s in {result.train_seconds:.0f} s; "

@@ -310,7 +310,8 @@ def train(config: TrainConfig, progress: bool = True, state_path: str | Path | N
         state_path: where to save the training's state every ``save_every`` env steps
             (between episodes; :mod:`dvrk_gym.baselines.resume`). If the file exists, the
             training resumes from it (it must be a state of the same settings, written by this
-            version of dvrk_gym), and ends as a training never stopped would, bit for bit.
+            version of dvrk_gym with the same libraries), and ends as a training never stopped
+            would, bit for bit.
             The file is left in place: delete it once the model and whatever else the
             caller writes are saved. None: no saves.
         save_every: env steps between saves.

@@ -146,7 +146,9 @@ def save_training_state(path: str | Path, model: Any, config: dict[str, Any], pr
         progress: the training loop's own record, JSON values, given back by :func:`restore_training_state`.
 
     Raises:
-        ValueError: not an off-policy model, or an env is in the middle of an episode.
+        ValueError: not an off-policy model; a memory-optimised replay buffer, or HER's with
+            ``copy_info_dict=True`` (whose info dicts are not saved); envs not wrapped in
+            ``ResetRecorder``; or an env in the middle of an episode.
     """
     model = check_supported(model)
     try:

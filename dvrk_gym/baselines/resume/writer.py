@@ -15,8 +15,8 @@ from dvrk_gym.utils.source_fingerprint import source_fingerprint
 
 class TrainingStateWriter(BaseCallback):
     """Save the training state (:func:`~dvrk_gym.baselines.resume.state_file.save_training_state`)
-    once at least ``every`` env steps have passed since the last save, at the first moment
-    after that when every training env is between episodes.
+    at each multiple of ``every`` env steps, or at the first moment after it when every
+    training env is between episodes (multiples passed while waiting make one save).
 
     It saves as a rollout begins: the last step's transition is in the replay buffer and
     its gradient updates are done, so the file holds a consistent moment.
