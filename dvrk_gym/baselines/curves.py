@@ -7,9 +7,7 @@ written as JSON null.
 
 from __future__ import annotations
 
-import dataclasses
 import json
-import math
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -25,26 +23,16 @@ PAPER_DNN_RF_PICK_SUCCESS = paper.DEBRIDEMENT_RESULTS[("dnn+rf", "pumpkin_seed")
 """The paper's DNN+RF debridement success on pumpkin seeds (110 of 120 picks)."""
 
 
-def _json_value(value: Any) -> Any:
-    return None if isinstance(value, float) and math.isnan(value) else value
-
-
 def save_curve(points: Sequence[CurvePoint], path: Path, meta: dict[str, Any]) -> Path:
     """Write ``{"meta": ..., "points": [{env_steps, mm_error, pixel_error, success_rate, time_per_fragment_s}]}``."""
     path = Path(path)
-    rows = [{key: _json_value(value) for key, value in dataclasses.asdict(p).items()} for p in points]
-    return atomic_write_json(path, {"meta": meta, "points": rows}, indent=1)
+    return atomic_write_json(path, {"meta": meta, "points": [p.to_json() for p in points]}, indent=1)
 
 
 def load_curve(path: Path) -> list[CurvePoint]:
     """Read the points written by :func:`save_curve` (null errors back to NaN)."""
-    points = []
-    for point in json.loads(Path(path).read_text())["points"]:
-        for key in ("mm_error", "pixel_error", "success_rate"):
-            if point.get(key) is None:
-                point[key] = float("nan")
-        points.append(CurvePoint(**point))
-    return points
+    rows = json.loads(Path(path).read_text())["points"]
+    return [CurvePoint.from_json({**dict.fromkeys(CurvePoint.NAN_FIELDS), **row}) for row in rows]  # a missing error is NaN too
 
 
 def plot_curves(curves: Mapping[str, Sequence[CurvePoint]], path: Path, title: str = "", metric: str = "mm_error") -> Path:

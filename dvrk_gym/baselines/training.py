@@ -16,7 +16,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 import gymnasium as gym
 import numpy as np
@@ -141,6 +141,24 @@ class CurvePoint:
     pixel_error: float
     success_rate: float
     time_per_fragment_s: float | None = None
+    NAN_FIELDS: ClassVar[tuple[str, ...]] = ("mm_error", "pixel_error", "success_rate")
+    """The fields that may be NaN (written as JSON null)."""
+
+    def to_json(self) -> dict[str, Any]:
+        """The point as JSON values: NaN errors (a pick agent's pixel error) as null."""
+        return {key: None if isinstance(value, float) and np.isnan(value) else value for key, value in dataclasses.asdict(self).items()}
+
+    @classmethod
+    def from_json(cls, value: Any) -> CurvePoint:
+        """A point from :meth:`to_json` (null errors back to NaN).
+
+        Raises:
+            TypeError: ``value`` is not a dict of this class's fields.
+        """
+        if not isinstance(value, dict):
+            raise TypeError(f"a curve point must be a dict, got {value!r}")
+        fields: dict[str, Any] = {key: float("nan") if item is None and key in cls.NAN_FIELDS else item for key, item in value.items()}
+        return cls(**fields)
 
 
 @dataclass
@@ -207,13 +225,6 @@ def evaluate_pick_curve_point(model: BaseAlgorithm, env: gym.Env, env_steps: int
     return CurvePoint(env_steps, mean_offset, float("nan"), total["success"] / max(total["picks"], 1), total["time_per_fragment_s"])
 
 
-def _point_fields(saved: Any) -> dict[str, Any]:
-    """A saved curve point's fields, its None errors back to NaN (``time_per_fragment_s`` may be None)."""
-    if not isinstance(saved, dict):
-        raise TypeError(f"a curve point must be a dict, got {saved!r}")
-    return {key: float("nan") if value is None and key != "time_per_fragment_s" else value for key, value in saved.items()}
-
-
 CurveEvaluator = Callable[[BaseAlgorithm, gym.Env, int, int], CurvePoint]
 
 
@@ -251,10 +262,7 @@ class LearningCurve(BaseCallback):
 
     def record(self) -> dict[str, Any]:
         """The curve so far, JSON values, for a saved training state."""
-        points = [
-            {k: None if isinstance(v, float) and np.isnan(v) else v for k, v in dataclasses.asdict(p).items()} for p in self.points
-        ]  # JSON has no NaN
-        return {"points": points, "marks": [int(m) for m in self.marks], "eval_seconds": self.eval_seconds}
+        return {"points": [p.to_json() for p in self.points], "marks": [int(m) for m in self.marks], "eval_seconds": self.eval_seconds}
 
     def restore(self, record: Any, env_steps: int) -> None:
         """Take up a :meth:`record` saved at ``env_steps``; the training then goes on without
@@ -266,7 +274,7 @@ class LearningCurve(BaseCallback):
         if not isinstance(record, dict) or set(record) != {"points", "marks", "eval_seconds"}:
             raise ValueError("a learning curve's record holds 'points', 'marks' and 'eval_seconds'")
         try:
-            points = [CurvePoint(**_point_fields(point)) for point in record["points"]]
+            points = [CurvePoint.from_json(point) for point in record["points"]]
             marks = [int(mark) for mark in record["marks"]]
             eval_seconds = float(record["eval_seconds"])
         except (TypeError, ValueError) as error:

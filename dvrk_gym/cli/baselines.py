@@ -248,8 +248,8 @@ def _add_train(subparsers: argparse._SubParsersAction) -> None:
         "--save-every",
         type=int,
         default=DEFAULT_SAVE_EVERY,
-        help=f"env steps between saves of the training's state to OUT/{TRAINING_STATE} (default: %(default)s; at the first moment "
-        "after that when every training env is between episodes); a killed run given the same "
+        help=f"env steps between saves of the training's state to OUT/{TRAINING_STATE} (default: %(default)s; at each multiple of it, "
+        "or at the first moment after it when every training env is between episodes); a killed run given the same "
         "command resumes from it and ends as if never stopped, bit for bit; it is deleted once every output is written",
     )
     add_progress_option(train)

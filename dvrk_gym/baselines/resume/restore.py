@@ -44,6 +44,7 @@ from dvrk_gym.baselines.resume.state_file import (
     training_envs,
 )
 from dvrk_gym.utils.bounded_zip import ArchiveLimitError, ArchiveLimits, open_archive, read_member
+from dvrk_gym.utils.checks import check_int
 from dvrk_gym.utils.source_fingerprint import SourceFingerprint, source_fingerprint
 
 
@@ -174,19 +175,14 @@ def _read_state_json(archive: zipfile.ZipFile, config: dict[str, Any]) -> dict[s
 
 
 def _count(state: dict[str, Any], key: str) -> int:
-    value = state.get(key)
-    if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= 10**12:
-        raise ValueError(f"{key!r} must be an int in [0, 1e12], got {value!r}")
-    return value
+    return check_int(repr(key), state.get(key), 0, 10**12)
 
 
 def _check_buffer_position(position: Any, buffer: Any) -> int:
-    if not isinstance(position, dict):
-        raise ValueError("'buffer' must be a dict")
-    pos, full = position.get("pos"), position.get("full")
-    if isinstance(pos, bool) or not isinstance(pos, int) or not 0 <= pos < buffer.buffer_size or not isinstance(full, bool):
-        raise ValueError(f"the buffer's position must be pos in [0, {buffer.buffer_size}) and full True or False, got {position!r}")
-    return int(buffer.buffer_size if full else pos)
+    if not isinstance(position, dict) or not isinstance(position.get("full"), bool):
+        raise ValueError(f"the buffer's position must be a dict with 'pos' and 'full' (True or False), got {position!r}")
+    pos = check_int("the buffer's position 'pos'", position.get("pos"), 0, buffer.buffer_size - 1)
+    return int(buffer.buffer_size if position["full"] else pos)
 
 
 def _int_array(value: Any, shape: tuple[int, ...], name: str) -> np.ndarray:

@@ -23,6 +23,7 @@ its run could not be continued as the same run.
 
 from __future__ import annotations
 
+import functools
 import importlib.metadata
 import json
 import random
@@ -191,8 +192,10 @@ def save_training_state(path: str | Path, model: Any, config: dict[str, Any], pr
     return Path(path)
 
 
+@functools.cache
 def library_versions() -> dict[str, str | None]:
-    """The installed versions of :data:`LIBRARIES` (None for one without metadata)."""
+    """The installed versions of :data:`LIBRARIES` (None for one without metadata), read once
+    per process (do not modify the result)."""
     versions: dict[str, str | None] = {}
     for name in LIBRARIES:
         try:
