@@ -20,8 +20,10 @@ about 45-90 minutes for a pick agent at 1-2 picks/s; the calibration run if none
 (a few minutes); the debridement trials about a minute per method (15 trials); the 10x
 budget about ten times the training. ``--steps`` shortens the training. Each agent's
 training saves its state in its folder under ``--out`` (``training_state.zip``), so the same
-command, killed, resumes the training it was in (:mod:`dvrk_gym.baselines.resume`); the
-agents it had finished are trained again.
+command, killed, resumes the training it was in (:mod:`dvrk_gym.baselines.resume`) and keeps
+the agents it had finished, when this code trained them with these settings
+(:func:`dvrk_gym.baselines.checkpoints.finished_agent`; delete an agent's folder to train it
+again).
 """
 
 from __future__ import annotations
@@ -35,7 +37,7 @@ import numpy as np
 
 from dvrk_gym.baselines.agents import AGENTS
 from dvrk_gym.baselines.budgets import BUDGETS, DEBRIDEMENT_ID, GRID_TOUCH_ID, resolve_budget
-from dvrk_gym.baselines.checkpoints import LoadedAgent, load_agent, save_agent
+from dvrk_gym.baselines.checkpoints import LoadedAgent, finished_agent, load_agent, save_agent
 from dvrk_gym.baselines.comparison import (
     BENCHMARK_SEED,
     agent_row,
@@ -48,9 +50,9 @@ from dvrk_gym.baselines.comparison import (
     format_debridement_comparison,
     setting_mismatches,
 )
-from dvrk_gym.baselines.curves import plot_curves, save_curve
+from dvrk_gym.baselines.curves import load_curve, plot_curves, save_curve
 from dvrk_gym.baselines.resume import STATE_FILE_NAME
-from dvrk_gym.baselines.training import TrainConfig, train
+from dvrk_gym.baselines.training import CurvePoint, TrainConfig, train
 from dvrk_gym.calibration.benchmark import format_table
 from dvrk_gym.calibration.loading import load_calibrator
 from dvrk_gym.calibration.pipeline import PipelineConfig, run_calibration
@@ -115,6 +117,18 @@ def pick_timing(calibration_dir: Path, resolutions: list[tuple[int, int]], trial
     print()
 
 
+def _finished(folder: Path, config: TrainConfig) -> tuple[LoadedAgent, list[CurvePoint]] | None:
+    """The agent and learning curve a killed run of this command finished in ``folder``, if
+    they are ``config``'s and this code's (:func:`finished_agent`); None: train it."""
+    if (folder / STATE_FILE_NAME).exists():
+        return None  # its training was cut short: resume it
+    agent = finished_agent(folder / "model.zip", config)
+    try:
+        return None if agent is None else (agent, load_curve(folder / "learning_curve.json"))
+    except (OSError, ValueError, TypeError, KeyError):
+        return None  # no curve, or a damaged one: train again
+
+
 def train_agents(args: argparse.Namespace, steps: int, pick_steps: int, calibration: PipelineConfig) -> list[LoadedAgent]:
     """Train each of ``args.agents``, save it with its curve, and load it back."""
     agents, curves = [], {}
@@ -130,6 +144,13 @@ def train_agents(args: argparse.Namespace, steps: int, pick_steps: int, calibrat
         )
         folder = args.out / f"{agent_name}_{budget}_seed{args.seed}"
         folder.mkdir(parents=True, exist_ok=True)
+        kept = _finished(folder, config)
+        if kept is not None:  # this run was killed after it: its model and curve are this code's and these settings'
+            agent, curve = kept
+            curves.setdefault(is_pick_agent(agent_name), {})[f"{agent_name}, seed {args.seed}"] = curve
+            print(f"{agent_name}: kept the agent this command trained before in {folder} (delete the folder to train it again)")
+            agents.append(agent)
+            continue
         start = time.perf_counter()
         result = train(config, progress=not args.no_progress, state_path=folder / STATE_FILE_NAME)  # a killed run resumes
         path = save_agent(result, folder / "model.zip")

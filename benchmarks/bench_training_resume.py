@@ -14,7 +14,9 @@ and kept as the reference; then, ``--kills`` times, the same command (saving eve
 ``--save-every`` / 10 env steps) is started in its own folder and killed with SIGKILL at a
 random moment within the reference's wall time, and run again to the end. Each resume must
 finish, leave no training state and no temporary file, and write a model whose weights and
-learning curve equal the reference's. Prints one line per kill (whether a training state,
+learning curve equal the reference's (a run killed after it had written every output and
+deleted its state is refused by the rerun as a finished training, and its outputs are
+checked instead). Prints one line per kill (whether a training state,
 and whether the model, had been saved when it was killed: the state is deleted only once
 every output is written, so a run killed after saving its model resumes from its last save
 too) and the counts.
@@ -113,7 +115,7 @@ def kills(n_kills: int, steps: int, save_every: int, seed: int, folder: Path) ->
     curve = json.loads((reference / "learning_curve.json").read_text())["points"]
     rng = np.random.default_rng(seed)
     print(f"SIGKILLs of dvrk-gym baseline train --steps {steps} --save-every {save_every} (reference {wall:.1f} s)")
-    identical = leftovers = resumed_from_a_save = after_the_model = 0
+    identical = leftovers = resumed_from_a_save = after_the_model = kept_finished = 0
     for kill in range(n_kills):
         out = folder / f"kill{kill}"
         after = float(rng.uniform(0.1, 0.95) * wall)
@@ -125,7 +127,11 @@ def kills(n_kills: int, steps: int, save_every: int, seed: int, folder: Path) ->
         had_state, had_model = (out / STATE_FILE_NAME).exists(), (out / "model.zip").exists()
         again = subprocess.run(command(out, steps, save_every, seed), capture_output=True, text=True)
         left = [p.name for p in out.rglob("*") if ".partial" in p.name or p.name == STATE_FILE_NAME] if out.exists() else []
-        same = again.returncode == 0 and same_weights(expected, load_agent(out / "model.zip").model.policy)
+        # Killed after every output was written (its state deleted), the rerun refuses to train
+        # again (exit 2, "holds a finished training"): the outputs it had written are checked.
+        finished = again.returncode == 2 and "holds a finished training" in again.stderr and had_model and not had_state
+        kept_finished += finished
+        same = (again.returncode == 0 or finished) and same_weights(expected, load_agent(out / "model.zip").model.policy)
         same = same and json.loads((out / "learning_curve.json").read_text())["points"] == curve
         identical += same
         leftovers += len(left)
@@ -138,7 +144,7 @@ def kills(n_kills: int, steps: int, save_every: int, seed: int, folder: Path) ->
         )
     print(
         f"{identical}/{n_kills} identical to the uninterrupted run, {resumed_from_a_save} resumed from a saved state, "
-        f"{after_the_model} after the model was saved"
+        f"{after_the_model} after the model was saved, {kept_finished} after every output was written (kept, not trained again)"
     )
     print(f"{leftovers} files left (training states, temporary files)")
 

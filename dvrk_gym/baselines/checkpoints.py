@@ -10,7 +10,8 @@ bounded before anything is built or inflated: the settings JSON's size, the netw
 settings describe (:func:`check_policy_kwargs`), and the zip's declared and actual member
 sizes (:data:`AGENT_FILE_LIMITS`). Even so, only load files this tool wrote, or that you trust.
 
-The JSON also records the world the agent learnt in, in full (:func:`env_record`: every
+The JSON also records which dvrk_gym trained the agent (its source fingerprint,
+:func:`~dvrk_gym.utils.source_fingerprint.source_fingerprint`), and the world the agent learnt in, in full (:func:`env_record`: every
 ``gym.make`` keyword of its env, defaults included, and the cable bias its preset named).
 A later version whose defaults differ (the paper's ``contact``, say) evaluates the agent
 with the recorded values, and :attr:`LoadedAgent.env_changes` says what differed.
@@ -38,6 +39,7 @@ from dvrk_gym.sim.robot.bias import resolve_bias
 from dvrk_gym.utils.atomic import atomic_path, atomic_write_json
 from dvrk_gym.utils.bounded_zip import ArchiveLimits, open_archive, read_member
 from dvrk_gym.utils.checks import check_bool, check_int
+from dvrk_gym.utils.source_fingerprint import SourceFingerprint, source_fingerprint
 
 FORMAT = "dvrk_gym.baselines/1"
 """Tag of the settings JSON, checked on load."""
@@ -68,6 +70,7 @@ class LoadedAgent:
             ``gym.make`` keyword (``bias_config``: the instrument; ``env``: nothing recorded)
             -> one line (empty: none). Keywords whose default changed are set back to the
             recorded values in ``config.env_overrides``; a changed instrument is only noted.
+        source: the dvrk_gym that trained it (None: not recorded, a file saved before it was).
     """
 
     model: BaseAlgorithm
@@ -75,6 +78,7 @@ class LoadedAgent:
     env_steps: int
     path: Path
     env_changes: dict[str, str] = field(default_factory=dict)
+    source: SourceFingerprint | None = None
 
     @property
     def label(self) -> str:
@@ -103,6 +107,7 @@ def save_agent(result: TrainResult, path: Path) -> Path:
         "env_steps": result.env_steps,
         "train_seconds": result.train_seconds,
         "steps_per_second": result.steps_per_second,
+        "source": source_fingerprint().to_json(),
     }  # built before anything is written: a setting that cannot be saved leaves the old files as they were
     path.parent.mkdir(parents=True, exist_ok=True)
     with atomic_path(path) as temporary:
@@ -309,7 +314,30 @@ def load_agent(path: Path) -> LoadedAgent:
     finally:
         env.close()
     model.policy.set_training_mode(False)
-    return LoadedAgent(model, config, int(settings["env_steps"]), path, env_changes)
+    return LoadedAgent(model, config, int(settings["env_steps"]), path, env_changes, SourceFingerprint.from_json(settings.get("source")))
+
+
+def finished_agent(path: Path, config: TrainConfig) -> LoadedAgent | None:
+    """The agent saved at ``path`` if it is ``config``'s training, trained by this very dvrk_gym; else None.
+
+    A run that trains several agents and was killed uses it to keep those it had finished. An
+    agent is kept only when its zip and settings are there and whole (:func:`load_agent`), its
+    recorded training settings are ``config``'s, and its recorded source fingerprint is this
+    process's, so results never mix agents trained by other code. Anything else (no file, a
+    damaged one, other settings, other code, a file saved before the source was recorded)
+    gives None: train it again.
+    """
+    path = Path(path)
+    try:
+        recorded = _read_settings(path)
+        if recorded["config"] != json.loads(json.dumps(config.to_dict())):
+            return None
+        if SourceFingerprint.from_json(recorded.get("source")) != source_fingerprint():
+            return None
+        agent = load_agent(path)
+    except (OSError, ValueError):
+        return None
+    return agent if not agent.env_changes else None
 
 
 def _inference_only(algorithm: type[BaseAlgorithm]) -> dict[str, Any]:

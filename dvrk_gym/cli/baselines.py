@@ -68,8 +68,14 @@ def _run_train(args: argparse.Namespace) -> int:
     # The folder is this process's while it trains (a second training there is refused, naming
     # this one), and the temporary file of a save cut short by a kill is removed.
     with RunFolder(out):
-        if state_path.exists():
+        if args.force:
+            state_path.unlink(missing_ok=True)  # train from the start: a saved state would be resumed
+        elif state_path.exists():
             print(f"resuming the training saved in {state_path}")
+        elif (out / "model.zip").exists():
+            raise FileExistsError(
+                f"{out / 'model.zip'} exists: {out} holds a finished training; give --force to train again, or another --out"
+            )
         result = train(config, progress=not args.no_progress, state_path=state_path, save_every=save_every)
         model_path = save_agent(result, out / "model.zip")  # the model first: nothing after it can lose it
         label = f"{args.algo}, seed {args.seed}"
@@ -251,6 +257,11 @@ def _add_train(subparsers: argparse._SubParsersAction) -> None:
         help=f"env steps between saves of the training's state to OUT/{TRAINING_STATE} (default: %(default)s; at each multiple of it, "
         "or at the first moment after it when every training env is between episodes); a killed run given the same "
         "command resumes from it and ends as if never stopped, bit for bit; it is deleted once every output is written",
+    )
+    train.add_argument(
+        "--force",
+        action="store_true",
+        help="train from the start even if --out holds a finished training (its model.zip) or a saved state; both are replaced",
     )
     add_progress_option(train)
     train.set_defaults(func=_run_train)

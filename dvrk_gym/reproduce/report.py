@@ -108,7 +108,7 @@ def write_figures(folder: Path, data: dict[str, Any]) -> dict[str, str]:
             plot_search(results, str(temporary))
         figures["model_search"] = "figures/model_search.png"
     if data["rl"]:
-        curves = {agent["label"]: [CurvePoint(**point) for point in agent["curve"]] for agent in data["rl"]}
+        curves = {agent["label"]: [CurvePoint.from_json(point) for point in agent["curve"]] for agent in data["rl"]}
         plot_curves(curves, folder / "learning_curves.png", title="RL agents on GridTouch-v0: touch error against robot moves")
         figures["learning_curves"] = "figures/learning_curves.png"
     for cell in data["debridement"]:

@@ -197,7 +197,7 @@ def rl_agent(
         "env_steps": int(result.env_steps),
         "steps_per_second": float(result.steps_per_second),
         "train_s": float(result.train_seconds),
-        "curve": [dataclasses.asdict(point) for point in result.curve],
+        "curve": [point.to_json() for point in result.curve],  # NaN as null: results.json stays strict JSON
         "mean_mm": row.mm_error,
         "mean_px": row.pixel_error,
         "summary": table_summary({agent: settings})[agent],

@@ -1,0 +1,83 @@
+"""A finished training is kept: `baseline train` refuses to redo it without --force, and a
+benchmark killed part-way keeps the agents it had finished (checkpoints.finished_agent)."""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+
+import pytest
+import torch
+
+import dvrk_gym.baselines.checkpoints as checkpoints
+from dvrk_gym.baselines.checkpoints import finished_agent, settings_path
+from dvrk_gym.cli.baselines import TRAINING_STATE, add_commands
+from dvrk_gym.utils.source_fingerprint import SourceFingerprint, source_fingerprint
+
+COMMAND = ["baseline", "train", "--algo", "sac", "--steps", "20", "--learning-starts", "10", "--resolution", "320", "180"]
+
+
+def _parse(*extra: str) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(prog="dvrk-gym")
+    add_commands(parser.add_subparsers(dest="command", required=True))
+    return parser.parse_args([*COMMAND, "--eval-points", "1", "--no-progress", *extra])
+
+
+@pytest.fixture(scope="module")
+def finished(tmp_path_factory):
+    """A folder holding a finished `baseline train` (model, settings, curve, plot)."""
+    out = tmp_path_factory.mktemp("finished") / "run"
+    args = _parse("--out", str(out))
+    assert args.func(args) == 0
+    return out
+
+
+def test_a_finished_training_is_not_trained_again_without_force(finished):
+    model = (finished / "model.zip").read_bytes()
+    written = (finished / "model.zip").stat().st_mtime_ns
+    args = _parse("--out", str(finished))
+    with pytest.raises(FileExistsError, match="model.zip exists.*--force"):
+        args.func(args)
+    assert (finished / "model.zip").read_bytes() == model and (finished / "model.zip").stat().st_mtime_ns == written
+
+
+def test_force_trains_again_from_the_start_even_over_a_saved_state(finished, tmp_path):
+    out = tmp_path / "copy"
+    out.mkdir()
+    for name in ("model.zip", "model.json"):
+        (out / name).write_bytes((finished / name).read_bytes())
+    (out / TRAINING_STATE).write_bytes(b"not a state: --force must not try to resume it")
+    args = _parse("--out", str(out), "--force")
+    assert args.func(args) == 0
+    assert not (out / TRAINING_STATE).exists()
+    assert (out / "model.zip").read_bytes() != b"" and (out / "learning_curve.json").exists()
+    same = checkpoints.load_agent(finished / "model.zip").model.policy.state_dict()
+    again = checkpoints.load_agent(out / "model.zip").model.policy.state_dict()
+    assert same.keys() == again.keys() and all(torch.equal(same[key], again[key]) for key in same)  # the same training again
+
+
+def test_a_finished_agent_is_kept_only_for_its_own_settings_and_code(finished, monkeypatch):
+    path = finished / "model.zip"
+    kept = finished_agent(path, checkpoints.load_agent(path).config)
+    assert kept is not None and kept.source == source_fingerprint()
+    config = kept.config
+    assert finished_agent(path, dataclasses.replace(config, seed=config.seed + 1)) is None
+    assert finished_agent(path, dataclasses.replace(config, steps=config.steps + 1)) is None
+    assert finished_agent(finished / "absent.zip", config) is None
+    monkeypatch.setattr(checkpoints, "source_fingerprint", lambda: SourceFingerprint(version="0", sha256="0" * 64))
+    assert finished_agent(path, config) is None  # trained by other code: train it again
+
+
+def test_a_damaged_or_unrecorded_agent_is_not_kept(finished, tmp_path):
+    config = checkpoints.load_agent(finished / "model.zip").config
+    out = tmp_path / "damaged"
+    out.mkdir()
+    (out / "model.zip").write_bytes((finished / "model.zip").read_bytes()[:-100])
+    (out / "model.json").write_bytes((finished / "model.json").read_bytes())
+    assert finished_agent(out / "model.zip", config) is None  # cut short: its digest differs
+    (out / "model.zip").write_bytes((finished / "model.zip").read_bytes())
+    settings = json.loads(settings_path(out / "model.zip").read_text())
+    del settings["source"]  # saved before the source was recorded
+    settings_path(out / "model.zip").write_text(json.dumps(settings))
+    assert finished_agent(out / "model.zip", config) is None
