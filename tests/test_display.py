@@ -275,7 +275,7 @@ def test_without_libegl_render_falls_back_to_tinyrenderer_in_the_same_process():
     hide = "; ".join(f"mount --bind /dev/null {path}" for path in sorted(set(libraries)))
     code = (
         "import logging, gymnasium as gym, dvrk_gym; logging.basicConfig(level=logging.WARNING);"
-        "env = gym.make('dvrk_gym/GridTouch-v0', camera_resolution=(160, 96), render_mode='rgb_array'); env.reset(seed=0);"
+        "env = gym.make('dvrk_gym/GridTouch-v0', camera_resolution=(256, 144), render_mode='rgb_array'); env.reset(seed=0);"
         "frame = env.render(); print('RENDERED', frame.shape, env.unwrapped._display.renderer); env.close()"
     )
     done = subprocess.run(
@@ -288,7 +288,7 @@ def test_without_libegl_render_falls_back_to_tinyrenderer_in_the_same_process():
     if done.returncode != 0 and "mount" in done.stderr and "RENDERED" not in done.stdout:
         pytest.skip(f"could not hide libEGL here: {done.stderr.strip()[-200:]}")
     assert done.returncode == 0, done.stderr
-    assert "RENDERED (96, 160, 3) tiny" in done.stdout
+    assert "RENDERED (144, 256, 3) tiny" in done.stdout
     fallback_lines = [line for line in done.stderr.splitlines() if "TinyRenderer" in line]
     assert len(fallback_lines) == 1, done.stderr
 
@@ -316,7 +316,7 @@ def test_render_settings_are_checked(make_env):
 @needs_egl
 def test_closing_an_env_frees_its_mirror_client_files_and_processes(tmp_path):
     before_children = {child.pid for child in psutil.Process().children(recursive=True)}
-    env = gym.make("dvrk_gym/GridTouch-v0", camera_resolution=(160, 96), render_mode="rgb_array")
+    env = gym.make("dvrk_gym/GridTouch-v0", camera_resolution=(256, 144), render_mode="rgb_array")
     env.reset(seed=0)
     env.render()
     mirror = env.unwrapped._display._mirror

@@ -315,9 +315,10 @@ def test_record_video_writes_an_episode_of_every_env(env_id, tmp_path):
     from gymnasium.wrappers import RecordVideo
 
     folder = tmp_path / "videos"  # a folder RecordVideo makes: it warns when it overwrites one that exists
-    env = RecordVideo(gym.make(env_id, camera_resolution=(160, 96), render_mode="rgb_array"), str(folder), episode_trigger=lambda _: True)
+    env = RecordVideo(gym.make(env_id, camera_resolution=(256, 144), render_mode="rgb_array"), str(folder), episode_trigger=lambda _: True)
     try:
         env.reset(seed=0)
+        env.action_space.seed(0)
         done = False
         while not done:
             _, _, terminated, truncated, _ = env.step(env.action_space.sample())

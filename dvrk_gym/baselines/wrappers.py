@@ -136,6 +136,12 @@ class TrainingYaws(gym.Wrapper):
         self.mode = mode
         self._episodes = 0
 
+    def _check_carried_attributes(self, attributes: dict[str, Any]) -> None:
+        """Refuse an episode count this wrapper could not have carried (see :class:`~dvrk_gym.envs.base.DvrkEnv`)."""
+        episodes = attributes["_episodes"]
+        if isinstance(episodes, bool) or not isinstance(episodes, int) or episodes < 0:
+            raise ValueError(f"carried '_episodes' must be a non-negative int, got {episodes!r}")
+
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
         if seed is not None:
             self._episodes = 0

@@ -4,8 +4,10 @@ A subclass has a frozen config dataclass extending :class:`EnvConfig`, and an ``
 whose keyword arguments are that config's fields, written out (so ``help()``, editors and
 ``inspect.signature`` show them) and documented by the config's docstring (appended to the
 ``__init__`` docstring for ``help()``). It names its action components (``action_names``)
-and implements ``_reset_episode`` and ``_step_episode``. The base owns the world, the
-action checks, seeding, state restoration and rendering, so no environment repeats them.
+and implements ``_reset_episode`` and ``_step_episode`` (and ``_check_options``, which
+checks its reset options before anything changes: a refused reset leaves the env as it
+was). The base owns the world, the action checks, seeding, state restoration and
+rendering, so no environment repeats them. A closed env refuses every call but ``close``.
 """
 
 from __future__ import annotations
@@ -13,12 +15,12 @@ from __future__ import annotations
 import difflib
 import functools
 import inspect
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from typing import Any, ClassVar, Generic, TypeVar
 
 import gymnasium as gym
 import numpy as np
-from gymnasium.error import ResetNeeded
+from gymnasium.error import ClosedEnvironmentError, ResetNeeded
 
 from dvrk_gym.envs.configs import EnvConfig
 from dvrk_gym.sim.endoscope.display import EndoscopeDisplay
@@ -79,12 +81,17 @@ def check_action(action: Any, space: gym.spaces.Box, names: tuple[str, ...]) -> 
         ValueError: not real numbers (complex, bool, text), wrong shape, or an element that is
             NaN or infinite (named in the message).
     """
-    raw = np.asarray(action)
+    try:
+        raw = np.asarray(action)
+    except ValueError as error:  # a ragged nesting
+        raise ValueError(
+            f"action must be an array of shape {space.shape} ({', '.join(names)}), got {type(action).__name__} ({error})"
+        ) from None
+    if raw.shape != space.shape:
+        raise ValueError(f"action must have shape {space.shape} ({', '.join(names)}), got {raw.shape}")
     if raw.dtype.kind not in "fiu":  # complex, bool, strings and objects are not coerced
         raise ValueError(f"action must hold real numbers ({', '.join(names)}), got dtype {raw.dtype} ({action!r})")
     array = raw.astype(np.float64)
-    if array.shape != space.shape:
-        raise ValueError(f"action must have shape {space.shape} ({', '.join(names)}), got {array.shape}")
     for i, value in enumerate(array):
         if not np.isfinite(value):
             raise ValueError(f"action[{i}] ({names[i]}) is {value}; expected a finite value in [{space.low[i]:.4g}, {space.high[i]:.4g}]")
@@ -160,16 +167,36 @@ class DvrkEnv(gym.Env, Generic[ConfigT]):
         cable = self.world.cable
         cable.set_state(np.full(cable.get_state().shape, np.nan))
         self._needs_reset = True
+        self._closed = False
         self._seeded_reset = False  # whether the reset under way was given a seed
         self._display: EndoscopeDisplay | None = None  # made at the first image rendered
 
     # ------------------------------------------------------------------ gym API
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
-        super().reset(seed=seed)
+        """Start an episode (Gymnasium's ``reset``). The seed and the options are checked
+        before anything changes: a refused reset leaves the env as it was (its episode, if
+        one was under way, can go on).
+
+        Raises:
+            TypeError: ``seed`` is not an int, or ``options`` not a dict.
+            ValueError: a negative seed, an unknown option or a bad option value.
+            gymnasium.error.ClosedEnvironmentError: the env was closed.
+        """
+        self._refuse_if_closed("reset")
+        if seed is not None:
+            if isinstance(seed, (bool, np.bool_)) or not isinstance(seed, (int, np.integer)):
+                raise TypeError(f"seed must be None or an int, got {seed!r}")
+            if seed < 0:
+                raise ValueError(f"seed must be a non-negative int, got {seed}")
+            seed = int(seed)
+        if options is not None and not isinstance(options, Mapping):
+            raise TypeError(f"options must be None or a dict of reset options {list(self.option_names)}, got {_describe(options)}")
         options = dict(options or {})
-        unknown = sorted(set(options) - set(self.option_names))
+        unknown = sorted(set(options) - set(self.option_names), key=str)
         if unknown:
             raise ValueError(f"unknown reset option(s) {unknown}; valid options: {list(self.option_names)}")
+        self._check_options(options, seeded=seed is not None)
+        super().reset(seed=seed)
         self._restore_initial_state()
         self._seeded_reset = seed is not None
         observation, info = self._reset_episode(options)
@@ -177,6 +204,7 @@ class DvrkEnv(gym.Env, Generic[ConfigT]):
         return observation, info
 
     def step(self, action: Any) -> tuple[Any, float, bool, bool, dict[str, Any]]:
+        self._refuse_if_closed("step")
         if self._needs_reset:
             raise ResetNeeded("call reset() before step(): the episode has not started or has ended")
         clipped, clamped = check_action(action, self.action_space, self.action_names)
@@ -186,6 +214,7 @@ class DvrkEnv(gym.Env, Generic[ConfigT]):
         return observation, reward, terminated, truncated, info
 
     def render(self) -> np.ndarray | list[Any] | None:
+        self._refuse_if_closed("render")
         if self.render_mode == "rgb_array":
             return self._render_frame()
         return None  # "human": the PyBullet GUI shows the world live; None: nothing to draw
@@ -202,7 +231,14 @@ class DvrkEnv(gym.Env, Generic[ConfigT]):
             display.close()
         if hasattr(self, "world"):
             self.world.close()
+        self._closed = True
         super().close()
+
+    def _refuse_if_closed(self, call: str) -> None:
+        if getattr(self, "_closed", False):
+            raise ClosedEnvironmentError(
+                f"{type(self).__name__}.{call}(): the env is closed (its physics server is gone); make another env"
+            )
 
     # ------------------------------------------------------------------ what carries between episodes
     def carried_state(self) -> dict[str, Any]:
@@ -249,6 +285,7 @@ class DvrkEnv(gym.Env, Generic[ConfigT]):
             generator.bit_generator.state = state["np_random"]
         except (TypeError, ValueError, KeyError, OverflowError) as error:
             raise ValueError(f"carried 'np_random' is not a PCG64 generator's state ({error})") from None
+        self._check_carried_attributes(attributes)
         self.world.cable.set_state(cable)  # checks the shape and the values
         self.world.q_cmd = q_cmd
         self.np_random = generator
@@ -278,6 +315,24 @@ class DvrkEnv(gym.Env, Generic[ConfigT]):
         """Put the physics back as it was when the env was made (an env that rebuilds its
         world on reset overrides this)."""
         self.world.restore_physics(self._initial_physics_state)
+
+    def _check_options(self, options: dict[str, Any], seeded: bool) -> None:
+        """Check the reset options' values (their names are checked already) without changing
+        anything; ``seeded``: the reset was given a seed.
+
+        Raises:
+            ValueError: a bad option value.
+        """
+        if "relax" in options:
+            relax_option(options, seeded)
+
+    def _check_carried_attributes(self, attributes: dict[str, Any]) -> None:
+        """Check a carried state's :attr:`carried_attributes` before they are taken up (a
+        subclass with any overrides this).
+
+        Raises:
+            ValueError: an attribute value this env could not have carried.
+        """
 
     def _reset_episode(self, options: dict[str, Any]) -> tuple[Any, dict[str, Any]]:
         raise NotImplementedError

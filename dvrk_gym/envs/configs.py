@@ -9,6 +9,7 @@ imported (:mod:`dvrk_gym.envs`).
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 from dvrk_gym import paper
@@ -27,7 +28,8 @@ class EnvConfig:
     """Settings every environment shares.
 
     Attributes:
-        bias: cable bias, a preset name ("none", "paper", "severe") or a BiasConfig.
+        bias: cable bias, a preset name ("none", "paper", "severe"), a BiasConfig or a dict of
+            its fields (as ``dataclasses.asdict`` gives them).
         bias_seed: which instrument to draw from the bias distribution (fixed for the
             life of the env; episodes are seeded separately through ``reset(seed=...)``).
         camera_resolution: (width, height) of each endoscope image, pixels.
@@ -52,10 +54,17 @@ class EnvConfig:
     def __post_init__(self) -> None:
         # gym.make passes lists from JSON-like specs; the world wants a tuple.
         object.__setattr__(self, "camera_resolution", check_resolution("camera_resolution", self.camera_resolution))
+        if isinstance(self.bias, Mapping):  # a BiasConfig's fields, as dataclasses.asdict or a JSON file gives them
+            try:
+                object.__setattr__(self, "bias", BiasConfig(**self.bias))
+            except TypeError as error:
+                raise ValueError(f"bias given as a dict must hold BiasConfig's fields ({error})") from None
         if isinstance(self.bias, str):
             check_choice("bias", self.bias, sorted(BIAS_PRESETS))
         elif not isinstance(self.bias, BiasConfig):
-            raise ValueError(f"bias must be one of {sorted(BIAS_PRESETS)} or a BiasConfig, got {self.bias!r}")
+            raise ValueError(
+                f"bias must be one of {sorted(BIAS_PRESETS)}, a BiasConfig or a dict of its fields, got {type(self.bias).__name__}"
+            )
         check_int_fields(type(self).__name__, self, {"bias_seed": (0, 2**31 - 1)})
         check_float_fields(type(self).__name__, self, {"pixel_noise_px": (0.0, MAX_PIXEL_NOISE_PX, False)})
         if self.render_resolution is not None:

@@ -150,13 +150,16 @@ class CalibrationExplorationEnv(DvrkEnv[ExplorationConfig]):
         self.observation_space = spaces.Dict({**reported_observation_space(), **marker_observation_space(width, height)})
         self._steps = 0
 
+    def _check_options(self, options: dict[str, Any], seeded: bool) -> None:
+        corner = options.get("corner")
+        if corner is not None and (
+            isinstance(corner, (bool, np.bool_)) or not isinstance(corner, (int, np.integer)) or corner not in (0, 1, 2, 3)
+        ):
+            raise ValueError(f"option 'corner' must be an int 0, 1, 2 or 3, got {corner!r}")
+
     def _reset_episode(self, options: dict[str, Any]) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
         corner = options.get("corner")
-        if corner is None:
-            corner = int(self.np_random.integers(4))
-        elif isinstance(corner, (bool, np.bool_)) or not isinstance(corner, (int, np.integer)) or corner not in (0, 1, 2, 3):
-            raise ValueError(f"option 'corner' must be an int 0, 1, 2 or 3, got {corner!r}")
-        corner = int(corner)
+        corner = int(self.np_random.integers(4)) if corner is None else int(corner)
         start = kin.pose_from_euler(workspace_corners()[corner], *home_orientation())
         self.world.reset_robot(ik.inverse_kinematics(start))
         self._steps = 0

@@ -74,6 +74,12 @@ def _check_yaw_option(yaw: Any) -> float | str:
     return value
 
 
+def _check_circle(circle: Any, what: str) -> int:
+    if isinstance(circle, (bool, np.bool_)) or not isinstance(circle, (int, np.integer)) or not 0 <= circle < N_CIRCLES:
+        raise ValueError(f"{what} must be an int in [0, {N_CIRCLES - 1}], got {circle!r}")
+    return int(circle)
+
+
 def _clip_camera(position: np.ndarray) -> np.ndarray:
     return np.clip(position, CAMERA_BOX_LOW_M, CAMERA_BOX_HIGH_M).astype(np.float32)
 
@@ -176,20 +182,35 @@ class GridTouchEnv(DvrkEnv[GridTouchConfig]):
         self._yaw = 0.0
         self._achieved = np.zeros(3)
         self._touched = False  # whether the arm touched the paper since the last reset
+        try:
+            self.world.observe_grid()  # the goals: a resolution that loses a circle is refused now, not at its episode
+        except ValueError:
+            self.close()
+            raise
 
     # ------------------------------------------------------------------ episode
-    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
-        if seed is not None:
-            self._next_circle = TOUR[0]
-        return super().reset(seed=seed, options=options)
+    def _check_options(self, options: dict[str, Any], seeded: bool) -> None:
+        super()._check_options(options, seeded)
+        if "yaw" in options:
+            _check_yaw_option(options["yaw"])
+        if "circle" in options:
+            _check_circle(options["circle"], "option 'circle'")
+
+    def _check_carried_attributes(self, attributes: dict[str, Any]) -> None:
+        _check_circle(attributes["_next_circle"], "carried '_next_circle'")
+        try:
+            _check_yaw_option(attributes["_yaw_setting"])
+        except ValueError as error:
+            raise ValueError(f"carried '_yaw_setting': {error}") from None
+        if not isinstance(attributes["_touched"], bool):
+            raise ValueError(f"carried '_touched' must be True or False, got {attributes['_touched']!r}")
 
     def _reset_episode(self, options: dict[str, Any]) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+        if self._seeded_reset:
+            self._next_circle = TOUR[0]  # a seed starts the tour again
         if "yaw" in options:
             self._yaw_setting = _check_yaw_option(options["yaw"])
-        circle = options.get("circle", self._next_circle)
-        if isinstance(circle, bool) or not isinstance(circle, (int, np.integer)) or not 0 <= circle < N_CIRCLES:
-            raise ValueError(f"option 'circle' must be an int in [0, {N_CIRCLES - 1}], got {circle!r}")
-        self._circle = int(circle)
+        self._circle = int(options.get("circle", self._next_circle))
         self._next_circle = _NEXT_IN_TOUR[self._circle]
         if self._yaw_setting == "random":
             self._yaw = float(self.np_random.uniform(-np.pi / 2, np.pi / 2))

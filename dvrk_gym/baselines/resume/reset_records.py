@@ -65,6 +65,9 @@ def restore_stack_state(env: gym.Env, layers: Any) -> None:
         expected = set(getattr(type(layer), "carried_attributes", ()))
         if not isinstance(state, dict) or set(state) != expected:
             raise ValueError(f"{type(layer).__name__} carries {sorted(expected)}, the record holds {state!r}")
+        check = getattr(layer, "_check_carried_attributes", None)
+        if check is not None:
+            check(state)  # before any is set
         for name, value in state.items():
             setattr(layer, name, value)
 
