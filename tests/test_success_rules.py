@@ -72,14 +72,14 @@ def test_grid_touch_threshold_is_the_configured_one(make_env):
 def test_grid_touch_reward_units_and_signs():
     from dvrk_gym.envs.grid_touch import GridTouchEnv
 
-    env = GridTouchEnv(reward_type="sparse", distance_threshold_m=0.002, camera_resolution=(64, 36))
+    env = GridTouchEnv(reward_type="sparse", distance_threshold_m=0.002, camera_resolution=(320, 180))
     try:
         desired = np.zeros(3)
         near, far = np.array([0.0019, 0, 0]), np.array([0.0021, 0, 0])
         assert env.compute_reward(near, desired, {}) == 0.0 and env.compute_reward(far, desired, {}) == -1.0
     finally:
         env.close()
-    dense = GridTouchEnv(camera_resolution=(64, 36))
+    dense = GridTouchEnv(camera_resolution=(320, 180))
     try:
         assert dense.compute_reward(np.array([0.003, 0.004, 0.0]), np.zeros(3), {}) == pytest.approx(-5.0)  # -5 mm
         assert dense.compute_reward(np.zeros(3), np.zeros(3), {}) == 0.0

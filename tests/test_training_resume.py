@@ -144,6 +144,10 @@ def _edit_json(path, edit) -> None:
         (lambda s: s["envs"][0]["layers"].pop(), "stack"),
         (lambda s: s["rng"].update(numpy=[1, 2]), "TrainingStateError|ValueError|values to unpack"),
         (lambda s: s["progress"]["curve"].update(marks=[1]), "later marks"),
+        (lambda s: s["progress"]["curve"]["points"][0].update(mm_error="x"), "mm_error must be a real number"),
+        (lambda s: s["progress"]["curve"]["points"][0].update(env_steps=-1), "env_steps"),
+        (lambda s: s["progress"].update(wall_seconds=float("nan")), "wall_seconds"),
+        (lambda s: s["progress"]["curve"].update(eval_seconds=-1.0), "eval_seconds"),
     ],
 )
 def test_a_tampered_state_json_is_refused_naming_the_file(saved_state, edit, message):

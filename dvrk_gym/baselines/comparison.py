@@ -20,7 +20,6 @@ success, outcomes A/B/C and time per fragment.
 
 from __future__ import annotations
 
-import json
 import logging
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -41,6 +40,7 @@ from dvrk_gym.calibration.policy import CalibratedPolicy
 from dvrk_gym.envs.debridement import fragment_target
 from dvrk_gym.evaluation.trials import Trial, run_debridement, totals
 from dvrk_gym.sim.table.contact import DEFAULT_CONTACT
+from dvrk_gym.utils.atomic import read_json
 from dvrk_gym.utils.checks import check_resolution
 
 logger = logging.getLogger(__name__)
@@ -103,22 +103,27 @@ def calibration_rows(folder: Path) -> tuple[list[ComparisonRow], PipelineConfig]
 
     Raises:
         FileNotFoundError: the folder has no ``calibration_table.json``.
+        ValueError: the table is not one ``dvrk-gym evaluate`` writes (damaged or edited; the
+            message names it).
     """
     folder = Path(folder)
     table_path = folder / "calibration_table.json"
     if not table_path.exists():
         raise FileNotFoundError(f"{table_path} not found: run 'dvrk-gym evaluate --out {folder}' first")
-    table = json.loads(table_path.read_text())
-    summary = table["summary"]
-    protocol = table.get("protocol") or "raw"  # a table written before the protocol was recorded sent its predictions raw
+    table = read_json(table_path)
     config = _pipeline_config(folder)
     moves = calibrator_moves(config)
     rows = []
-    for method, stats in summary.items():
-        every = stats["all settings"]
-        rows.append(
-            ComparisonRow(method, moves.get(method, -1), every["mm"]["mean"], every["pixel"]["mean"], f"{table_path} (protocol {protocol})")
-        )
+    try:
+        protocol = table.get("protocol") or "raw"  # a table written before the protocol was recorded sent its predictions raw
+        for method, stats in table["summary"].items():
+            every = stats["all settings"]
+            mm, px = every["mm"]["mean"], every["pixel"]["mean"]
+            if not all(isinstance(value, (int, float)) and not isinstance(value, bool) for value in (mm, px)):
+                raise TypeError(f"{method}'s means are {mm!r} mm and {px!r} px")
+            rows.append(ComparisonRow(str(method), moves.get(method, -1), float(mm), float(px), f"{table_path} (protocol {protocol})"))
+    except (KeyError, TypeError, AttributeError) as error:
+        raise ValueError(f"{table_path} is not a calibration table 'dvrk-gym evaluate' writes ({type(error).__name__}: {error})") from None
     return rows, config
 
 

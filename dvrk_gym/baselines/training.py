@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -35,7 +36,7 @@ from dvrk_gym.calibration.benchmark import YAW_SETTINGS
 from dvrk_gym.envs.grid_touch import N_CIRCLES, TOUR
 from dvrk_gym.evaluation.episodes import run_episodes
 from dvrk_gym.evaluation.trials import run_trials, totals
-from dvrk_gym.utils.checks import check_choice, check_int_fields, check_resolution
+from dvrk_gym.utils.checks import check_choice, check_float, check_int, check_int_fields, check_resolution
 from dvrk_gym.utils.torch_threads import torch_threads
 
 logger = logging.getLogger(__name__)
@@ -154,11 +155,21 @@ class CurvePoint:
 
         Raises:
             TypeError: ``value`` is not a dict of this class's fields.
+            ValueError: a field is not a number of its kind (a non-negative int of env
+                steps; real errors and rate, null for NaN; a finite, non-negative time or null).
         """
         if not isinstance(value, dict):
             raise TypeError(f"a curve point must be a dict, got {value!r}")
         fields: dict[str, Any] = {key: float("nan") if item is None and key in cls.NAN_FIELDS else item for key, item in value.items()}
-        return cls(**fields)
+        point = cls(**fields)
+        check_int("a curve point's env_steps", point.env_steps, 0)
+        for name in cls.NAN_FIELDS:
+            item = getattr(point, name)
+            if isinstance(item, bool) or not isinstance(item, (int, float)) or math.isinf(item):
+                raise ValueError(f"a curve point's {name} must be a real number or null, got {item!r}")
+        if point.time_per_fragment_s is not None:
+            check_float("a curve point's time_per_fragment_s", point.time_per_fragment_s, 0.0)
+        return point
 
 
 @dataclass
@@ -275,8 +286,8 @@ class LearningCurve(BaseCallback):
             raise ValueError("a learning curve's record holds 'points', 'marks' and 'eval_seconds'")
         try:
             points = [CurvePoint.from_json(point) for point in record["points"]]
-            marks = [int(mark) for mark in record["marks"]]
-            eval_seconds = float(record["eval_seconds"])
+            marks = [check_int("a mark", mark, 0) for mark in record["marks"]]
+            eval_seconds = check_float("eval_seconds", record["eval_seconds"], 0.0)
         except (TypeError, ValueError) as error:
             raise ValueError(f"a learning curve's record is malformed ({error})") from None
         if not points or any(mark <= env_steps for mark in marks):
@@ -363,7 +374,7 @@ def _resume(state_path: Path, model: BaseAlgorithm, curve: LearningCurve, config
         if not 0 < model.num_timesteps < config.steps:
             raise ValueError(f"it was saved at {model.num_timesteps} env steps, outside the run's (0, {config.steps})")
         curve.restore(record.get("curve"), model.num_timesteps)
-        wall_seconds = float(record["wall_seconds"])
+        wall_seconds = check_float("wall_seconds", record["wall_seconds"], 0.0)
     except (KeyError, TypeError, ValueError) as error:
         raise TrainingStateError(f"{state_path}: not a training state these settings can resume ({error})") from None
     logger.info("resuming %s at %d of %d env steps from %s", config.agent, model.num_timesteps, config.steps, state_path)

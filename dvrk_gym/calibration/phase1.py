@@ -148,6 +148,16 @@ class Phase1Data(ArrayRecord):
     camera_position: np.ndarray
     trajectory: np.ndarray
     kept: np.ndarray
+    ROW_LAYOUT = {
+        "reported_position": ((3,), "f"),
+        "orientation": ((3,), "f"),
+        "left_px": ((2,), "f"),
+        "right_px": ((2,), "f"),
+        "areas_px": ((2,), "f"),
+        "camera_position": ((3,), "f"),
+        "trajectory": ((), "iu"),
+        "kept": ((), "b"),
+    }
 
     @property
     def n_raw(self) -> int:

@@ -37,6 +37,13 @@ class Phase2Data(ArrayRecord):
     commanded: np.ndarray
     corrected: np.ndarray
     circle: np.ndarray
+    ROW_LAYOUT = {
+        "camera_position": ((3,), "f"),
+        "orientation": ((3,), "f"),
+        "commanded": ((3,), "f"),
+        "corrected": ((3,), "f"),
+        "circle": ((), "iu"),
+    }
 
     @property
     def X(self) -> np.ndarray:

@@ -11,7 +11,7 @@ import io
 import math
 from dataclasses import fields
 from os import PathLike
-from typing import Any, TypeVar, cast
+from typing import Any, ClassVar, TypeVar, cast
 
 import numpy as np
 
@@ -72,7 +72,17 @@ def read_npz_arrays(path: str | PathLike) -> dict[str, np.ndarray]:
 
 
 class ArrayRecord:
-    """Mixin for a frozen dataclass whose fields are all numpy arrays of equal length."""
+    """Mixin for a frozen dataclass whose fields are all numpy arrays of equal length.
+
+    A subclass states each field's row shape and kind in :attr:`ROW_LAYOUT`, which
+    :meth:`load` checks: a file whose arrays are of other shapes, kinds or lengths is refused
+    before any of it is used (an index array of floats, or one row short, would otherwise
+    fail far from the file, or pick the wrong rows silently).
+    """
+
+    ROW_LAYOUT: ClassVar[dict[str, tuple[tuple[int, ...], str]]] = {}
+    """Field -> (the shape of one row, e.g. ``(3,)`` or ``()``; the numpy dtype kinds allowed,
+    e.g. ``"f"`` floats, ``"iu"`` ints, ``"b"`` bools)."""
 
     def save(self, path: str | PathLike) -> None:
         """Write every field to an ``.npz`` file at exactly ``path`` (no suffix added), atomically."""
@@ -89,4 +99,14 @@ class ArrayRecord:
             raise ValueError(f"{path} is not a readable {cls.__name__} file: {error}") from None
         if set(data) != names:
             raise ValueError(f"{path} is not {cls.__name__} data: arrays {sorted(data)}, expected {sorted(names)}")
+        rows = {len(array) if array.ndim else -1 for array in data.values()}
+        for name, (row_shape, kinds) in cls.ROW_LAYOUT.items():
+            array = data[name]
+            if array.ndim != 1 + len(row_shape) or array.shape[1:] != row_shape or array.dtype.kind not in kinds:
+                raise ValueError(
+                    f"{path}: array {name!r} is {array.dtype}{list(array.shape)}; {cls.__name__} wants "
+                    f"(N, {', '.join(map(str, row_shape))}) of dtype kind {kinds!r}".replace(", )", ")")
+                )
+        if len(rows) != 1:
+            raise ValueError(f"{path}: {cls.__name__}'s arrays must have one row per sample, got lengths {sorted(rows)}")
         return cls(**{name: data[name] for name in names})

@@ -17,6 +17,7 @@ from pathlib import Path
 from dvrk_gym import paper
 from dvrk_gym.cli.options import add_instrument_options, add_progress_option, writable_folder
 from dvrk_gym.sim.table.contact import CONTACTS, DEFAULT_CONTACT
+from dvrk_gym.utils.checks import check_int
 
 
 def _run_debride(args: argparse.Namespace) -> int:
@@ -41,7 +42,8 @@ def _run_debride(args: argparse.Namespace) -> int:
         )
     writable_folder(args.out)
     calibrator, settings = load_calibrator(args.calibration, args.calibrator, args.bias, args.bias_seed)
-    bias, bias_seed = settings.get("bias", args.bias), int(settings.get("bias_seed", args.bias_seed))
+    bias = settings.get("bias", args.bias)
+    bias_seed = check_int(f"the bias_seed in {args.calibration}'s settings", settings.get("bias_seed", args.bias_seed), 0, 2**31 - 1)
     policy = CalibratedPolicy(calibrator, target=fragment_target)
     world = {"bias": bias, "bias_seed": bias_seed, "camera_resolution": tuple(args.resolution)}
     trials = run_debridement(policy, args.trials, args.seed, args.fragment, **world, progress=not args.no_progress, contact=args.contact)

@@ -6,13 +6,14 @@ import argparse
 from pathlib import Path
 
 from dvrk_gym import paper
-from dvrk_gym.cli.options import add_instrument_options, add_progress_option
+from dvrk_gym.cli.options import add_instrument_options, add_progress_option, writable_folder
 
 
 def _run_fidelity(args: argparse.Namespace) -> int:
     from dvrk_gym.fidelity.comparison import run_fidelity
     from dvrk_gym.fidelity.report import format_table, write_report
 
+    writable_folder(args.out)  # before the collection: a folder that cannot hold the report is found now
     run = run_fidelity(
         bias=args.bias,
         bias_seed=args.bias_seed,

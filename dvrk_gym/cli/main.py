@@ -48,7 +48,7 @@ def _one_line(error: BaseException, args: argparse.Namespace) -> str:
 
     def flag(match: re.Match[str]) -> str:
         field = match.group(1)
-        return f"--{field.replace('_', '-')}" if getattr(args, field, None) is not None else match.group(0)
+        return f"--{field.replace('_', '-')}" if not field.startswith("_") and getattr(args, field, None) is not None else match.group(0)
 
     return _CONFIG_FIELD.sub(flag, text)
 

@@ -10,15 +10,21 @@ import tempfile
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from dvrk_gym.utils.checks import check_int, check_resolution
+from dvrk_gym.utils.checks import check_float, check_int, check_resolution
 
 if TYPE_CHECKING:
     from dvrk_gym.parallel.executors import Executor
 
 
+MAX_CONNECT_TIMEOUT_S = 3600.0
+"""The longest ``--connect-timeout``, seconds."""
+MAX_TRIALS = 100_000
+"""The most ``--trials`` of any command (the paper ran 15 per cell; a trial takes seconds)."""
+
+
 def check_common_options(args: argparse.Namespace) -> None:
     """Check ``--seed``, ``--bias-seed``, ``--trajectories`` (Phase I's), ``--epochs`` (the
-    DNN's) and ``--resolution`` by their flags' names, for every command that has them, before
+    DNN's), ``--resolution``, ``--connect-timeout`` and ``--trials`` by their flags' names, for every command that has them, before
     the command runs (a config deeper down would name its own field, and a negative seed would
     fail only where numpy first draws from it).
 
@@ -38,6 +44,10 @@ def check_common_options(args: argparse.Namespace) -> None:
         check_int("--epochs", args.epochs, 1, MAX_EPOCHS)
     if getattr(args, "resolution", None) is not None:
         check_resolution("--resolution", args.resolution)
+    if getattr(args, "connect_timeout", None) is not None:
+        check_float("--connect-timeout", args.connect_timeout, 0.0, MAX_CONNECT_TIMEOUT_S, low_open=True, unit="s")
+    if getattr(args, "trials", None) is not None:
+        check_int("--trials", args.trials, 1, MAX_TRIALS)
 
 
 def add_instrument_options(parser: argparse.ArgumentParser, resolution: bool = True, note: str = "") -> None:

@@ -3,20 +3,22 @@
 from __future__ import annotations
 
 import dataclasses
-import json
 import os
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 from dvrk_gym import paper
 from dvrk_gym.baselines.budgets import AGENT_ENVS, GRID_TOUCH_ID
 from dvrk_gym.calibration.phase1 import MAX_STEPS_PER_TRAJECTORY, MAX_TRAJECTORIES
+from dvrk_gym.utils.atomic import read_json
 from dvrk_gym.utils.checks import check_choice, check_int, check_resolution
 
 SEARCHES = ("paper", "quick")
 _MAX_COUNT = 10**7
 """An upper bound on every count of a profile (trajectories, epochs, trials, steps...)."""
+
+MAX_PROFILE_BYTES = 2**20
+"""The largest profile file read, bytes (a profile is a few lines of JSON)."""
 
 
 @dataclass(frozen=True)
@@ -95,7 +97,7 @@ class Profile:
     def from_file(cls, path: str | os.PathLike) -> Profile:
         """A profile from a JSON file of its fields (see :meth:`from_dict`); errors name the file."""
         try:
-            return cls.from_dict(json.loads(Path(path).read_text()))
+            return cls.from_dict(read_json(path, max_bytes=MAX_PROFILE_BYTES))
         except ValueError as error:
             raise ValueError(f"profile {path}: {error}") from None
 

@@ -20,6 +20,11 @@ METHOD_NAMES = {"rbt": "RBT", "dnn": "DNN", "dnn+rf": "DNN+RF"}
 """Each calibrator's name in the calibration table (and in :mod:`dvrk_gym.paper`)."""
 
 
+MAX_UNITS = 10_000
+"""The most units one sweep runs (each a whole calibration: minutes on a core, so 10,000 is
+weeks of a machine), checked before the grid is built."""
+
+
 @dataclass(frozen=True)
 class Unit:
     """One calibration run of a sweep: an instrument and a seed.
@@ -64,6 +69,11 @@ class SweepSettings:
             object.__setattr__(self, field, _as_ints(getattr(self, field), field))
         _check_seeds(self.bias_seeds, "bias_seeds")
         _check_seeds(self.seeds, "seeds")
+        if len(self.bias_seeds) * len(self.seeds) > MAX_UNITS:
+            raise ValueError(
+                f"{len(self.bias_seeds):,} instruments x {len(self.seeds):,} seeds is {len(self.bias_seeds) * len(self.seeds):,} units; "
+                f"a sweep runs at most {MAX_UNITS:,} (each a calibration of minutes): split it into several sweeps"
+            )
         if not self.calibrators:
             raise ValueError(f"calibrators is empty; expected some of {list(CALIBRATORS)}")
         unknown = [name for name in self.calibrators if name not in CALIBRATORS]
@@ -140,6 +150,8 @@ def parse_int_list(text: str, option: str) -> tuple[int, ...]:
             raise ValueError(f"{option} {text!r}: {part.strip()!r} is not a number or a range; expected e.g. '0-4' or '0,3,7-9'") from None
         if last < first:
             raise ValueError(f"{option} {text!r}: the range {part.strip()!r} is empty; write it low-high, e.g. '{last}-{first}'")
+        if len(values) + last - first + 1 > MAX_UNITS:  # before the list is made: '0-100000000000' would fill the memory
+            raise ValueError(f"{option} {text!r} lists more than {MAX_UNITS:,} numbers; a sweep runs at most {MAX_UNITS:,} units")
         values.extend(range(first, last + 1))
     _check_unique(tuple(values), option)
     return tuple(values)

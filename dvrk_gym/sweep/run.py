@@ -23,7 +23,7 @@ from tqdm.auto import tqdm
 from dvrk_gym.calibration.pipeline import PipelineConfig
 from dvrk_gym.parallel.executors import Executor
 from dvrk_gym.sweep.grid import CALIBRATORS, SweepSettings, Unit
-from dvrk_gym.sweep.table import plot_errors, sweep_rows, write_csv
+from dvrk_gym.sweep.table import plot_errors, sweep_rows, unit_rows, write_csv
 from dvrk_gym.sweep.unit import run_unit
 from dvrk_gym.utils.run_folder import RunFolder
 
@@ -75,12 +75,16 @@ def _load_unit(folder: RunFolder, unit: Unit) -> dict[str, Any] | None:
     if result is None:
         return None
     try:
-        complete = result["config"] == {"bias_seed": unit.bias_seed, "seed": unit.seed} and set(result["calibrators"]) >= set(CALIBRATORS)
-    except (KeyError, TypeError) as error:
-        complete = False
-        logger.warning("%s is not a unit's result (%s)", folder.file(_unit_file(unit.name)), error)
-    if not complete:
-        logger.warning("%s holds another unit or misses calibrators: running the unit again", folder.file(_unit_file(unit.name)))
+        if result["config"] != {"bias_seed": unit.bias_seed, "seed": unit.seed}:
+            raise ValueError(f"it holds unit {result['config']!r}")
+        unit_rows(unit.bias_seed, unit.seed, result, CALIBRATORS)  # every number the table reads, checked
+    except (KeyError, TypeError, ValueError) as error:
+        logger.warning(
+            "%s is not this unit's whole result (%s: %s): running the unit again",
+            folder.file(_unit_file(unit.name)),
+            type(error).__name__,
+            error,
+        )
         return None
     return result
 

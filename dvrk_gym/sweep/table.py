@@ -53,18 +53,32 @@ def sweep_rows(settings: SweepSettings, results: Mapping[str, Mapping[str, Any]]
     rows = []
     for unit in settings.units():
         result = results.get(unit.name)
-        if result is None:
-            continue
-        for name in settings.calibrators:
-            errors = result["calibrators"][name]
-            per_setting = errors["settings"]
-            row: dict[str, Any] = {"bias_seed": unit.bias_seed, "seed": unit.seed, "calibrator": name}
-            row.update({key: errors[key] for key in ("mean_mm", "sem_mm", "mean_px", "sem_px")})
-            row.update({f"mm_{key}": per_setting[label]["mean_mm"] for label, key in SETTING_KEYS.items()})
-            row.update({f"px_{key}": per_setting[label]["mean_px"] for label, key in SETTING_KEYS.items()})
-            row.update({"phase1_raw": result["phase1"]["raw"], "phase1_kept": result["phase1"]["kept"]})
-            row.update({"benchmark_s": errors["benchmark_s"], "unit_wall_s": result["wall_s"]})
-            rows.append(row)
+        if result is not None:
+            rows.extend(unit_rows(unit.bias_seed, unit.seed, result, settings.calibrators))
+    return rows
+
+
+def unit_rows(bias_seed: int, seed: int, result: Mapping[str, Any], calibrators: Sequence[str]) -> list[dict[str, Any]]:
+    """One unit's rows of the table, one per calibrator, every number in them checked.
+
+    Raises:
+        KeyError, TypeError: ``result`` lacks a number the table reads.
+        ValueError: a number is not a finite real one (a unit file edited or damaged).
+    """
+    rows = []
+    for name in calibrators:
+        errors = result["calibrators"][name]
+        per_setting = errors["settings"]
+        row: dict[str, Any] = {"bias_seed": bias_seed, "seed": seed, "calibrator": name}
+        row.update({key: errors[key] for key in ("mean_mm", "sem_mm", "mean_px", "sem_px")})
+        row.update({f"mm_{key}": per_setting[label]["mean_mm"] for label, key in SETTING_KEYS.items()})
+        row.update({f"px_{key}": per_setting[label]["mean_px"] for label, key in SETTING_KEYS.items()})
+        row.update({"phase1_raw": result["phase1"]["raw"], "phase1_kept": result["phase1"]["kept"]})
+        row.update({"benchmark_s": errors["benchmark_s"], "unit_wall_s": result["wall_s"]})
+        for column, value in row.items():
+            if column != "calibrator" and (isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value)):
+                raise ValueError(f"{name}'s {column} is {value!r}, not a finite number")
+        rows.append(row)
     return rows
 
 

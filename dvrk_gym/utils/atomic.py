@@ -1,4 +1,4 @@
-"""One way to write a file: all of it or none of it.
+"""One way to write a file: all of it or none of it (and JSON read back within bounds).
 
 Every file the package writes goes through here. The bytes go to a temporary file in the
 same folder (``.<stem>.<random>.partial<suffix>``: the target's suffix is kept, so writers
@@ -9,6 +9,10 @@ so that the rename survives a power cut. A kill at any moment leaves the old fil
 new one, never a half-written one; a temporary file left by a kill is removed by
 :func:`remove_partial_files` (a :class:`~dvrk_gym.utils.run_folder.RunFolder` does so when
 it is opened).
+
+:func:`read_json` is the other way: a JSON file that may come from elsewhere (edited,
+damaged, a device such as ``/dev/zero``, or far too large), read only when it is a regular
+file of at most ``max_bytes``, with every failure a ``ValueError`` naming the file.
 """
 
 from __future__ import annotations
@@ -95,6 +99,35 @@ def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> Path:
 def atomic_write_text(path: str | os.PathLike, text: str, encoding: str = "utf-8") -> Path:
     """Write ``text`` to ``path``, all or nothing; returns the path."""
     return atomic_write_bytes(path, text.encode(encoding))
+
+
+MAX_JSON_BYTES = 16 * 2**20
+"""The largest JSON file :func:`read_json` reads by default, bytes (the package's settings,
+stamps, tables and results are kilobytes to a few megabytes)."""
+
+
+def read_json(path: str | os.PathLike, max_bytes: int = MAX_JSON_BYTES) -> Any:
+    """The JSON value in ``path``, read only if it is a regular file of at most ``max_bytes``.
+
+    Raises:
+        FileNotFoundError: there is no such file.
+        ValueError: not a regular file, too large, not UTF-8, not JSON, or nested too deeply;
+            the message names the file.
+    """
+    path = Path(path)
+    status = path.stat()  # FileNotFoundError names the file
+    if not path.is_file():
+        raise ValueError(f"{path} is not a regular file")
+    if status.st_size > max_bytes:
+        raise ValueError(f"{path}: {status.st_size:,} bytes; a JSON file read here has at most {max_bytes:,}")
+    with path.open("rb") as file:
+        data = file.read(max_bytes + 1)  # the size again: the file may have grown since
+    if len(data) > max_bytes:
+        raise ValueError(f"{path}: more than {max_bytes:,} bytes; a JSON file read here has at most {max_bytes:,}")
+    try:
+        return json.loads(data.decode("utf-8"))
+    except (ValueError, RecursionError) as error:  # UnicodeDecodeError and JSONDecodeError are ValueErrors
+        raise ValueError(f"{path} is not valid JSON ({type(error).__name__}: {error})") from None
 
 
 def atomic_write_json(path: str | os.PathLike, value: Any, **dumps_options: Any) -> Path:

@@ -35,7 +35,7 @@ from typing import Any, TypeVar
 
 from filelock import FileLock, Timeout
 
-from dvrk_gym.utils.atomic import atomic_path, atomic_write_json, remove_partial_files
+from dvrk_gym.utils.atomic import atomic_path, atomic_write_json, read_json, remove_partial_files
 from dvrk_gym.utils.source_fingerprint import SourceFingerprint, source_fingerprint
 
 logger = logging.getLogger(__name__)
@@ -84,7 +84,7 @@ def _read_stamp(path: Path) -> dict[str, Any] | None:
     if not path.exists():
         return None
     try:
-        stamp = json.loads(path.read_text())
+        stamp = read_json(path)
     except (ValueError, OSError) as error:
         raise ValueError(f"{path} is unreadable ({error}); delete it, or the folder, to start the run again") from None
     if not isinstance(stamp, dict):
@@ -309,7 +309,7 @@ class RunFolder:
 
     def read_json(self, name: str) -> Any:
         """A JSON result of the folder; None when it is missing or unreadable (see :meth:`load`)."""
-        return self.load(name, lambda path: json.loads(path.read_text()))
+        return self.load(name, read_json)
 
     def write_json(self, name: str, value: Any) -> Path:
         """Write a JSON result into the folder (indented, atomically); returns its path."""

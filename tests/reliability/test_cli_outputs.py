@@ -182,6 +182,12 @@ REFUSED_BEFORE_ANY_WORK = [
     (["fidelity", "--trajectories", "0"], "--trajectories"),
     (["fidelity", "--seed", "-1"], "--seed"),
     (["debride", "--calibrate", "--seed", "-1"], "--seed"),
+    (["sweep", "--scheduler", "tcp://127.0.0.1:1", "--connect-timeout", "nan"], "--connect-timeout"),
+    (["reproduce", "--scheduler", "tcp://127.0.0.1:1", "--connect-timeout", "-1"], "--connect-timeout"),
+    (["reproduce", "--scheduler", "tcp://127.0.0.1:1", "--connect-timeout", "1e7"], "--connect-timeout"),
+    (["debride", "--calibrate", "--trials", "1000000000"], "--trials"),
+    (["sweep", "--bias-seeds", "0-100000000000"], "at most 10,000"),
+    (["sweep", "--bias-seeds", "0-999", "--seeds", "0-99"], "100,000 units"),
 ]
 
 

@@ -226,7 +226,7 @@ def _agent_files(folder: Path, members: dict[str, bytes], **settings) -> Path:
 
     values = {
         "format": FORMAT,
-        "config": TrainConfig(agent="sac", steps=10, camera_resolution=(64, 36)).to_dict(),
+        "config": TrainConfig(agent="sac", steps=10, camera_resolution=(320, 180)).to_dict(),
         "policy_kwargs": {"net_arch": [8, 8], "use_sde": False},
         "goal_scaling": {"center_m": list(GOAL_CENTER_M), "half_range_m": GOAL_HALF_RANGE_M},
         "env_steps": 10,
