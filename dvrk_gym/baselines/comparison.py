@@ -138,7 +138,7 @@ def _pipeline_config(folder: Path) -> PipelineConfig:
     if settings is None:
         logger.warning("%s has no settings: assuming the paper's budgets and default settings", folder)
         return PipelineConfig()
-    return PipelineConfig.from_settings(settings)
+    return PipelineConfig.from_settings(settings, source=f"the settings of {folder}")
 
 
 def agent_contact(config: TrainConfig) -> str:

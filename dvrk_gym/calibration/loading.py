@@ -60,6 +60,6 @@ def load_calibrator(folder: str | os.PathLike, name: str, bias: str = "paper", b
         raise ModelFileError(retired_format_message(retired))
     if not path.exists():
         logger.warning("%s has no %s: running the calibration pipeline there (cached stages)", folder, path.name)
-        run_calibration(folder, PipelineConfig.from_settings(settings), benchmark=False)
+        run_calibration(folder, PipelineConfig.from_settings(settings, source=f"the settings of {folder}"), benchmark=False)
         settings = read_pipeline_settings(folder) or settings
     return CALIBRATOR_LOADERS[name].load(path), settings

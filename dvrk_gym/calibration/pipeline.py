@@ -91,10 +91,21 @@ class PipelineConfig:
         return {"bias": self.bias, "bias_seed": self.bias_seed, "camera_resolution": tuple(self.camera_resolution)}
 
     @classmethod
-    def from_settings(cls, settings: dict[str, Any]) -> PipelineConfig:
-        """The config of a run folder's stamp (JSON: the resolution comes back as a list)."""
-        values: dict[str, Any] = {key: (tuple(value) if key == "camera_resolution" else value) for key, value in settings.items()}
-        return cls(**values)
+    def from_settings(cls, settings: dict[str, Any], source: str = "the settings") -> PipelineConfig:
+        """The config of a run folder's stamp (JSON: the resolution comes back as a list).
+
+        Args:
+            settings: the stamp's settings.
+            source: where they came from, for errors (the stamp file's path).
+
+        Raises:
+            ValueError: they are not a config's fields and values (the message names ``source``).
+        """
+        try:
+            values: dict[str, Any] = {key: (tuple(value) if key == "camera_resolution" else value) for key, value in settings.items()}
+            return cls(**values)
+        except (TypeError, ValueError, AttributeError) as error:
+            raise ValueError(f"{source} are not a calibration's settings ({error})") from None
 
 
 def read_pipeline_settings(folder: str | os.PathLike) -> dict[str, Any] | None:

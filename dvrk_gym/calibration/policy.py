@@ -31,10 +31,21 @@ def grid_touch_target(observation: dict[str, np.ndarray]) -> Target:
 
 
 def calibrator_input(camera_position: np.ndarray, yaw_rad: float, round_yaw: bool = True) -> np.ndarray:
-    """The (1, 6) calibrator input for a camera-frame point and a yaw (rounded if asked)."""
+    """The (1, 6) calibrator input for a camera-frame point (m) and a yaw (rad; rounded to the
+    nearest of the paper's five if asked).
+
+    Raises:
+        ValueError: the point is not three finite real numbers, or the yaw not a finite real
+            number (a NaN yaw would otherwise round to -90 degrees, silently).
+    """
+    point = np.asarray(camera_position)
+    if point.shape != (3,) or point.dtype.kind not in "fiu" or not np.isfinite(point).all():
+        raise ValueError(f"the camera-frame target must be 3 finite real numbers (m), got {camera_position!r}")
+    if isinstance(yaw_rad, (bool, np.bool_)) or not isinstance(yaw_rad, (int, float, np.integer, np.floating)) or not np.isfinite(yaw_rad):
+        raise ValueError(f"the target's yaw must be a finite real number (rad), got {yaw_rad!r}")
     yaw = float(kin.nearest_paper_yaw(yaw_rad)) if round_yaw else float(yaw_rad)
     pitch, roll = kin.paper_pitch_roll(yaw)
-    return np.array([[*np.asarray(camera_position, dtype=float), yaw, float(pitch), float(roll)]])
+    return np.array([[*point.astype(float), yaw, float(pitch), float(roll)]])
 
 
 class CalibratedPolicy:

@@ -182,11 +182,17 @@ class GridTouchEnv(DvrkEnv[GridTouchConfig]):
         self._yaw = 0.0
         self._achieved = np.zeros(3)
         self._touched = False  # whether the arm touched the paper since the last reset
-        try:
-            self.world.observe_grid()  # the goals: a resolution that loses a circle is refused now, not at its episode
-        except ValueError:
+        # The goals are the circles as the endoscope sees them: a resolution that loses one
+        # (160 x 96 loses circle 33, whose goal would be NaN) is refused now, not at its episode.
+        missed = [i for i, seen in enumerate(self.world.observe_grid()) if not np.isfinite(seen.camera_position).all()]
+        if missed:
             self.close()
-            raise
+            width, height = self.config.camera_resolution
+            raise ValueError(
+                f"at a camera_resolution of {width} x {height} px the endoscope does not find printed circle(s) {missed} "
+                "in both images, and GridTouch-v0's goals are those circles; use another resolution "
+                "(320 x 180 and the default 1920 x 1080 find all 35)"
+            )
 
     # ------------------------------------------------------------------ episode
     def _check_options(self, options: dict[str, Any], seeded: bool) -> None:

@@ -7,7 +7,9 @@ makes all three of the paper's calibrators, so the unit of work is (instrument, 
 
 from __future__ import annotations
 
+import collections
 import dataclasses
+import itertools
 import operator
 from dataclasses import dataclass
 from typing import Any
@@ -101,14 +103,20 @@ class SweepSettings:
 
 
 def _check_unique(values: tuple[Any, ...], name: str) -> None:
-    repeated = sorted({value for value in values if values.count(value) > 1}, key=str)
+    counts = collections.Counter(values)  # one pass, not quadratic
+    repeated = sorted((value for value, count in counts.items() if count > 1), key=str)
     if repeated:
         raise ValueError(f"{name} repeats {repeated}; give each once")
 
 
 def _as_ints(values: Any, name: str) -> tuple[int, ...]:
-    """Integers (numpy's too) as a tuple of ``int``."""
-    values = list(values)
+    """Integers (numpy's too) as a tuple of ``int``; at most :data:`MAX_UNITS` of them."""
+    try:
+        values = list(itertools.islice(values, MAX_UNITS + 1))  # a huge range is not listed whole
+    except TypeError:
+        raise ValueError(f"{name} is {values!r}; expected non-negative integers") from None
+    if len(values) > MAX_UNITS:
+        raise ValueError(f"{name} has more than {MAX_UNITS:,} values; a sweep runs at most {MAX_UNITS:,} units")
     try:
         if any(isinstance(value, bool) for value in values):
             raise TypeError(name)

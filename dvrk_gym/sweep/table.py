@@ -7,6 +7,7 @@ wall times (``benchmark_s``, ``unit_wall_s``) is the same wherever the units ran
 from __future__ import annotations
 
 import csv
+import io
 import os
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -17,6 +18,7 @@ import numpy as np
 from dvrk_gym import paper
 from dvrk_gym.calibration.benchmark import YAW_SETTINGS
 from dvrk_gym.sweep.grid import METHOD_NAMES, SweepSettings
+from dvrk_gym.utils.atomic import atomic_savefig, atomic_write_text
 
 SETTING_KEYS = {label: label.replace(" ", "") for label, _ in YAW_SETTINGS}
 """Each of the paper's six settings as a column suffix: ``yaw-90`` ... ``yaw90``, ``random``."""
@@ -85,11 +87,11 @@ def unit_rows(bias_seed: int, seed: int, result: Mapping[str, Any], calibrators:
 def write_csv(rows: Sequence[Mapping[str, Any]], path: str | os.PathLike) -> Path:
     """Write the rows as CSV with a header of :data:`COLUMNS` (floats in full precision)."""
     path = Path(path)
-    with path.open("w", newline="") as file:
-        writer = csv.DictWriter(file, fieldnames=COLUMNS)
-        writer.writeheader()
-        writer.writerows(rows)
-    return path
+    text = io.StringIO()
+    writer = csv.DictWriter(text, fieldnames=COLUMNS)  # the whole table first: a bad row leaves the old file as it was
+    writer.writeheader()
+    writer.writerows(rows)
+    return atomic_write_text(path, text.getvalue())
 
 
 def format_rows(rows: Sequence[Mapping[str, Any]]) -> str:
@@ -157,6 +159,8 @@ def plot_errors(rows: Sequence[Mapping[str, Any]], path: str | os.PathLike) -> P
     ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.0, 1.0))
     fig.tight_layout()
     path = Path(path)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    try:
+        atomic_savefig(fig, path, dpi=110)
+    finally:
+        plt.close(fig)
     return path

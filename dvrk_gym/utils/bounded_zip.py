@@ -74,6 +74,8 @@ def _check_declared_sizes(name: str, members: list[zipfile.ZipInfo], limits: Arc
     if len(members) > limits.max_members:
         raise ArchiveLimitError(f"{name}: {len(members):,} members; at most {limits.max_members:,} are read")
     for member in members:
+        if member.flag_bits & 0x1:  # zipfile would ask for a password (RuntimeError) when it is read
+            raise ArchiveLimitError(f"{name}: member {member.filename!r} is marked encrypted; the package writes no encrypted members")
         if member.file_size > limits.max_member_bytes:
             raise ArchiveLimitError(
                 f"{name}: member {member.filename!r} inflates to {member.file_size:,} bytes "
@@ -102,7 +104,7 @@ def read_member(archive: zipfile.ZipFile, name: str, limits: ArchiveLimits = Arc
                 if total > allowed:
                     raise ArchiveLimitError(f"{source}: member {name!r} inflates beyond its declared {info.file_size:,} bytes")
                 chunks.append(chunk)
-    except (zipfile.BadZipFile, OSError, EOFError, NotImplementedError, ValueError) as error:
+    except (zipfile.BadZipFile, OSError, EOFError, NotImplementedError, ValueError, RuntimeError) as error:
         if isinstance(error, ArchiveLimitError):
             raise
         raise ArchiveLimitError(f"{source}: member {name!r} is corrupt ({type(error).__name__}: {error})") from None

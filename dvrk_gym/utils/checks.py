@@ -51,7 +51,10 @@ def check_float(
     allowed += f" {unit}" if unit else ""
     if isinstance(value, bool) or not isinstance(value, numbers.Real):
         raise ValueError(f"{name} must be {allowed}, got {_shown(value)}")
-    number = float(value)
+    try:
+        number = float(value)
+    except OverflowError:  # an int beyond any float (10**400)
+        raise ValueError(f"{name} must be {allowed}, got a number too large for a float") from None
     too_low = low is not None and (number <= low if low_open else number < low)
     if not math.isfinite(number) or too_low or (high is not None and number > high):
         raise ValueError(f"{name} must be {allowed}, got {number}")

@@ -159,8 +159,11 @@ class DNNCalibrator(SavableModel):
         self.x_scale_ = np.where(spread > 0.0, spread, 1.0)
         self.y_mean_ = y.mean(axis=0)
         # One scale for all three outputs keeps the loss an (isotropic) squared L2 distance.
-        output_spread = float(np.sqrt(np.mean((y - self.y_mean_) ** 2)))
+        with np.errstate(over="ignore"):  # an overflow is refused just below, by name
+            output_spread = float(np.sqrt(np.mean((y - self.y_mean_) ** 2)))
         self.y_scale_ = np.full(_OUTPUTS, output_spread if output_spread > 0.0 else 1.0)
+        if not (np.isfinite(self.x_scale_).all() and np.isfinite(self.y_scale_).all()):
+            raise ValueError("the inputs or targets spread beyond what a float holds; expected metres and radians")
         inputs = torch.from_numpy(((features - self.x_mean_) / self.x_scale_).astype(np.float32))
         targets = torch.from_numpy(((y - self.y_mean_) / self.y_scale_).astype(np.float32))
         generator = torch.Generator().manual_seed(self.seed)
@@ -207,12 +210,20 @@ class DNNCalibrator(SavableModel):
         if self.network_ is None:
             raise ValueError("DNNCalibrator.predict called before fit")
         features = encode_euler(check_inputs(X))
-        inputs = torch.from_numpy(((features - self.x_mean_) / self.x_scale_).astype(np.float32))
+        with np.errstate(over="ignore"):  # a row beyond float32 gives no finite prediction, refused below by its index
+            inputs = torch.from_numpy(((features - self.x_mean_) / self.x_scale_).astype(np.float32))
         # One thread: a row's product changes in its last bits with the count, and on 2 threads one
         # row took 203 us against 54 (entering and leaving the pin: 1-2 us).
         with torch_threads(1), torch.inference_mode():
             outputs = self.network_(inputs).numpy().astype(np.float64)
-        return outputs * self.y_scale_ + self.y_mean_
+        predictions = outputs * self.y_scale_ + self.y_mean_
+        if not np.isfinite(predictions).all():
+            row = int(np.argwhere(~np.isfinite(predictions))[0, 0])
+            raise ValueError(
+                f"X row {row} ({check_inputs(X)[row].tolist()}) gives no finite prediction: its features overflow the "
+                "network's float32 range; expected metres and radians near the training data's"
+            )
+        return predictions
 
     def _layer_names(self) -> list[str]:
         return [f"layer{i}" for i in range(self.hidden_layers + 1)]
@@ -246,8 +257,9 @@ class DNNCalibrator(SavableModel):
             require_array(arrays, f"{name}_bias", (fan_out,), np.float32)
         x_scale = require_array(arrays, "x_scale", (_INPUT_FEATURES,), np.float64)
         y_scale = require_array(arrays, "y_scale", (_OUTPUTS,), np.float64)
-        if np.any(x_scale <= 0.0) or np.any(y_scale <= 0.0):
-            raise ValueError("x_scale and y_scale must be positive")
+        smallest = np.finfo(np.float64).tiny  # a subnormal scale (1e-320) divides every input to inf
+        if not (np.all(x_scale >= smallest) and np.all(y_scale >= smallest)):
+            raise ValueError(f"x_scale and y_scale must be positive normal floats (at least {smallest:g})")
         network = _build_network(self.hidden_layers, self.units, self.activation)
         state = {}
         for index, name in enumerate(names):

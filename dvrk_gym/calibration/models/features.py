@@ -59,12 +59,16 @@ def check_inputs(X: object, name: str = "X", columns: int = 6) -> np.ndarray:
         The array as float64, shape (N, columns).
 
     Raises:
-        ValueError: If it is not numeric, not 2-D with ``columns`` columns, empty or not finite.
+        ValueError: If it does not hold real numbers (complex, bool, text, objects), is not
+            2-D with ``columns`` columns, is empty or not finite.
     """
     try:
-        array = np.asarray(X, dtype=np.float64)
+        raw = np.asarray(X)
     except (TypeError, ValueError) as error:
         raise ValueError(f"{name} is not a numeric array: {error}") from None
+    if raw.dtype.kind not in "fiu":  # complex (its imaginary part dropped), bools, text and objects are not coerced
+        raise ValueError(f"{name} must hold real numbers, got dtype {raw.dtype}")
+    array = raw.astype(np.float64)
     if array.ndim != 2 or array.shape[1] != columns:
         raise ValueError(f"{name} has shape {array.shape}; expected (N, {columns})")
     if array.shape[0] == 0:

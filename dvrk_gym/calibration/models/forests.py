@@ -299,7 +299,12 @@ class ResidualForests(SavableModel):
     def _from_params(cls, params: Mapping[str, Any]) -> ResidualForests:
         model = cls(trees=params["trees"], max_depth=params["max_depth"], seed=params["seed"])
         groups = params["groups"]
-        if not isinstance(groups, list) or not set(groups) <= set(range(len(PAPER_YAWS_RAD))) or len(set(groups)) != len(groups):
+        if (
+            not isinstance(groups, list)
+            or not all(isinstance(g, int) and not isinstance(g, bool) for g in groups)  # 1.0 == 1 would pass the set test
+            or not set(groups) <= set(range(len(PAPER_YAWS_RAD)))
+            or len(set(groups)) != len(groups)
+        ):
             raise ValueError(f"groups {groups!r}; expected a list of distinct indices 0..4")
         return model
 

@@ -78,10 +78,6 @@ def observe_printed_grid(
     Returns:
         35 detections in grid order. Their arrays are read-only: they may be shared by
         every world with the same key.
-
-    Raises:
-        ValueError: the endoscope does not find every circle in both images and triangulate
-            it (some small resolutions blur a circle away; the error names them).
     """
     key = None if scene_key is None else (_camera_key(camera), scene_key)
     if key is not None:
@@ -89,26 +85,13 @@ def observe_printed_grid(
             cached = _CACHE.get(key)
             if cached is not None:
                 _CACHE.move_to_end(key)
-                return _every_circle_seen(cached, camera)
+                return cached
     detections = tuple(_read_only(d) for d in detect_printed_grid(camera, *render_both()))
     if key is not None:
         with _LOCK:
             _CACHE[key] = detections
             while len(_CACHE) > CACHE_SIZE:
                 _CACHE.popitem(last=False)
-    return _every_circle_seen(detections, camera)
-
-
-def _every_circle_seen(detections: tuple[StereoDetection, ...], camera: StereoCamera) -> tuple[StereoDetection, ...]:
-    """``detections``, once every circle has a finite triangulated position (the goals and
-    the calibration's targets are these positions: a NaN one would pass on silently)."""
-    missed = [i for i, detection in enumerate(detections) if not np.isfinite(detection.camera_position).all()]
-    if missed:
-        k = camera.intrinsics
-        raise ValueError(
-            f"at a camera_resolution of {k.width} x {k.height} px the endoscope does not find printed circle(s) {missed} "
-            "in both images; use another resolution (320 x 180 and the default 1920 x 1080 find all 35)"
-        )
     return detections
 
 

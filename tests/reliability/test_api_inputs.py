@@ -1,0 +1,123 @@
+"""The library's own functions given nonsense (from a review's probes): each refused with a
+ValueError naming what is wrong, never a silent NaN, a silent coercion or a raw traceback."""
+
+import csv
+import io
+import zipfile
+
+import numpy as np
+import pytest
+
+from dvrk_gym.calibration.models.dnn import DNNCalibrator
+from dvrk_gym.calibration.models.features import check_inputs
+from dvrk_gym.calibration.models.forests import ResidualForests
+from dvrk_gym.calibration.models.rigid import RigidBodyCalibrator
+from dvrk_gym.calibration.pipeline import PipelineConfig
+from dvrk_gym.calibration.policy import CalibratedPolicy, calibrator_input
+from dvrk_gym.sweep.grid import SweepSettings
+from dvrk_gym.sweep.table import COLUMNS, write_csv
+from dvrk_gym.utils.bounded_zip import ArchiveLimitError, open_archive, read_member
+from dvrk_gym.utils.checks import check_float
+
+
+def _rows(n: int = 40, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    rng = np.random.default_rng(seed)
+    X = np.hstack([rng.uniform(-0.03, 0.03, (n, 3)) + [0.0, 0.0, 0.18], np.zeros((n, 1)), rng.uniform(-0.1, 0.1, (n, 2))])
+    return X, X[:, :3] * [1.0, -1.0, -1.0] + [0.05, 0.05, 0.05]
+
+
+def _encrypted_flag(data: bytes) -> bytes:
+    """The zip with every member marked encrypted in the central directory (one bit each)."""
+    array = bytearray(data)
+    start = 0
+    while (found := array.find(b"PK\x01\x02", start)) != -1:
+        array[found + 8] |= 0x1
+        start = found + 4
+    return bytes(array)
+
+
+def test_a_member_marked_encrypted_is_refused_naming_it(tmp_path):
+    buffer = io.BytesIO()
+    with zipfile.ZipFile(buffer, "w") as archive:
+        archive.writestr("params.json", "{}")
+    path = tmp_path / "model.zip"
+    path.write_bytes(_encrypted_flag(buffer.getvalue()))
+    with pytest.raises(ArchiveLimitError, match="'params.json' is marked encrypted"):
+        open_archive(path)
+    rbt = tmp_path / "rbt.zip"
+    RigidBodyCalibrator().fit(*_rows()).save(rbt)
+    rbt.write_bytes(_encrypted_flag(rbt.read_bytes()))
+    with pytest.raises(ValueError, match="marked encrypted"):
+        RigidBodyCalibrator.load(rbt)
+    with zipfile.ZipFile(buffer) as archive:  # the read itself, past an archive opened some other way
+        archive.infolist()[0].flag_bits |= 0x1
+        with pytest.raises(ArchiveLimitError, match="corrupt"):
+            read_member(archive, "params.json")
+
+
+@pytest.mark.parametrize(
+    ("point", "yaw"),
+    [([0.0, 0.0, 0.18], np.nan), ([0.0, 0.0, 0.18], np.inf), ([0.0, np.nan, 0.18], 0.0), ([0.0, 0.18], 0.0), (["0", "0", "0.18"], 0.0)],
+)
+def test_a_target_that_is_not_finite_is_refused_not_rounded_to_a_yaw(point, yaw):
+    with pytest.raises(ValueError, match="finite"):
+        calibrator_input(point, yaw)
+
+
+def test_the_policy_refuses_an_observation_with_a_nan_yaw():
+    policy = CalibratedPolicy(RigidBodyCalibrator().fit(*_rows()))
+    observation = {"desired_goal": np.array([0.0, 0.0, 0.18], np.float32), "observation": np.array([0.0, 0.0, np.nan], np.float32)}
+    with pytest.raises(ValueError, match="yaw must be a finite real number"):
+        policy(observation)
+
+
+@pytest.mark.parametrize("groups", [[0.0, 1.0], [True], [0, 0], [5], "01"])
+def test_residual_forest_groups_must_be_distinct_indices(groups):
+    with pytest.raises(ValueError, match="groups"):
+        ResidualForests._from_params({"trees": 2, "max_depth": None, "seed": 0, "groups": groups})
+
+
+@pytest.mark.parametrize(("X", "dtype"), [(_rows()[0] + 0j, "complex128"), (_rows()[0] > 0, "bool"), (_rows()[0].astype(str), "<U")])
+def test_model_inputs_of_other_kinds_are_not_coerced(X, dtype):
+    with pytest.raises(ValueError, match=f"X must hold real numbers, got dtype {dtype}"):
+        check_inputs(X)
+    with pytest.raises(ValueError, match="real numbers"):
+        RigidBodyCalibrator().fit(X, _rows()[1])
+
+
+def test_the_dnn_refuses_what_overflows_it_instead_of_predicting_nan():
+    X, y = _rows()
+    with pytest.raises(ValueError, match="spread beyond what a float holds"):
+        DNNCalibrator(epochs=1, progress=False).fit(X, y * 1e300)
+    dnn = DNNCalibrator(epochs=1, progress=False).fit(X, y)
+    far = X[:1].copy()
+    far[0, 0] = 1e300
+    with pytest.raises(ValueError, match="X row 0 .* gives no finite prediction"):
+        dnn.predict(far)
+    assert np.isfinite(dnn.predict(X)).all()
+
+
+def test_a_huge_int_is_refused_as_a_float_clearly():
+    with pytest.raises(ValueError, match="x must be a finite number in \\[-1, 1\\], got a number too large for a float"):
+        check_float("x", 10**400, -1, 1)
+
+
+@pytest.mark.parametrize("seeds", [range(40_000), range(3 * 10**9), 5])
+def test_sweep_settings_refuse_a_huge_or_odd_grid_at_once(seeds):
+    with pytest.raises(ValueError, match="bias_seeds"):
+        SweepSettings(bias_seeds=seeds)
+
+
+def test_a_sweep_table_with_a_bad_row_leaves_the_old_one(tmp_path):
+    row = dict.fromkeys(COLUMNS, 1)
+    path = write_csv([row, row], tmp_path / "sweep.csv")
+    before = path.read_bytes()
+    with pytest.raises(ValueError):
+        write_csv([row, {**row, "extra": 1}], path)
+    assert path.read_bytes() == before and len(list(csv.reader(io.StringIO(before.decode())))) == 3
+
+
+@pytest.mark.parametrize("settings", [{"foo": 1}, {"camera_resolution": 5}, {"epochs": -1}])
+def test_bad_calibration_settings_name_where_they_came_from(settings):
+    with pytest.raises(ValueError, match="runs/cal/pipeline_config.json are not a calibration's settings"):
+        PipelineConfig.from_settings(settings, source="runs/cal/pipeline_config.json")
