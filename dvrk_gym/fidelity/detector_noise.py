@@ -82,7 +82,15 @@ def _noise(t: np.ndarray) -> DetectionNoise:
 
 
 def fit_detector_noise(counts: np.ndarray) -> DetectionNoise:
-    """Maximum-likelihood detector noise for a histogram of row differences (:func:`histogram`)."""
+    """Maximum-likelihood detector noise for a histogram of row differences (:func:`histogram`).
+
+    Raises:
+        ValueError: ``counts`` is not a 1-D array of finite, non-negative counts with at least
+            one row (an empty histogram would "fit" at the optimiser's starting point).
+    """
+    counts = np.asarray(counts)
+    if counts.ndim != 1 or counts.dtype.kind not in "fiu" or not np.isfinite(counts).all() or (counts < 0).any() or counts.sum() <= 0:
+        raise ValueError(f"counts must be a 1-D histogram of finite, non-negative counts holding some rows, got {counts!r}")
 
     def negative_log_likelihood(t: np.ndarray) -> float:
         return float(-np.sum(counts * np.log(row_difference_probabilities(_noise(t)) + 1e-300)))

@@ -46,6 +46,7 @@ from dvrk_gym.fidelity.statistics import fidelity_statistics
 from dvrk_gym.sim.endoscope.camera import WORKSPACE_CENTER_M
 from dvrk_gym.sim.endoscope.noise import IDENTIFIED_MARKER_NOISE, DetectionNoise
 from dvrk_gym.sim.robot.bias import BIAS_PRESETS
+from dvrk_gym.utils.checks import check_int
 
 __all__ = [
     "TRAIN_FRACTION",
@@ -115,6 +116,7 @@ class InstrumentFit:
 
 def split(n_rows: int, train_fraction: float = TRAIN_FRACTION) -> tuple[np.ndarray, np.ndarray]:
     """Training and held-out row indices: the first train_fraction of the rows, and the rest."""
+    n_rows = check_int("n_rows", n_rows, 0)
     if not 0.0 < train_fraction < 1.0:
         raise ValueError(f"train_fraction = {train_fraction}; expected a value in (0, 1)")
     cut = int(round(train_fraction * n_rows))

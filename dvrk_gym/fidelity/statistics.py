@@ -58,6 +58,7 @@ from dvrk_gym.calibration.models.features import PAPER_YAWS_RAD, check_inputs, c
 from dvrk_gym.calibration.models.rigid import RigidBodyCalibrator
 from dvrk_gym.calibration.models.two_phase import Regressor
 from dvrk_gym.calibration.search import cross_validate
+from dvrk_gym.utils.checks import check_int
 
 __all__ = [
     "CV_FOLDS",
@@ -274,6 +275,7 @@ def fidelity_statistics(
         ValueError: on bad shapes, non-finite values, units that are not metres and
             radians, fewer rows than ``folds``, or no consecutive pair for the jitter.
     """
+    folds = check_int("folds", folds, 2, 1000)
     X = check_inputs(X)
     y = check_targets(y, X.shape[0])
     _check_units(X, y)

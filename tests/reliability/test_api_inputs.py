@@ -121,3 +121,33 @@ def test_a_sweep_table_with_a_bad_row_leaves_the_old_one(tmp_path):
 def test_bad_calibration_settings_name_where_they_came_from(settings):
     with pytest.raises(ValueError, match="runs/cal/pipeline_config.json are not a calibration's settings"):
         PipelineConfig.from_settings(settings, source="runs/cal/pipeline_config.json")
+
+
+@pytest.mark.parametrize("counts", [np.zeros(11), np.full(11, np.nan), -np.ones(11), np.ones((2, 11))])
+def test_the_detector_noise_fit_refuses_a_histogram_it_cannot_fit(counts):
+    from dvrk_gym.fidelity.detector_noise import fit_detector_noise
+
+    with pytest.raises(ValueError, match="counts must be a 1-D histogram"):
+        fit_detector_noise(counts)
+
+
+def test_fidelity_helpers_name_their_bad_counts():
+    from dvrk_gym.fidelity.identify import split
+    from dvrk_gym.fidelity.statistics import fidelity_statistics
+
+    with pytest.raises(ValueError, match="n_rows"):
+        split(10.6)
+    X, y = _rows()
+    with pytest.raises(ValueError, match="folds"):
+        fidelity_statistics(X, y, folds="10")
+
+
+@pytest.mark.parametrize(
+    ("kind", "params"), [("linear", {"angles": "euler", "extra": 1}), ("forest", {"trees": 2, "max_depth": None, "seed": 0, "x": 1})]
+)
+def test_model_parameters_with_an_unknown_entry_are_refused(kind, params):
+    from dvrk_gym.calibration.models.forests import ForestCalibrator
+    from dvrk_gym.calibration.models.linear import LinearCalibrator
+
+    with pytest.raises(ValueError, match="unexpected \\['(extra|x)'\\]"):
+        {"linear": LinearCalibrator, "forest": ForestCalibrator}[kind]._from_params(params)

@@ -203,6 +203,7 @@ class ForestCalibrator(SavableModel):
 
     @classmethod
     def _from_params(cls, params: Mapping[str, Any]) -> ForestCalibrator:
+        require_names(params, {"trees", "max_depth", "seed"}, "parameters")
         return cls(trees=params["trees"], max_depth=params["max_depth"], seed=params["seed"])
 
     def _load_parts(self, parts: ModelParts) -> None:
@@ -297,6 +298,7 @@ class ResidualForests(SavableModel):
 
     @classmethod
     def _from_params(cls, params: Mapping[str, Any]) -> ResidualForests:
+        require_names(params, {"trees", "max_depth", "seed", "groups"}, "parameters")
         model = cls(trees=params["trees"], max_depth=params["max_depth"], seed=params["seed"])
         groups = params["groups"]
         if (

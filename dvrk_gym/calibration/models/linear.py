@@ -73,6 +73,7 @@ class LinearCalibrator(SavableModel):
 
     @classmethod
     def _from_params(cls, params: Mapping[str, Any]) -> LinearCalibrator:
+        require_names(params, {"angles"}, "parameters")
         return cls(angles=params["angles"])
 
     def _load_parts(self, parts: ModelParts) -> None:
