@@ -35,6 +35,7 @@ from dvrk_gym.envs.exploration import (
     workspace_corners,
 )
 from dvrk_gym.sim.robot.bias import BiasConfig
+from dvrk_gym.utils.checks import check_float, check_int
 
 MAX_TRAJECTORIES = 10_000
 MAX_STEPS_PER_TRAJECTORY = 10_000
@@ -68,10 +69,8 @@ class PaperExplorationPolicy:
     def __init__(
         self, seed: int | None = None, step_m: float = paper.PHASE1_STEP_M, rotations_per_pause: int = paper.PHASE1_ROTATIONS_PER_PAUSE
     ) -> None:
-        if not step_m > 0:
-            raise ValueError(f"step_m must be > 0, got {step_m}")
-        if rotations_per_pause < 1:
-            raise ValueError(f"rotations_per_pause must be >= 1, got {rotations_per_pause}")
+        check_float("step_m", step_m, 0.0, 1.0, low_open=True, unit="m")  # not 0, not inf: the pauses must come
+        check_int("rotations_per_pause", rotations_per_pause, 1, 1000)  # 2.7 was truncated to 2
         self.rng = np.random.default_rng(seed)
         self.step_m = float(step_m)
         self.rotations_per_pause = int(rotations_per_pause)

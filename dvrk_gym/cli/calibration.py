@@ -236,6 +236,6 @@ def add_commands(subparsers: argparse._SubParsersAction) -> None:
         "(default: contiguous for --data paper, shuffled for a file)",
     )
     search.add_argument("--seed", type=int, default=0, help="seeds the models, and shuffled folds (default: %(default)s)")
-    search.add_argument("--quick", action="store_true", help="a few models, few epochs, 3 folds")
+    search.add_argument("--quick", action="store_true", help="a few models, few epochs, at most 3 folds (it caps --folds)")
     add_progress_option(search)
     search.set_defaults(func=_run_search)

@@ -53,6 +53,8 @@ def open_archive(source: str | os.PathLike | bytes, limits: ArchiveLimits = Arch
         name, size, opened = "archive in memory", len(source), io.BytesIO(source)
     else:
         path = Path(source)
+        if path.exists() and not path.is_file():
+            raise ArchiveLimitError(f"{path} is {'a folder' if path.is_dir() else 'not a regular file'}, not a zip archive")
         if not path.is_file():
             raise FileNotFoundError(f"{path}: no such file")
         name, size, opened = str(path), path.stat().st_size, path

@@ -151,3 +151,21 @@ def test_model_parameters_with_an_unknown_entry_are_refused(kind, params):
 
     with pytest.raises(ValueError, match="unexpected \\['(extra|x)'\\]"):
         {"linear": LinearCalibrator, "forest": ForestCalibrator}[kind]._from_params(params)
+
+
+@pytest.mark.parametrize(
+    ("keywords", "name"), [({"step_m": np.inf}, "step_m"), ({"step_m": 0.0}, "step_m"), ({"rotations_per_pause": 2.7}, "rotations")]
+)
+def test_the_exploration_policy_refuses_steps_it_cannot_take(keywords, name):
+    from dvrk_gym.calibration.phase1 import PaperExplorationPolicy
+
+    with pytest.raises(ValueError, match=name):
+        PaperExplorationPolicy(seed=0, **keywords)
+
+
+def test_a_folder_where_a_zip_should_be_is_named_as_a_folder(tmp_path):
+    (tmp_path / "rbt.zip").mkdir()
+    with pytest.raises(ArchiveLimitError, match="rbt.zip is a folder, not a zip archive"):
+        open_archive(tmp_path / "rbt.zip")
+    with pytest.raises(FileNotFoundError, match="no such file"):
+        open_archive(tmp_path / "absent.zip")
