@@ -12,6 +12,7 @@ import torch
 
 import dvrk_gym.baselines.checkpoints as checkpoints
 from dvrk_gym.baselines.checkpoints import finished_agent, settings_path
+from dvrk_gym.baselines.curves import load_curve
 from dvrk_gym.cli.baselines import TRAINING_STATE, add_commands
 from dvrk_gym.utils.source_fingerprint import SourceFingerprint, source_fingerprint
 
@@ -81,3 +82,15 @@ def test_a_damaged_or_unrecorded_agent_is_not_kept(finished, tmp_path):
     del settings["source"]  # saved before the source was recorded
     settings_path(out / "model.zip").write_text(json.dumps(settings))
     assert finished_agent(out / "model.zip", config) is None
+
+
+def test_a_model_without_its_curve_and_no_state_is_trained_again(finished, tmp_path, capsys):
+    """Killed between the model and its curve before any save: nothing to resume, and not finished."""
+    out = tmp_path / "cut"
+    out.mkdir()
+    for name in ("model.zip", "model.json"):
+        (out / name).write_bytes((finished / name).read_bytes())
+    args = _parse("--out", str(out))
+    assert args.func(args) == 0
+    assert "training again from the start" in capsys.readouterr().out
+    assert load_curve(out / "learning_curve.json") == load_curve(finished / "learning_curve.json")  # the same points (times vary)

@@ -36,7 +36,7 @@ from dvrk_gym.baselines.training import TrainConfig, TrainResult, make_agent_env
 from dvrk_gym.baselines.wrappers import GOAL_CENTER_M, GOAL_HALF_RANGE_M
 from dvrk_gym.envs import ENV_CONFIGS
 from dvrk_gym.sim.robot.bias import resolve_bias
-from dvrk_gym.utils.atomic import atomic_path, atomic_write_json
+from dvrk_gym.utils.atomic import atomic_path, atomic_write_json, read_json
 from dvrk_gym.utils.bounded_zip import ArchiveLimits, open_archive, read_member
 from dvrk_gym.utils.checks import check_bool, check_int
 from dvrk_gym.utils.source_fingerprint import SourceFingerprint, source_fingerprint
@@ -237,13 +237,10 @@ def _read_settings(path: Path) -> dict[str, Any]:
         raise FileNotFoundError(f"no model file {path}")
     if not json_path.exists():
         raise FileNotFoundError(f"{json_path} is missing: models are saved by 'dvrk-gym baseline train' as a .zip and a .json side by side")
-    size = json_path.stat().st_size
-    if size > MAX_SETTINGS_BYTES:
-        raise ValueError(f"{json_path}: {size:,} bytes; a settings file has at most {MAX_SETTINGS_BYTES:,}")
     try:
-        settings = json.loads(json_path.read_text())
-    except (ValueError, RecursionError) as error:
-        raise ValueError(f"{json_path} is not valid JSON ({error}); was it cut short? Train the agent again") from None
+        settings = read_json(json_path, max_bytes=MAX_SETTINGS_BYTES)  # a regular file of bounded size, or a ValueError naming it
+    except ValueError as error:
+        raise ValueError(f"{error}; was it cut short? Train the agent again") from None
     if not isinstance(settings, dict):
         raise ValueError(f"{json_path} holds {type(settings).__name__}, not a dvrk_gym baseline settings object")
     if settings.get("format") != FORMAT:

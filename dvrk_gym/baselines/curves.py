@@ -7,7 +7,6 @@ written as JSON null.
 
 from __future__ import annotations
 
-import json
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -15,7 +14,7 @@ from typing import Any
 from dvrk_gym import paper
 from dvrk_gym.baselines.budgets import CALIBRATOR_MOVES
 from dvrk_gym.baselines.training import CurvePoint
-from dvrk_gym.utils.atomic import atomic_savefig, atomic_write_json
+from dvrk_gym.utils.atomic import atomic_savefig, atomic_write_json, read_json
 
 CURVE_METRICS = ("mm_error", "success_rate")
 """What :func:`plot_curves` can draw: touch error or grip offset (mm), or success rate."""
@@ -31,7 +30,7 @@ def save_curve(points: Sequence[CurvePoint], path: Path, meta: dict[str, Any]) -
 
 def load_curve(path: Path) -> list[CurvePoint]:
     """Read the points written by :func:`save_curve` (null errors back to NaN)."""
-    rows = json.loads(Path(path).read_text())["points"]
+    rows = read_json(path)["points"]
     return [CurvePoint.from_json({**dict.fromkeys(CurvePoint.NAN_FIELDS), **row}) for row in rows]  # a missing error is NaN too
 
 

@@ -143,16 +143,16 @@ class TrainingYaws(gym.Wrapper):
             raise ValueError(f"carried '_episodes' must be a non-negative int, got {episodes!r}")
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
-        if seed is not None:
-            self._episodes = 0
+        episodes = 0 if seed is not None else self._episodes
         options = dict(options or {})
         if self.mode == "random":
             options.setdefault("yaw", "random")
         else:
-            tour = self._episodes // N_CIRCLES
+            tour = episodes // N_CIRCLES
             options.setdefault("yaw", float(PAPER_YAWS_RAD[tour % len(PAPER_YAWS_RAD)]))
-        self._episodes += 1
-        return self.env.reset(seed=seed, options=options)
+        result = self.env.reset(seed=seed, options=options)
+        self._episodes = episodes + 1  # after the env took the reset: a refused one leaves the schedule as it was
+        return result
 
     def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
         return self.env.step(action)

@@ -64,6 +64,9 @@ class PaperExplorationPolicy:
         step_m: distance between pauses, metres (the authors' collector: 2 mm).
         rotations_per_pause: random orientations commanded at each pause after the
             trajectory's own (the paper: 3).
+
+    Raises:
+        ValueError: ``step_m`` not in (0, 1] m, or ``rotations_per_pause`` not an int in [1, 1000].
     """
 
     def __init__(

@@ -96,7 +96,7 @@ class PipelineConfig:
 
         Args:
             settings: the stamp's settings.
-            source: where they came from, for errors (the stamp file's path).
+            source: where they came from, for errors (e.g. "the settings of runs/cal").
 
         Raises:
             ValueError: they are not a config's fields and values (the message names ``source``).

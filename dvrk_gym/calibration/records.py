@@ -91,7 +91,13 @@ class ArrayRecord:
 
     @classmethod
     def load(cls: type[_Record], path: str | PathLike) -> _Record:
-        """Read a file written by :meth:`save`; refuse files of another kind or with pickles."""
+        """Read a file written by :meth:`save`; refuse files of another kind or with pickles.
+
+        Raises:
+            ValueError: not a readable ``.npz`` of exactly this record's arrays, or an array of
+                another row shape, kind or length than :attr:`ROW_LAYOUT` says (the message
+                names the file and the array).
+        """
         names = {f.name for f in fields(cast(Any, cls))}
         try:
             data = read_npz_arrays(path)

@@ -19,6 +19,8 @@ TRAINING_STATE = "training_state.zip"
 """The file in a training's output folder that holds its state until its outputs are written
 (``dvrk_gym.baselines.resume.STATE_FILE_NAME``, which a test checks; repeated here so that
 ``--help`` does not import torch)."""
+OUTPUTS = ("model.zip", "model.json", "learning_curve.json", "learning_curve.png")
+"""What a finished training leaves in its folder (a folder holding them all is not trained again without ``--force``)."""
 DEFAULT_SAVE_EVERY = 500
 """``--save-every``'s default (``dvrk_gym.baselines.training.SAVE_EVERY``, which a test checks;
 repeated here so that ``--help`` does not import torch)."""
@@ -72,10 +74,12 @@ def _run_train(args: argparse.Namespace) -> int:
             state_path.unlink(missing_ok=True)  # train from the start: a saved state would be resumed
         elif state_path.exists():
             print(f"resuming the training saved in {state_path}")
-        elif (out / "model.zip").exists():
+        elif all((out / name).exists() for name in OUTPUTS):
             raise FileExistsError(
                 f"{out / 'model.zip'} exists: {out} holds a finished training; give --force to train again, or another --out"
             )
+        elif (out / "model.zip").exists():  # killed between its outputs before any save: the same training writes the same ones
+            print(f"{out} holds a model but not all of {', '.join(OUTPUTS)}, and no saved state: training again from the start")
         result = train(config, progress=not args.no_progress, state_path=state_path, save_every=save_every)
         model_path = save_agent(result, out / "model.zip")  # the model first: nothing after it can lose it
         label = f"{args.algo}, seed {args.seed}"

@@ -7,7 +7,8 @@ whose keyword arguments are that config's fields, written out (so ``help()``, ed
 and implements ``_reset_episode`` and ``_step_episode`` (and ``_check_options``, which
 checks its reset options before anything changes: a refused reset leaves the env as it
 was). The base owns the world, the action checks, seeding, state restoration and
-rendering, so no environment repeats them. A closed env refuses every call but ``close``.
+rendering, so no environment repeats them. A closed env refuses every call of this API
+(``reset``, ``step``, ``render``, ``carried_state``, ``restore_carried_state``) but ``close``.
 """
 
 from __future__ import annotations
@@ -252,6 +253,7 @@ class DvrkEnv(gym.Env, Generic[ConfigT]):
         :meth:`restore_carried_state` and reset with the same seed and options, starts the
         same episode bit for bit (a resumed training relies on it).
         """
+        self._refuse_if_closed("carried_state")
         world = self.world
         cable = world.cable.get_state()
         return {
@@ -267,6 +269,7 @@ class DvrkEnv(gym.Env, Generic[ConfigT]):
         Raises:
             ValueError: ``state`` is not one :meth:`carried_state` returns.
         """
+        self._refuse_if_closed("restore_carried_state")
         expected = {"np_random", "cable", "q_cmd", "attributes"}
         if not isinstance(state, dict) or set(state) != expected:
             raise ValueError(f"a carried state is a dict with keys {sorted(expected)}, got {_describe(state)}")

@@ -165,7 +165,12 @@ class GridTouchEnv(DvrkEnv[GridTouchConfig]):
         render_resolution: tuple[int, int] | None = None,
         renderer: str = "auto",
     ) -> None:
-        """GridTouch-v0, set up by the fields of :class:`GridTouchConfig` (listed below)."""
+        """GridTouch-v0, set up by the fields of :class:`GridTouchConfig` (listed below).
+
+        Raises:
+            ValueError: a bad field, or a ``camera_resolution`` at which the endoscope loses a
+                printed circle (its goal; the message names the circles).
+        """
         super().__init__(GridTouchConfig(**config_arguments(locals())), render_mode=render_mode)
         self.action_space = spaces.Box(ACTION_LOW.astype(np.float32), ACTION_HIGH.astype(np.float32), dtype=np.float32)
         goal = spaces.Box(CAMERA_BOX_LOW_M.astype(np.float32), CAMERA_BOX_HIGH_M.astype(np.float32), dtype=np.float32)

@@ -22,7 +22,6 @@ from __future__ import annotations
 import concurrent.futures as cf
 import contextlib
 import graphlib
-import json
 import logging
 import socket
 import time
@@ -35,6 +34,7 @@ from typing import Any
 from tqdm.auto import tqdm
 
 from dvrk_gym.parallel.executors import Executor, local_executor, outcome_of
+from dvrk_gym.utils.atomic import read_json
 from dvrk_gym.utils.run_folder import RunFolder
 from dvrk_gym.utils.torch_threads import torch_threads
 
@@ -88,7 +88,7 @@ def call_task(
 
 def _read_result(path: Path) -> dict[str, Any]:
     """A cached task result; ValueError unless it is a JSON object with the task's wall time."""
-    result = json.loads(path.read_text())
+    result = read_json(path)
     if not isinstance(result, dict) or not isinstance(result.get("wall_s"), (int, float)):
         raise ValueError("not a task result (a JSON object with its wall_s)")
     return result

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
-import json
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -30,7 +29,7 @@ from dvrk_gym.reproduce import tasks
 from dvrk_gym.reproduce.profiles import QUICK, Profile
 from dvrk_gym.reproduce.report import collect_results, write_figures, write_report
 from dvrk_gym.sim.robot.bias import resolve_bias
-from dvrk_gym.utils.atomic import atomic_write_bytes, atomic_write_json
+from dvrk_gym.utils.atomic import atomic_write_bytes, atomic_write_json, read_json
 from dvrk_gym.utils.checks import check_bool, check_int
 from dvrk_gym.utils.run_folder import RunFolder
 
@@ -228,7 +227,7 @@ def _reproduce(config: ReproduceConfig, folder: RunFolder, executor: Executor) -
 
 
 def _read_calls(path: Path) -> list[dict[str, Any]]:
-    calls = json.loads(path.read_text())
+    calls = read_json(path)
     if not isinstance(calls, list) or not all(isinstance(call, dict) and isinstance(call.get("wall_s"), (int, float)) for call in calls):
         raise ValueError("not a list of calls with their wall_s")
     return calls

@@ -58,6 +58,10 @@ class SweepSettings:
         pipeline: the budget and world every unit shares (Phase I trajectories and poses,
             DNN epochs, bias preset, camera resolution); its ``bias_seed`` and ``seed`` are
             replaced by each unit's.
+
+    Raises:
+        ValueError: seeds that are not distinct non-negative ints, more than
+            :data:`MAX_UNITS` units, or unknown or repeated calibrators.
     """
 
     bias_seeds: tuple[int, ...] = (0, 1, 2, 3, 4)
@@ -146,7 +150,8 @@ def parse_int_list(text: str, option: str) -> tuple[int, ...]:
         option: the option's name, for the error message.
 
     Raises:
-        ValueError: not such a list, an empty range (``"4-0"``) or a repeated number.
+        ValueError: not such a list, an empty range (``"4-0"``), a repeated number, or more
+            than :data:`MAX_UNITS` numbers (refused before they are listed).
     """
     values: list[int] = []
     for part in text.split(","):

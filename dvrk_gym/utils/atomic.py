@@ -12,7 +12,8 @@ it is opened).
 
 :func:`read_json` is the other way: a JSON file that may come from elsewhere (edited,
 damaged, a device such as ``/dev/zero``, or far too large), read only when it is a regular
-file of at most ``max_bytes``, with every failure a ``ValueError`` naming the file.
+file of at most ``max_bytes``; a file that is not so, or not JSON, is a ``ValueError`` naming
+it (a missing file a ``FileNotFoundError``, an unreadable one a ``PermissionError``).
 """
 
 from __future__ import annotations
@@ -111,6 +112,7 @@ def read_json(path: str | os.PathLike, max_bytes: int = MAX_JSON_BYTES) -> Any:
 
     Raises:
         FileNotFoundError: there is no such file.
+        PermissionError: it may not be read.
         ValueError: not a regular file, too large, not UTF-8, not JSON, or nested too deeply;
             the message names the file.
     """

@@ -169,3 +169,17 @@ def test_a_folder_where_a_zip_should_be_is_named_as_a_folder(tmp_path):
         open_archive(tmp_path / "rbt.zip")
     with pytest.raises(FileNotFoundError, match="no such file"):
         open_archive(tmp_path / "absent.zip")
+
+
+def test_a_refused_dnn_fit_leaves_the_fitted_model_as_it_was():
+    X, y = _rows()
+    dnn = DNNCalibrator(epochs=1, progress=False).fit(X, y)
+    before = dnn.predict(X)
+    with pytest.raises(ValueError, match="spread beyond"):
+        dnn.fit(X, y * 1e300)
+    assert np.array_equal(dnn.predict(X), before)
+
+
+def test_residual_forests_refuse_yaws_of_other_kinds():
+    with pytest.raises(ValueError, match="yaw must hold real numbers"):
+        ResidualForests._check(np.zeros((2, 3)), np.array([True, False]))

@@ -167,3 +167,23 @@ def test_ragged_or_long_actions_are_refused_in_one_short_line(made, action, mess
     with pytest.raises(ValueError, match=message) as refused:
         env.step(action)
     assert "\n" not in str(refused.value) and len(str(refused.value)) < 240
+
+
+def test_a_refused_reset_through_the_training_yaws_keeps_their_schedule(made):
+    refused, twin = TrainingYaws(made()), TrainingYaws(made())
+    for env in (refused, twin):
+        env.reset(seed=0)
+    with pytest.raises(ValueError, match="circle"):
+        refused.reset(options={"circle": 99})
+    assert refused._episodes == twin._episodes == 1
+
+
+def test_a_closed_env_refuses_its_carried_state_calls_too(made):
+    env = made()
+    env.reset(seed=0)
+    state = env.carried_state()
+    env.close()
+    with pytest.raises(ClosedEnvironmentError):
+        env.carried_state()
+    with pytest.raises(ClosedEnvironmentError):
+        env.restore_carried_state(state)

@@ -261,7 +261,7 @@ def test_agent_settings_that_are_not_json_or_too_large_are_refused(tmp_path):
     (tmp_path / "model.json").write_text('{"format": "dvrk_gym.baselines/1", "config": {')  # cut short
     assert "is not valid JSON" in _bounded(load_agent, path)
     (tmp_path / "model.json").write_text(" " * (2**20 + 1))
-    assert "a settings file has at most 1,048,576" in _bounded(load_agent, path)
+    assert "a JSON file read here has at most 1,048,576" in _bounded(load_agent, path)
 
 
 def test_agent_weights_that_inflate_beyond_the_limit_or_hold_objects_are_refused(tmp_path):

@@ -149,21 +149,27 @@ class DNNCalibrator(SavableModel):
         }
 
     def fit(self, X: np.ndarray, y: np.ndarray) -> DNNCalibrator:
-        """Train on inputs X (N, 6: metres, radians) and base positions y (N, 3, metres)."""
+        """Train on inputs X (N, 6: metres, radians) and base positions y (N, 3, metres).
+
+        Raises:
+            ValueError: bad inputs or targets (:func:`check_inputs`, :func:`check_targets`), or
+                ones that spread beyond what a float holds; a refused fit leaves the model as it was.
+        """
         X = check_inputs(X)
         y = check_targets(y, X.shape[0])
         features = encode_euler(X)
-        self.x_mean_ = features.mean(axis=0)
+        x_mean = features.mean(axis=0)
         # Constant features (e.g. one yaw only) are left unscaled instead of divided by zero.
         spread = features.std(axis=0)
-        self.x_scale_ = np.where(spread > 0.0, spread, 1.0)
-        self.y_mean_ = y.mean(axis=0)
+        x_scale = np.where(spread > 0.0, spread, 1.0)
+        y_mean = y.mean(axis=0)
         # One scale for all three outputs keeps the loss an (isotropic) squared L2 distance.
         with np.errstate(over="ignore"):  # an overflow is refused just below, by name
-            output_spread = float(np.sqrt(np.mean((y - self.y_mean_) ** 2)))
-        self.y_scale_ = np.full(_OUTPUTS, output_spread if output_spread > 0.0 else 1.0)
-        if not (np.isfinite(self.x_scale_).all() and np.isfinite(self.y_scale_).all()):
+            output_spread = float(np.sqrt(np.mean((y - y_mean) ** 2)))
+        y_scale = np.full(_OUTPUTS, output_spread if output_spread > 0.0 else 1.0)
+        if not (np.isfinite(x_scale).all() and np.isfinite(y_scale).all()):
             raise ValueError("the inputs or targets spread beyond what a float holds; expected metres and radians")
+        self.x_mean_, self.x_scale_, self.y_mean_, self.y_scale_ = x_mean, x_scale, y_mean, y_scale
         inputs = torch.from_numpy(((features - self.x_mean_) / self.x_scale_).astype(np.float32))
         targets = torch.from_numpy(((y - self.y_mean_) / self.y_scale_).astype(np.float32))
         generator = torch.Generator().manual_seed(self.seed)
@@ -206,7 +212,12 @@ class DNNCalibrator(SavableModel):
         return history
 
     def predict(self, X: np.ndarray) -> np.ndarray:
-        """Base positions (N, 3) in metres for inputs X (N, 6: metres, radians)."""
+        """Base positions (N, 3) in metres for inputs X (N, 6: metres, radians).
+
+        Raises:
+            ValueError: called before fit, bad inputs (:func:`check_inputs`), or a row whose
+                features overflow the network (no finite prediction; the message names it).
+        """
         if self.network_ is None:
             raise ValueError("DNNCalibrator.predict called before fit")
         features = encode_euler(check_inputs(X))

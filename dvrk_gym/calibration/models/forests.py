@@ -275,7 +275,7 @@ class ResidualForests(SavableModel):
     @staticmethod
     def _check(predicted_base: np.ndarray, yaw: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         predicted_base = check_inputs(predicted_base, name="predicted_base", columns=3)
-        yaw = check_inputs(np.reshape(np.asarray(yaw, dtype=np.float64), (-1, 1)), "yaw", 1)[:, 0]
+        yaw = check_inputs(np.reshape(np.asarray(yaw), (-1, 1)), "yaw", 1)[:, 0]  # its kind checked, not coerced
         if yaw.shape[0] != predicted_base.shape[0]:
             raise ValueError(f"yaw has {yaw.shape[0]} values but predicted_base has {predicted_base.shape[0]} rows")
         return predicted_base, nearest_yaw_index(yaw)
