@@ -4,6 +4,7 @@ the task scheduler."""
 import json
 import math
 import shutil
+from pathlib import Path
 
 import pytest
 from reproduction_files import files_that_differ
@@ -201,3 +202,28 @@ def test_a_profile_is_held_to_the_calibrations_own_bounds():
     for field, bound in (("n_trajectories", MAX_TRAJECTORIES), ("steps_per_trajectory", MAX_STEPS_PER_TRAJECTORY)):
         with pytest.raises(ValueError, match=f"{field} must be an int in \\[1, {bound}\\]"):
             Profile(name="big", **{field: bound + 1})
+
+
+def test_a_tampered_cached_result_is_a_clear_error_and_leaves_the_last_outputs(tiny_reproduction, tmp_path):
+    out = tmp_path / "run"
+    shutil.copytree(tiny_reproduction.report.parent, out)
+    before = {name: (out / name).read_bytes() for name in ("report.md", "results.json", "calls.json")}
+    calibration = out / "tasks" / "calibration.json"
+    calibration.write_text(json.dumps({**json.loads(calibration.read_text()), "summary": 5}))
+    with pytest.raises(ValueError, match="cached task results in .* do not hold what the report reads"):
+        run_reproduce(ReproduceConfig(out=out, profile=TINY, workers=1, progress=False))
+    assert {name: (out / name).read_bytes() for name in before} == before  # nothing half-written, no call logged
+
+
+def test_a_cached_result_whose_files_are_gone_runs_again(tiny_reproduction, tmp_path):
+    out = tmp_path / "run"
+    shutil.copytree(tiny_reproduction.report.parent, out)
+    figure = Path(json.loads((out / "tasks" / "bias_field.json").read_text())["figure"])
+    moved = out / "figures" / "bias_field.png"
+    assert figure == tiny_reproduction.report.parent / "figures" / "bias_field.png"  # absolute: the copy points at the original
+    (out / "tasks" / "bias_field.json").write_text(
+        json.dumps({**json.loads((out / "tasks" / "bias_field.json").read_text()), "figure": str(tmp_path / "gone.png")})
+    )
+    again = run_reproduce(ReproduceConfig(out=out, profile=TINY, workers=1, progress=False))
+    assert "bias_field" not in again.data["task_cached"] and moved.exists()
+    assert again.data["bias"]["rigid_by_yaw_mm"] == tiny_reproduction.data["bias"]["rigid_by_yaw_mm"]

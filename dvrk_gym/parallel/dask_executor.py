@@ -24,6 +24,7 @@ from distributed import Client
 from distributed.comm import get_address_host_port, parse_address
 
 from dvrk_gym.parallel.executors import FuturesExecutor
+from dvrk_gym.utils.checks import check_float
 
 logger = logging.getLogger(__name__)
 
@@ -48,14 +49,20 @@ class DaskExecutor(FuturesExecutor):
     """
 
     def __init__(self, address: str, connect_timeout_s: float = CONNECT_TIMEOUT_S) -> None:
+        connect_timeout_s = check_float("connect_timeout_s", connect_timeout_s, 0.0, 3600.0, low_open=True, unit="s")
+        if not isinstance(address, str):
+            raise ValueError(f"the scheduler address must be a string such as tcp://host:8786, got {address!r}")
         try:
-            if parse_address(address)[0] != "inproc":  # a malformed address fails here, before a client exists
+            protocol = parse_address(address)[0]
+            if protocol != "inproc":  # a malformed address fails here, before a client exists
                 get_address_host_port(address)
-        except ValueError as error:
+        except (ValueError, TypeError) as error:
             raise ValueError(f"the scheduler address {address!r} is malformed ({error}); expected such as tcp://host:8786") from None
+        if protocol not in ("tcp", "inproc"):  # tls:// needs certificates no option here takes
+            raise ValueError(f"the scheduler address {address!r} uses {protocol}://; give a tcp:// address, such as tcp://host:8786")
         try:
             self.client = Client(address, timeout=connect_timeout_s, set_as_default=False)
-        except (OSError, TimeoutError) as error:
+        except (OSError, TimeoutError, TypeError, ValueError) as error:  # tls:// without certificates raises a TypeError
             raise ValueError(
                 f"cannot reach a Dask scheduler at {address!r} within {connect_timeout_s:g} s ({type(error).__name__}: {error}); "
                 "expected the address of a running scheduler, such as tcp://host:8786"

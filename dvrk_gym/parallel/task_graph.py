@@ -21,8 +21,10 @@ from __future__ import annotations
 
 import concurrent.futures as cf
 import contextlib
+import functools
 import graphlib
 import logging
+import re
 import socket
 import time
 from collections.abc import Callable
@@ -53,6 +55,8 @@ class Task:
         cost_s: rough wall time, seconds. Among ready tasks, the one with the most work
             riding on it (its cost plus that of every task that needs it, directly or
             not) starts first, so that the stages that unlock others are not kept waiting.
+        files: keys of its result that name files it wrote (paths): a cached result whose
+            files are gone is run again.
     """
 
     name: str
@@ -60,6 +64,7 @@ class Task:
     kwargs: dict[str, Any] = field(default_factory=dict)
     needs: tuple[str, ...] = ()
     cost_s: float = 1.0
+    files: tuple[str, ...] = ()
 
 
 class TaskError(RuntimeError):
@@ -86,17 +91,24 @@ def call_task(
     return result, time.perf_counter() - start
 
 
-def _read_result(path: Path) -> dict[str, Any]:
-    """A cached task result; ValueError unless it is a JSON object with the task's wall time."""
+def _read_result(path: Path, files: tuple[str, ...] = ()) -> dict[str, Any]:
+    """A cached task result; ValueError unless it is a JSON object with the task's wall time
+    and the files its ``files`` keys name are there."""
     result = read_json(path)
     if not isinstance(result, dict) or not isinstance(result.get("wall_s"), (int, float)):
         raise ValueError("not a task result (a JSON object with its wall_s)")
+    for key in files:
+        if not isinstance(result.get(key), str) or not Path(result[key]).is_file():
+            raise ValueError(f"its {key!r} file {result.get(key)!r} is gone: the task runs again")
     return result
 
 
 def _sorter(tasks: list[Task]) -> graphlib.TopologicalSorter:
     """The graph's sorter, prepared; ValueError for repeated names, unknown needs or a cycle."""
     names = [task.name for task in tasks]
+    for name in names:  # the name is its cache file's stem: no folders, no hidden or partial files
+        if not isinstance(name, str) or not re.fullmatch(r"[A-Za-z0-9_+\-][A-Za-z0-9_+.\-]*", name):
+            raise ValueError(f"task name {name!r} must be letters, digits and _ + - . (not starting with '.'), no folders")
     if len(set(names)) != len(names):
         raise ValueError(f"task names must be unique: {sorted(n for n in set(names) if names.count(n) > 1)}")
     for task in tasks:
@@ -181,7 +193,7 @@ class _GraphRun:
         self.rank = {task.name: (-priority[task.name], index) for index, task in enumerate(tasks)}  # ties: the graph's order
         self.results: dict[str, dict[str, Any]] = {}
         for task in tasks:
-            found = cache.load(f"{task.name}.json", _read_result)
+            found = cache.load(f"{task.name}.json", functools.partial(_read_result, files=task.files))
             if found is not None:
                 self.results[task.name] = {**found, "cached": True}
         self.ready: list[str] = []
@@ -237,7 +249,11 @@ class _GraphRun:
             task = self.running.pop(future)
             outcome = outcome_of(task, future.result)
             if outcome.error is None:
-                self._finish(task, *outcome.result)
+                try:
+                    self._finish(task, *outcome.result)
+                except (TypeError, ValueError) as error:  # a result that is not JSON: as if the task had raised
+                    if self.failure is None:
+                        self.failure = TaskError(f"task {task.name!r} returned a result that cannot be saved as JSON: {error}")
             elif self.failure is None:
                 if isinstance(outcome.error, BrokenProcessPool):  # a worker was killed (or ran out of memory): none can say which
                     self.failure = TaskError(f"a worker process died while running {lost}: {outcome.error}")

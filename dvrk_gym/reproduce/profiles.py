@@ -10,10 +10,13 @@ from typing import Any
 from dvrk_gym import paper
 from dvrk_gym.baselines.budgets import AGENT_ENVS, GRID_TOUCH_ID
 from dvrk_gym.calibration.phase1 import MAX_STEPS_PER_TRAJECTORY, MAX_TRAJECTORIES
+from dvrk_gym.envs.debridement_config import MAX_PICKS
 from dvrk_gym.utils.atomic import read_json
 from dvrk_gym.utils.checks import check_choice, check_int, check_resolution
 
 SEARCHES = ("paper", "quick")
+MAX_EVAL_POINTS = 10_000
+"""The most evaluations along an RL learning curve (``TrainConfig.eval_points``'s bound)."""
 _MAX_COUNT = 10**7
 """An upper bound on every count of a profile (trajectories, epochs, trials, steps...)."""
 
@@ -64,8 +67,15 @@ class Profile:
         check_choice("search", self.search, SEARCHES)
         check_int("n_trajectories", self.n_trajectories, 1, MAX_TRAJECTORIES)  # the calibration's own bounds
         check_int("steps_per_trajectory", self.steps_per_trajectory, 1, MAX_STEPS_PER_TRAJECTORY)
-        for name in ("dnn_epochs", "debridement_trials", "debridement_picks", "rl_eval_points"):
+        for name in ("dnn_epochs", "debridement_trials"):
             check_int(name, getattr(self, name), 1, _MAX_COUNT)
+        # The bounds of the envs and trainings they go to, checked here: a run folder is
+        # stamped with its profile, so a value refused only when its task ran would leave a
+        # folder that the corrected profile cannot resume.
+        check_int("debridement_picks", self.debridement_picks, 1, MAX_PICKS)
+        check_int("rl_eval_points", self.rl_eval_points, 1, MAX_EVAL_POINTS)
+        if len(set(self.rl_agents)) != len(self.rl_agents):
+            raise ValueError(f"rl_agents repeats an agent: {list(self.rl_agents)}; give each once")
         grid_agents = sorted(name for name, env_id in AGENT_ENVS.items() if env_id == GRID_TOUCH_ID)
         unknown = [agent for agent in self.rl_agents if agent not in grid_agents]
         if unknown:

@@ -17,7 +17,7 @@ from dvrk_gym.baselines.curves import plot_curves
 from dvrk_gym.baselines.training import CurvePoint
 from dvrk_gym.calibration.benchmark import YAW_SETTINGS
 from dvrk_gym.calibration.search import SearchResult, plot_search
-from dvrk_gym.utils.atomic import atomic_path, atomic_write_text
+from dvrk_gym.utils.atomic import atomic_path
 
 PAPER_PHASE1 = {"raw": paper.PHASE1_RAW_SAMPLES, "kept": paper.PHASE1_KEPT_SAMPLES}
 """The paper's Phase I: raw samples and those both cameras saw at the same place."""
@@ -132,8 +132,8 @@ def _image(data: dict[str, Any], key: str, caption: str) -> list[str]:
     return [f"![{caption}]({path})", ""] if path else []
 
 
-def write_report(path: Path, data: dict[str, Any]) -> Path:
-    """Write ``report.md``: settings, then every table, the paper beside the simulation."""
+def render_report(data: dict[str, Any]) -> str:
+    """``report.md``'s text: settings, then every table, the paper beside the simulation."""
     settings, profile = data["settings"], data["settings"]["profile"]
     lines = [
         "# dvrk-gym reproduction of Seita et al., ICRA 2018",
@@ -154,7 +154,7 @@ def write_report(path: Path, data: dict[str, Any]) -> Path:
         [[name, f"{s:.1f}", "yes" if name in data["task_cached"] else ""] for name, s in data["task_wall_s"].items()],
     )
     lines += ["", "Versions: " + ", ".join(f"{k} {v}" for k, v in settings["versions"].items()), ""]
-    return atomic_write_text(path, "\n".join(lines))
+    return "\n".join(lines)
 
 
 def _timing_sentence(data: dict[str, Any]) -> str:

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import json
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -27,9 +28,9 @@ from dvrk_gym.parallel.executors import Executor, InlineExecutor, local_executor
 from dvrk_gym.parallel.task_graph import Task, run_tasks
 from dvrk_gym.reproduce import tasks
 from dvrk_gym.reproduce.profiles import QUICK, Profile
-from dvrk_gym.reproduce.report import collect_results, write_figures, write_report
+from dvrk_gym.reproduce.report import collect_results, render_report, write_figures
 from dvrk_gym.sim.robot.bias import resolve_bias
-from dvrk_gym.utils.atomic import atomic_write_bytes, atomic_write_json, read_json
+from dvrk_gym.utils.atomic import atomic_write_bytes, atomic_write_text, read_json
 from dvrk_gym.utils.checks import check_bool, check_int
 from dvrk_gym.utils.run_folder import RunFolder
 
@@ -104,7 +105,8 @@ def _debridement_task(
         "resolution": profile.camera_resolution,
         "out": str(config.out / "debridement" / name),
     }
-    return Task(name, function, {**kwargs, **cell}, needs=(need,), cost_s=0.6 * profile.debridement_picks * profile.debridement_trials)
+    cost_s = 0.6 * profile.debridement_picks * profile.debridement_trials
+    return Task(name, function, {**kwargs, **cell}, needs=(need,), cost_s=cost_s, files=("figure",))
 
 
 def _calibration_tasks(config: ReproduceConfig, nested_progress: bool) -> list[Task]:
@@ -123,7 +125,13 @@ def _calibration_tasks(config: ReproduceConfig, nested_progress: bool) -> list[T
     phase1_s = 0.9 * profile.n_trajectories * profile.steps_per_trajectory / paper.PHASE1_POSES_PER_TRAJECTORY
     world = {"bias": config.bias, "bias_seed": config.bias_seed, "seed": config.seed}
     graph = [
-        Task("bias_field", tasks.bias_field, {"figure": str(config.out / "figures" / "bias_field.png"), **world}, cost_s=15),
+        Task(
+            "bias_field",
+            tasks.bias_field,
+            {"figure": str(config.out / "figures" / "bias_field.png"), **world},
+            cost_s=15,
+            files=("figure",),
+        ),
         Task(
             "calibration",
             tasks.calibration,
@@ -152,7 +160,7 @@ def _rl_tasks(config: ReproduceConfig) -> list[Task]:
         folder = config.out / "baselines" / agent
         training = {"agent": agent, "steps": steps, "seed": config.seed, "eval_points": profile.rl_eval_points, **world}
         benchmark = {"benchmark_seed": config.seed + BENCHMARK_SEED_OFFSET, "out": str(folder)}
-        graph.append(Task(f"rl_{agent}", tasks.rl_agent, {**training, **benchmark}, cost_s=steps / 10.0 + 10))
+        graph.append(Task(f"rl_{agent}", tasks.rl_agent, {**training, **benchmark}, cost_s=steps / 10.0 + 10, files=("model",)))
         for fragment in FRAGMENTS:
             kwargs = {"model": str(folder / "model.zip"), "fragment": fragment, "bias": config.bias, "bias_seed": config.bias_seed}
             graph.append(_debridement_task(config, cell_name(agent, fragment), tasks.rl_debridement, kwargs, f"rl_{agent}"))
@@ -208,21 +216,32 @@ def _reproduce(config: ReproduceConfig, folder: RunFolder, executor: Executor) -
     task_results = run_tasks(
         graph, config.out / "tasks", progress=config.progress, executor=executor, shared_folder=config.out, label="reproduce"
     )
-    error_maps = Path(task_results["calibration"]["figure"])
+    # Everything the outputs hold is made before any is written: a cached result that was
+    # edited or damaged fails here, clearly, and leaves the outputs of the last good call.
+    try:
+        error_maps = Path(task_results["calibration"]["figure"])
+        data = collect_results(config, task_results, executor.description)
+        data["figures"] = write_figures(config.out / "figures", data)
+        wall = time.perf_counter() - start
+        calls = _calls_with_this_one(folder, config, executor, wall, tasks_run=sum(not r["cached"] for r in task_results.values()))
+        data["calls"] = calls
+        data["wall_s"] = {
+            "this_call": wall,
+            "all_calls": sum(call["wall_s"] for call in calls),
+            "tasks_total": sum(r["wall_s"] for r in task_results.values()),
+        }
+        results = json.dumps(data, indent=1, default=_json_default)
+        report = render_report(data)
+    except (KeyError, TypeError, ValueError, AttributeError, IndexError) as error:
+        raise ValueError(
+            f"the cached task results in {config.out / 'tasks'} do not hold what the report reads ({type(error).__name__}: {error}); "
+            "one was edited or damaged: delete the files you changed there and run the same command again (only those tasks run again)"
+        ) from None
     if error_maps.exists():
         atomic_write_bytes(config.out / "figures" / "calibration_error_maps.png", error_maps.read_bytes())
-    data = collect_results(config, task_results, executor.description)
-    data["figures"] = write_figures(config.out / "figures", data)
-    wall = time.perf_counter() - start
-    calls = _log_call(folder, config, executor, wall, tasks_run=sum(not result["cached"] for result in task_results.values()))
-    data["calls"] = calls
-    data["wall_s"] = {
-        "this_call": wall,
-        "all_calls": sum(call["wall_s"] for call in calls),
-        "tasks_total": sum(r["wall_s"] for r in task_results.values()),
-    }
-    results_path = atomic_write_json(config.out / "results.json", data, indent=1, default=_json_default)
-    report_path = write_report(config.out / "report.md", data)
+    folder.write_json("calls.json", calls)
+    results_path = atomic_write_text(config.out / "results.json", results)
+    report_path = atomic_write_text(config.out / "report.md", report)
     return Reproduction(report_path, results_path, data, wall)
 
 
@@ -233,8 +252,10 @@ def _read_calls(path: Path) -> list[dict[str, Any]]:
     return calls
 
 
-def _log_call(folder: RunFolder, config: ReproduceConfig, executor: Executor, wall_s: float, tasks_run: int) -> list[dict[str, Any]]:
-    """Append this call to ``calls.json`` in the run folder (a resumed run has several)."""
+def _calls_with_this_one(
+    folder: RunFolder, config: ReproduceConfig, executor: Executor, wall_s: float, tasks_run: int
+) -> list[dict[str, Any]]:
+    """The calls of ``calls.json`` in the run folder (a resumed run has several) and this one, to be written."""
     calls = folder.load("calls.json", _read_calls) or []
     calls.append(
         {
@@ -245,7 +266,6 @@ def _log_call(folder: RunFolder, config: ReproduceConfig, executor: Executor, wa
             "finished": time.strftime("%Y-%m-%d %H:%M:%S"),
         }
     )
-    folder.write_json("calls.json", calls)
     return calls
 
 

@@ -140,17 +140,26 @@ def atomic_write_json(path: str | os.PathLike, value: Any, **dumps_options: Any)
     return atomic_write_text(path, json.dumps(value, **dumps_options))
 
 
-def remove_partial_files(folder: str | os.PathLike) -> list[Path]:
+def remove_partial_files(folder: str | os.PathLike, skip_folders_with: str | None = None) -> list[Path]:
     """Remove the temporary files a killed write left in ``folder`` and the folders below it; returns them.
 
     Only call this on a folder no other process is writing (a run folder its owner holds).
+
+    Args:
+        folder: the folder.
+        skip_folders_with: a file name (a run folder's lock) that marks a folder below
+            ``folder`` as another run's, whose owner may be writing it: such folders are left alone.
     """
     removed = []
-    for path in Path(folder).rglob(f".*{PARTIAL_MARK}*"):
-        if path.is_file():
-            with contextlib.suppress(OSError):
-                path.unlink()
-                removed.append(path)
+    for here, folders, files in os.walk(Path(folder)):
+        if skip_folders_with is not None:
+            folders[:] = [name for name in folders if not (Path(here) / name / skip_folders_with).exists()]
+        for name in files:
+            path = Path(here) / name
+            if name.startswith(".") and PARTIAL_MARK in name and path.is_file():
+                with contextlib.suppress(OSError):
+                    path.unlink()
+                    removed.append(path)
     if removed:
         logger.info("removed %d temporary file(s) left by an interrupted write in %s", len(removed), folder)
     return removed

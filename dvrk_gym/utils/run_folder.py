@@ -27,6 +27,7 @@ import contextlib
 import json
 import logging
 import os
+import stat
 import time
 import zipfile
 from collections.abc import Callable, Mapping
@@ -145,6 +146,26 @@ def check_made_here(folder: str | os.PathLike, stamp: str, remedy: str) -> None:
         _refuse_other_source(Path(folder) / stamp, found.get(SOURCE_KEY), source_fingerprint(), remedy)
 
 
+MAX_LOCK_BYTES = 4096
+"""The most of a lock file read, bytes (it holds a short JSON object)."""
+
+
+def _lock_text(lock_file: Path) -> str:
+    """What a lock file holds (its first :data:`MAX_LOCK_BYTES`), or "" when there is none.
+
+    Raises:
+        ValueError: the path is not a regular file (a FIFO there would block the read).
+    """
+    try:
+        status = lock_file.stat()
+    except FileNotFoundError:
+        return ""
+    if not stat.S_ISREG(status.st_mode):
+        raise ValueError(f"{lock_file} is not a regular file; delete it (it should be the run's lock file)")
+    with lock_file.open("rb") as file:
+        return file.read(MAX_LOCK_BYTES).decode("utf-8", errors="replace")
+
+
 def _owner_pid(text: str) -> int | None:
     """The process id a lock file holds, or None when it holds none (a clean release empties it)."""
     try:
@@ -188,7 +209,7 @@ class RunFolder:
         try:
             if self._lock.lock_counter == 1:  # the first owner in this process: nobody else writes here now
                 self._claim()
-                remove_partial_files(self.path)
+                remove_partial_files(self.path, skip_folders_with=LOCK_FILE)  # not inside another run's folder
             if settings is not None:
                 self._check_and_stamp(settings)
         except BaseException:
@@ -196,10 +217,11 @@ class RunFolder:
             raise
 
     def _acquire(self) -> None:
+        _lock_text(self.path / LOCK_FILE)  # a lock path that is no regular file (a FIFO would block) is refused first
         try:
             self._lock.acquire()
         except Timeout:
-            owner = _owner_pid((self.path / LOCK_FILE).read_text(errors="replace")) if (self.path / LOCK_FILE).exists() else None
+            owner = _owner_pid(_lock_text(self.path / LOCK_FILE))
             who = f"process {owner}" if owner is not None else "another process"
             raise RunFolderBusy(
                 f"{self.path} is in use by {who} (its lock: {self.path / LOCK_FILE}); "
@@ -210,7 +232,7 @@ class RunFolder:
     def _claim(self) -> None:
         """Write this process's id into the lock file just taken, first logging the dead owner it replaces."""
         lock_file = self.path / LOCK_FILE
-        previous = _owner_pid(lock_file.read_text(errors="replace"))
+        previous = _owner_pid(_lock_text(lock_file))
         if previous is not None and previous != os.getpid():
             logger.warning(
                 "%s: taking over the stale lock of process %d, which no longer runs (it was killed or crashed)", self.path, previous

@@ -183,3 +183,50 @@ def test_a_refused_dnn_fit_leaves_the_fitted_model_as_it_was():
 def test_residual_forests_refuse_yaws_of_other_kinds():
     with pytest.raises(ValueError, match="yaw must hold real numbers"):
         ResidualForests._check(np.zeros((2, 3)), np.array([True, False]))
+
+
+@pytest.mark.parametrize(
+    ("field", "value", "message"),
+    [
+        ("debridement_picks", 65, "debridement_picks"),
+        ("rl_eval_points", 20_000, "rl_eval_points"),
+        ("rl_agents", ["sac", "sac"], "repeats"),
+    ],
+)
+def test_a_profile_is_refused_with_values_its_tasks_would_refuse_later(field, value, message):
+    """A run folder is stamped with its profile: refused only when its task ran, the corrected
+    profile could not resume the folder."""
+    from dvrk_gym.reproduce.profiles import MAX_EVAL_POINTS, TINY, Profile
+
+    with pytest.raises(ValueError, match=message):
+        Profile.from_dict({**TINY.to_dict(), field: value})
+    from dvrk_gym.baselines.training import TrainConfig
+
+    TrainConfig(agent="sac", steps=10, eval_points=MAX_EVAL_POINTS)
+    with pytest.raises(ValueError, match="eval_points"):
+        TrainConfig(agent="sac", steps=10, eval_points=MAX_EVAL_POINTS + 1)
+
+
+def test_task_names_are_file_stems_and_a_result_that_is_not_json_is_a_task_error(tmp_path):
+    from dvrk_gym.parallel.task_graph import Task, TaskError, run_tasks
+
+    for name in ("../escaped", "sub/x", ".hidden", ""):
+        with pytest.raises(ValueError, match="task name"):
+            run_tasks([Task(name, dict)], tmp_path / "cache", workers=1)
+    with pytest.raises(TaskError, match="cannot be saved as JSON"):
+        run_tasks([Task("bad", _not_json)], tmp_path / "cache", workers=1)
+    assert not (tmp_path / "escaped.json").exists()
+
+
+def _not_json() -> dict:
+    return {"value": object()}
+
+
+def test_a_scheduler_address_the_options_cannot_reach_is_refused_up_front():
+    pytest.importorskip("distributed")
+    from dvrk_gym.parallel.dask_executor import DaskExecutor
+
+    with pytest.raises(ValueError, match="give a tcp:// address"):
+        DaskExecutor("tls://127.0.0.1:9")
+    with pytest.raises(ValueError, match="connect_timeout_s"):
+        DaskExecutor("tcp://127.0.0.1:9", connect_timeout_s=float("nan"))

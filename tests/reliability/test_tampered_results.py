@@ -170,3 +170,23 @@ def test_a_dunder_in_an_error_is_not_taken_for_a_flag():
 
     text = _one_line(TypeError("TrainConfig.__init__() got an unexpected keyword argument 'x'"), argparse.Namespace(seed=0))
     assert "TrainConfig.__init__()" in text
+
+
+def test_a_lock_path_that_is_no_regular_file_is_refused_not_waited_on(tmp_path):
+    import os
+
+    os.mkfifo(tmp_path / "run.lock")  # reading it would block for ever
+    with pytest.raises(ValueError, match="run.lock is not a regular file"):
+        RunFolder(tmp_path)
+
+
+def test_opening_a_run_folder_leaves_the_temporary_files_of_runs_in_its_subfolders(tmp_path):
+    inner = tmp_path / "calibration"
+    inner.mkdir()
+    (inner / "run.lock").write_text("")
+    theirs, ours = inner / ".phase1.abc.partial.npz", tmp_path / ".results.abc.partial.json"
+    theirs.write_text("being written")
+    ours.write_text("left by a kill")
+    with RunFolder(tmp_path):
+        pass
+    assert theirs.exists() and not ours.exists()
