@@ -227,3 +227,12 @@ def test_a_cached_result_whose_files_are_gone_runs_again(tiny_reproduction, tmp_
     again = run_reproduce(ReproduceConfig(out=out, profile=TINY, workers=1, progress=False))
     assert "bias_field" not in again.data["task_cached"] and moved.exists()
     assert again.data["bias"]["rigid_by_yaw_mm"] == tiny_reproduction.data["bias"]["rigid_by_yaw_mm"]
+
+
+def test_a_copied_run_folder_links_its_own_figures(tiny_reproduction, tmp_path):
+    out = tmp_path / "copy"
+    shutil.copytree(tiny_reproduction.report.parent, out)
+    again = run_reproduce(ReproduceConfig(out=out, profile=TINY, workers=1, progress=False))
+    report = again.report.read_text()
+    assert "](../" not in report and all(not Path(cell["figure"]).is_absolute() for cell in again.data["debridement"])
+    assert all((out / cell["figure"]).is_file() for cell in again.data["debridement"])

@@ -39,9 +39,20 @@ def _per_setting(values: tuple[float, ...]) -> dict[str, float]:
     return dict(zip((label for label, _ in YAW_SETTINGS), values))
 
 
-def _relative(path: str, run_folder: Path) -> str:
-    """A path inside the run folder, relative to it (so the folder can be moved)."""
-    return os.path.relpath(os.path.abspath(path), os.path.abspath(run_folder))
+def relative_to_run(path: str, run_folder: Path) -> str:
+    """A path inside the run folder, relative to it (so the folder can be moved).
+
+    A task's cached result records where the folder was when the task ran: in a folder moved
+    or copied since, the file is found by the longest tail of that path that lies in
+    ``run_folder``.
+    """
+    full, root = Path(os.path.abspath(path)), Path(os.path.abspath(run_folder))
+    if not full.is_relative_to(root):
+        for start in range(1, len(full.parts)):
+            tail = Path(*full.parts[start:])
+            if (root / tail).exists():
+                return tail.as_posix()
+    return os.path.relpath(full, root)
 
 
 def collect_results(config: Any, task_results: dict[str, dict[str, Any]], executor: str) -> dict[str, Any]:
@@ -73,17 +84,17 @@ def collect_results(config: Any, task_results: dict[str, dict[str, Any]], execut
             reference = paper.DEBRIDEMENT_RESULTS.get((cell["calibrator"], cell["fragment"]))
             debridement.append(
                 {key: value for key, value in cell.items() if key != "cached"}
-                | {"paper": reference, "figure": _relative(cell["figure"], config.out)}
+                | {"paper": reference, "figure": relative_to_run(cell["figure"], config.out)}
             )
     agents = [
-        {k: v for k, v in result.items() if k != "cached"} | {"model": _relative(result["model"], config.out)}
+        {k: v for k, v in result.items() if k != "cached"} | {"model": relative_to_run(result["model"], config.out)}
         for name, result in task_results.items()
         if name.startswith("rl_")
     ]
     return {
         "settings": {**config.settings(), "workers": config.workers, "executor": executor, "versions": _versions()},
         "bias": {k: v for k, v in task_results["bias_field"].items() if k != "cached"}
-        | {"figure": _relative(task_results["bias_field"]["figure"], config.out)},
+        | {"figure": relative_to_run(task_results["bias_field"]["figure"], config.out)},
         "phase1": {**phase1, "kept_fraction": phase1["kept"] / max(phase1["raw"], 1), "paper": PAPER_PHASE1},
         "search": search,
         "search_paper_mm2": paper.SEARCH_MM2,

@@ -28,7 +28,7 @@ from dvrk_gym.parallel.executors import Executor, InlineExecutor, local_executor
 from dvrk_gym.parallel.task_graph import Task, run_tasks
 from dvrk_gym.reproduce import tasks
 from dvrk_gym.reproduce.profiles import QUICK, Profile
-from dvrk_gym.reproduce.report import collect_results, render_report, write_figures
+from dvrk_gym.reproduce.report import collect_results, relative_to_run, render_report, write_figures
 from dvrk_gym.sim.robot.bias import resolve_bias
 from dvrk_gym.utils.atomic import atomic_write_bytes, atomic_write_text, read_json
 from dvrk_gym.utils.checks import check_bool, check_int
@@ -219,7 +219,7 @@ def _reproduce(config: ReproduceConfig, folder: RunFolder, executor: Executor) -
     # Everything the outputs hold is made before any is written: a cached result that was
     # edited or damaged fails here, clearly, and leaves the outputs of the last good call.
     try:
-        error_maps = Path(task_results["calibration"]["figure"])
+        error_maps = config.out / relative_to_run(task_results["calibration"]["figure"], config.out)
         data = collect_results(config, task_results, executor.description)
         data["figures"] = write_figures(config.out / "figures", data)
         wall = time.perf_counter() - start
