@@ -151,7 +151,7 @@ def render_report(data: dict[str, Any]) -> str:
         "",
         f"Profile **{profile['name']}**, seed {settings['seed']}, cable bias `{settings['bias']}` "
         f"(instrument {settings['bias_seed']}), endoscope {profile['camera_resolution'][0]} x {profile['camera_resolution'][1]}, "
-        f"run on {settings['executor']}. " + _timing_sentence(data),
+        f"tasks run on {_executors(data)}. " + _timing_sentence(data),
         "",
         "Every figure from the simulation, with the paper's beside it and the difference. "
         "`results.json` holds the same numbers and more (per-setting statistics, learning curves, trial rows).",
@@ -172,6 +172,13 @@ def _timing_sentence(data: dict[str, Any]) -> str:
     calls = [call for call in data["calls"] if call["tasks_run"]]
     runs = "; ".join(f"{call['wall_s'] / 60:.1f} min for {call['tasks_run']} tasks on {_where(call)}" for call in calls)
     return f"Wall time: {runs or 'every task was cached'} (the tasks' own times add up to {data['wall_s']['tasks_total'] / 60:.1f} min)."
+
+
+def _executors(data: dict[str, Any]) -> str:
+    """Where the calls that ran tasks ran them (this call's executor when every task was cached
+    before it: a call that only loaded results ran none)."""
+    ran = list(dict.fromkeys(_where(call) for call in data["calls"] if call["tasks_run"]))
+    return " and ".join(ran) if ran else data["settings"]["executor"]
 
 
 def _where(call: dict[str, Any]) -> str:
