@@ -236,3 +236,14 @@ def test_a_copied_run_folder_links_its_own_figures(tiny_reproduction, tmp_path):
     report = again.report.read_text()
     assert "](../" not in report and all(not Path(cell["figure"]).is_absolute() for cell in again.data["debridement"])
     assert all((out / cell["figure"]).is_file() for cell in again.data["debridement"])
+
+
+def test_a_moved_run_folder_keeps_its_cache(tiny_reproduction, tmp_path):
+    """Its cached results name files where the run was made: found in the folder, nothing runs again."""
+    original, out = tiny_reproduction.report.parent, tmp_path / "moved"
+    shutil.copytree(original, out)
+    for cached in (out / "tasks").glob("*.json"):  # as if made in a folder since moved away
+        cached.write_text(cached.read_text().replace(str(original), str(tmp_path / "gone" / "run")))
+    again = run_reproduce(ReproduceConfig(out=out, profile=TINY, workers=1, progress=False))
+    assert set(again.data["task_cached"]) == {task.name for task in build_tasks(ReproduceConfig(out=out, profile=TINY))}
+    assert "](../" not in again.report.read_text()

@@ -58,8 +58,8 @@ class DaskExecutor(FuturesExecutor):
                 get_address_host_port(address)
         except (ValueError, TypeError) as error:
             raise ValueError(f"the scheduler address {address!r} is malformed ({error}); expected such as tcp://host:8786") from None
-        if protocol not in ("tcp", "inproc"):  # tls:// needs certificates no option here takes
-            raise ValueError(f"the scheduler address {address!r} uses {protocol}://; give a tcp:// address, such as tcp://host:8786")
+        if protocol in ("tls", "wss"):  # these need certificates no option here takes
+            raise ValueError(f"the scheduler address {address!r} uses {protocol}://, which needs TLS certificates; give a tcp:// address")
         try:
             self.client = Client(address, timeout=connect_timeout_s, set_as_default=False)
         except (OSError, TimeoutError, TypeError, ValueError) as error:  # tls:// without certificates raises a TypeError

@@ -37,7 +37,7 @@ from tqdm.auto import tqdm
 
 from dvrk_gym.parallel.executors import Executor, local_executor, outcome_of
 from dvrk_gym.utils.atomic import read_json
-from dvrk_gym.utils.run_folder import RunFolder
+from dvrk_gym.utils.run_folder import RunFolder, locate_in_folder
 from dvrk_gym.utils.torch_threads import torch_threads
 
 logger = logging.getLogger(__name__)
@@ -91,15 +91,17 @@ def call_task(
     return result, time.perf_counter() - start
 
 
-def _read_result(path: Path, files: tuple[str, ...] = ()) -> dict[str, Any]:
+def _read_result(path: Path, files: tuple[str, ...] = (), root: Path | None = None) -> dict[str, Any]:
     """A cached task result; ValueError unless it is a JSON object with the task's wall time
-    and the files its ``files`` keys name are there."""
+    and the files its ``files`` keys name are there (where they were written, or in ``root``,
+    the run folder, should it have been moved since: :func:`locate_in_folder`)."""
     result = read_json(path)
     if not isinstance(result, dict) or not isinstance(result.get("wall_s"), (int, float)):
         raise ValueError("not a task result (a JSON object with its wall_s)")
     for key in files:
-        if not isinstance(result.get(key), str) or not Path(result[key]).is_file():
-            raise ValueError(f"its {key!r} file {result.get(key)!r} is gone: the task runs again")
+        named = result.get(key)
+        if not isinstance(named, str) or not (locate_in_folder(named, root) if root is not None else Path(named)).is_file():
+            raise ValueError(f"its {key!r} file {named!r} is gone: the task runs again")
     return result
 
 
@@ -193,7 +195,8 @@ class _GraphRun:
         self.rank = {task.name: (-priority[task.name], index) for index, task in enumerate(tasks)}  # ties: the graph's order
         self.results: dict[str, dict[str, Any]] = {}
         for task in tasks:
-            found = cache.load(f"{task.name}.json", functools.partial(_read_result, files=task.files))
+            root = Path(shared) if shared is not None else cache.path.parent  # the run folder the files lie in
+            found = cache.load(f"{task.name}.json", functools.partial(_read_result, files=task.files, root=root))
             if found is not None:
                 self.results[task.name] = {**found, "cached": True}
         self.ready: list[str] = []

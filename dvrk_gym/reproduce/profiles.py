@@ -64,6 +64,8 @@ class Profile:
         if isinstance(self.rl_agents, str) or not isinstance(self.rl_agents, (list, tuple)):
             raise ValueError(f"rl_agents must be a list of agent names, got {self.rl_agents!r}")
         object.__setattr__(self, "rl_agents", tuple(self.rl_agents))
+        if not all(isinstance(agent, str) for agent in self.rl_agents):
+            raise ValueError(f"rl_agents must be a list of agent names, got {list(self.rl_agents)!r}")
         check_choice("search", self.search, SEARCHES)
         check_int("n_trajectories", self.n_trajectories, 1, MAX_TRAJECTORIES)  # the calibration's own bounds
         check_int("steps_per_trajectory", self.steps_per_trajectory, 1, MAX_STEPS_PER_TRAJECTORY)

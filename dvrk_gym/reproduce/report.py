@@ -18,6 +18,7 @@ from dvrk_gym.baselines.training import CurvePoint
 from dvrk_gym.calibration.benchmark import YAW_SETTINGS
 from dvrk_gym.calibration.search import SearchResult, plot_search
 from dvrk_gym.utils.atomic import atomic_path
+from dvrk_gym.utils.run_folder import locate_in_folder
 
 PAPER_PHASE1 = {"raw": paper.PHASE1_RAW_SAMPLES, "kept": paper.PHASE1_KEPT_SAMPLES}
 """The paper's Phase I: raw samples and those both cameras saw at the same place."""
@@ -46,13 +47,7 @@ def relative_to_run(path: str, run_folder: Path) -> str:
     or copied since, the file is found by the longest tail of that path that lies in
     ``run_folder``.
     """
-    full, root = Path(os.path.abspath(path)), Path(os.path.abspath(run_folder))
-    if not full.is_relative_to(root):
-        for start in range(1, len(full.parts)):
-            tail = Path(*full.parts[start:])
-            if (root / tail).exists():
-                return tail.as_posix()
-    return os.path.relpath(full, root)
+    return os.path.relpath(locate_in_folder(path, run_folder), os.path.abspath(run_folder))
 
 
 def collect_results(config: Any, task_results: dict[str, dict[str, Any]], executor: str) -> dict[str, Any]:

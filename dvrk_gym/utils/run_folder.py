@@ -146,6 +146,20 @@ def check_made_here(folder: str | os.PathLike, stamp: str, remedy: str) -> None:
         _refuse_other_source(Path(folder) / stamp, found.get(SOURCE_KEY), source_fingerprint(), remedy)
 
 
+def locate_in_folder(path: str | os.PathLike, folder: str | os.PathLike) -> Path:
+    """Where a file a run folder's result names lies now: ``path`` itself when it is inside
+    ``folder`` or no longer moved; in a folder moved or copied since the result was written
+    (results record absolute paths), the longest tail of ``path`` that is a file in ``folder``.
+    """
+    full, root = Path(os.path.abspath(path)), Path(os.path.abspath(folder))
+    if not full.is_relative_to(root):
+        for start in range(1, len(full.parts)):
+            moved = root / Path(*full.parts[start:])
+            if moved.is_file():
+                return moved
+    return full
+
+
 MAX_LOCK_BYTES = 4096
 """The most of a lock file read, bytes (it holds a short JSON object)."""
 

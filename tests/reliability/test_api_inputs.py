@@ -230,3 +230,10 @@ def test_a_scheduler_address_the_options_cannot_reach_is_refused_up_front():
         DaskExecutor("tls://127.0.0.1:9")
     with pytest.raises(ValueError, match="connect_timeout_s"):
         DaskExecutor("tcp://127.0.0.1:9", connect_timeout_s=float("nan"))
+
+
+def test_a_profile_with_agents_that_are_not_names_is_a_clear_error():
+    from dvrk_gym.reproduce.profiles import Profile
+
+    with pytest.raises(ValueError, match="rl_agents must be a list of agent names"):
+        Profile.from_dict({"name": "x", "rl_agents": [["sac"]]})

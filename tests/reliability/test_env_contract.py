@@ -187,3 +187,15 @@ def test_a_closed_env_refuses_its_carried_state_calls_too(made):
         env.carried_state()
     with pytest.raises(ClosedEnvironmentError):
         env.restore_carried_state(state)
+
+
+def test_a_refused_reset_leaves_the_resume_record_and_numpy_seeds_are_recorded_as_ints(made):
+    from dvrk_gym.baselines.resume.reset_records import ResetRecorder
+
+    env = ResetRecorder(TrainingYaws(made()))
+    env.reset(seed=np.int64(1))
+    recorded = env.last_reset()
+    assert recorded["seed"] == 1 and type(recorded["seed"]) is int
+    with pytest.raises(ValueError, match="circle"):
+        env.reset(options={"circle": 99})
+    assert env.last_reset() == recorded and env.between_episodes()

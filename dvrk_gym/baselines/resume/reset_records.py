@@ -19,6 +19,7 @@ from collections.abc import Iterator
 from typing import Any, SupportsFloat
 
 import gymnasium as gym
+import numpy as np
 
 from dvrk_gym.envs.base import DvrkEnv
 
@@ -85,9 +86,12 @@ class ResetRecorder(gym.Wrapper):
         self._steps_since_reset = 0
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
-        self._last_reset = {"seed": seed, "options": options, "layers": stack_state(self.env)}
-        self._steps_since_reset = 0
-        return self.env.reset(seed=seed, options=options)
+        record = {"seed": int(seed) if isinstance(seed, np.integer) else seed, "options": options, "layers": stack_state(self.env)}
+        result = self.env.reset(seed=seed, options=options)
+        # Taken before the reset changed anything, kept once the env took it: a refused reset
+        # leaves the last one's record (and the episode it started) as they were.
+        self._last_reset, self._steps_since_reset = record, 0
+        return result
 
     def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
         self._steps_since_reset += 1
