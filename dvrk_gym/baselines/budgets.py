@@ -23,6 +23,9 @@ AGENT_DESCRIPTIONS: dict[str, str] = {
 }
 """One line per agent, for help texts and tables."""
 
+MAX_EVAL_POINTS = 10_000
+"""The most evaluations along a learning curve (``TrainConfig.eval_points``; a profile's ``rl_eval_points``)."""
+
 PHASE1_MOVES = paper.PHASE1_TRAJECTORIES * paper.PHASE1_POSES_PER_TRAJECTORY
 """Commanded poses of the paper's Phase I: 57 trajectories x 93 (5,301)."""
 PHASE2_TOUCHES = paper.PHASE2_TOUCHES

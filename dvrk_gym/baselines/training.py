@@ -28,7 +28,7 @@ from tqdm.auto import tqdm
 
 from dvrk_gym import paper
 from dvrk_gym.baselines.agents import AgentSpec, build_model, get_agent
-from dvrk_gym.baselines.budgets import CALIBRATOR_MOVES, DEBRIDEMENT_ID
+from dvrk_gym.baselines.budgets import CALIBRATOR_MOVES, DEBRIDEMENT_ID, MAX_EVAL_POINTS
 from dvrk_gym.baselines.picking import GripOffsetLog
 from dvrk_gym.baselines.resume import ResetRecorder, TrainingStateError, TrainingStateWriter, restore_training_state
 from dvrk_gym.baselines.wrappers import TRAINING_YAWS
@@ -98,7 +98,13 @@ class TrainConfig:
         get_agent(self.agent)
         check_choice("training_yaws", self.training_yaws, TRAINING_YAWS)
         check_choice("vec_env", self.vec_env, VEC_ENVS)
-        bounds = {"steps": (1, 10**9), "seed": (0, 2**31 - 1), "bias_seed": (0, 2**31 - 1), "n_envs": (1, 64), "eval_points": (1, 10_000)}
+        bounds = {
+            "steps": (1, 10**9),
+            "seed": (0, 2**31 - 1),
+            "bias_seed": (0, 2**31 - 1),
+            "n_envs": (1, 64),
+            "eval_points": (1, MAX_EVAL_POINTS),
+        }
         bounds.update({"curve_trials": (1, 10_000), "torch_threads": (1, 256)})
         check_int_fields("TrainConfig", self, bounds)
         for name in ("env_overrides", "overrides"):

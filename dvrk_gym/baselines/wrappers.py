@@ -23,6 +23,7 @@ from numpy.typing import ArrayLike
 
 from dvrk_gym.envs.grid_touch import N_CIRCLES
 from dvrk_gym.sim.robot.kinematics import PAPER_YAWS_RAD
+from dvrk_gym.utils.checks import check_int
 
 GOAL_CENTER_M = (0.0, 0.0, 0.19)
 """Camera-frame point mapped to 0 by :class:`GoalScaling`: about the phantom's centre, metres."""
@@ -138,9 +139,7 @@ class TrainingYaws(gym.Wrapper):
 
     def _check_carried_attributes(self, attributes: dict[str, Any]) -> None:
         """Refuse an episode count this wrapper could not have carried (see :class:`~dvrk_gym.envs.base.DvrkEnv`)."""
-        episodes = attributes["_episodes"]
-        if isinstance(episodes, bool) or not isinstance(episodes, int) or episodes < 0:
-            raise ValueError(f"carried '_episodes' must be a non-negative int, got {episodes!r}")
+        check_int("carried '_episodes'", attributes["_episodes"], 0)
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
         episodes = 0 if seed is not None else self._episodes

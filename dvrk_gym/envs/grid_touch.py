@@ -36,6 +36,7 @@ from dvrk_gym.sim.robot import kinematics as kin
 from dvrk_gym.sim.robot.bias import BiasConfig
 from dvrk_gym.sim.table.contact import CONTACTS, DEFAULT_CONTACT
 from dvrk_gym.sim.world_config import MoveResult
+from dvrk_gym.utils.checks import check_int
 
 N_CIRCLES = GRID_ROWS * GRID_COLUMNS
 TOUR: tuple[int, ...] = tuple(row * GRID_COLUMNS + column for row in range(GRID_ROWS) for column in reversed(range(GRID_COLUMNS)))
@@ -72,12 +73,6 @@ def _check_yaw_option(yaw: Any) -> float | str:
     if not (np.isfinite(value) and abs(value) <= np.pi / 2 + 1e-9):
         raise ValueError(message)
     return value
-
-
-def _check_circle(circle: Any, what: str) -> int:
-    if isinstance(circle, (bool, np.bool_)) or not isinstance(circle, (int, np.integer)) or not 0 <= circle < N_CIRCLES:
-        raise ValueError(f"{what} must be an int in [0, {N_CIRCLES - 1}], got {circle!r}")
-    return int(circle)
 
 
 def _clip_camera(position: np.ndarray) -> np.ndarray:
@@ -205,10 +200,10 @@ class GridTouchEnv(DvrkEnv[GridTouchConfig]):
         if "yaw" in options:
             _check_yaw_option(options["yaw"])
         if "circle" in options:
-            _check_circle(options["circle"], "option 'circle'")
+            check_int("option 'circle'", options["circle"], 0, N_CIRCLES - 1)
 
     def _check_carried_attributes(self, attributes: dict[str, Any]) -> None:
-        _check_circle(attributes["_next_circle"], "carried '_next_circle'")
+        check_int("carried '_next_circle'", attributes["_next_circle"], 0, N_CIRCLES - 1)
         try:
             _check_yaw_option(attributes["_yaw_setting"])
         except ValueError as error:

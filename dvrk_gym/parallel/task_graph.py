@@ -91,7 +91,7 @@ def call_task(
     return result, time.perf_counter() - start
 
 
-def _read_result(path: Path, files: tuple[str, ...] = (), root: Path | None = None) -> dict[str, Any]:
+def _read_result(path: Path, files: tuple[str, ...], root: Path) -> dict[str, Any]:
     """A cached task result; ValueError unless it is a JSON object with the task's wall time
     and the files its ``files`` keys name are there (where they were written, or in ``root``,
     the run folder, should it have been moved since: :func:`locate_in_folder`)."""
@@ -100,7 +100,7 @@ def _read_result(path: Path, files: tuple[str, ...] = (), root: Path | None = No
         raise ValueError("not a task result (a JSON object with its wall_s)")
     for key in files:
         named = result.get(key)
-        if not isinstance(named, str) or not (locate_in_folder(named, root) if root is not None else Path(named)).is_file():
+        if not isinstance(named, str) or not locate_in_folder(named, root).is_file():
             raise ValueError(f"its {key!r} file {named!r} is gone: the task runs again")
     return result
 

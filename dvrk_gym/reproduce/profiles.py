@@ -8,15 +8,13 @@ from dataclasses import dataclass
 from typing import Any
 
 from dvrk_gym import paper
-from dvrk_gym.baselines.budgets import AGENT_ENVS, GRID_TOUCH_ID
+from dvrk_gym.baselines.budgets import AGENT_ENVS, GRID_TOUCH_ID, MAX_EVAL_POINTS
 from dvrk_gym.calibration.phase1 import MAX_STEPS_PER_TRAJECTORY, MAX_TRAJECTORIES
 from dvrk_gym.envs.debridement_config import MAX_PICKS
 from dvrk_gym.utils.atomic import read_json
 from dvrk_gym.utils.checks import check_choice, check_int, check_resolution
 
 SEARCHES = ("paper", "quick")
-MAX_EVAL_POINTS = 10_000
-"""The most evaluations along an RL learning curve (``TrainConfig.eval_points``'s bound)."""
 _MAX_COUNT = 10**7
 """An upper bound on every count of a profile (trajectories, epochs, trials, steps...)."""
 
