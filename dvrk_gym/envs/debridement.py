@@ -239,6 +239,7 @@ class DebridementEnv(DvrkEnv[DebridementConfig]):
         """The left endoscope image ("rgb_array"), or the frames since the last call
         ("rgb_array_list": the end of each phase of every pick, or one per delta step)."""
         if self.render_mode == "rgb_array_list":
+            self._refuse_if_closed("render")
             frames, self._frames = self._frames, []
             return frames
         return super().render()

@@ -178,6 +178,14 @@ def test_a_refused_reset_through_the_training_yaws_keeps_their_schedule(made):
     assert refused._episodes == twin._episodes == 1
 
 
+def test_a_closed_debridement_keeps_its_buffered_frames_to_itself(made):
+    env = made(DebridementEnv, render_mode="rgb_array_list")
+    env.reset(seed=0)  # buffers the first frame
+    env.close()
+    with pytest.raises(ClosedEnvironmentError, match="the env is closed"):
+        env.render()
+
+
 def test_a_closed_env_refuses_its_carried_state_calls_too(made):
     env = made()
     env.reset(seed=0)
