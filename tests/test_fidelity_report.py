@@ -9,7 +9,7 @@ import pytest
 
 from dvrk_gym.calibration.datasets import load_paper_phase1
 from dvrk_gym.cli.main import main
-from dvrk_gym.fidelity.comparison import SHARE_TOLERANCE, compare
+from dvrk_gym.fidelity.comparison import RELATIVE_TOLERANCE, SHARE_TOLERANCE, compare
 from dvrk_gym.fidelity.statistics import FidelityStatistics, fidelity_statistics
 from dvrk_gym.sim import identified
 from dvrk_gym.utils.atomic import atomic_path, atomic_write_text
@@ -49,6 +49,23 @@ def test_ratios_within_25_percent_and_shares_within_006_pass():
     assert len(verdicts_near) == 22 and all(verdicts_near.values())
 
 
+@pytest.mark.parametrize("scale", [0.7, 0.8, 0.95, 1.1, 1.2, 1.3])
+def test_each_row_records_the_tolerance_its_verdict_used(scale):
+    """A reader of fidelity.json judges |value| (a difference) or |value - 1| (a ratio)
+    against the row's tolerance, and must get the row's own verdict."""
+    sim = FidelityStatistics(
+        **{
+            name: tuple(v * scale for v in value) if isinstance(value, tuple) else value * scale
+            for name, value in dataclasses.asdict(REFERENCE).items()
+        }
+    )
+    rows = compare(REFERENCE, sim, 0.37, 0.37 * scale)
+    assert {row.tolerance for row in rows if not row.share} == {RELATIVE_TOLERANCE}
+    for row in rows:
+        off_by = abs(row.difference) if row.share else abs(row.difference - 1.0)
+        assert row.passed == (off_by <= row.tolerance), row
+
+
 def test_a_level_plane_misses_the_real_rows_tilt_by_ratio():
     level = dataclasses.replace(REFERENCE, plane_tilt_deg=0.5, plane_slope=(0.002, 0.009))
     near = dataclasses.replace(REFERENCE, plane_tilt_deg=7.2 * 0.76)
@@ -82,6 +99,37 @@ def test_cross_validation_rows_are_left_out_when_not_run():
     sim = dataclasses.replace(REFERENCE, cv_linear_mm2=None, cv_forest_mm2=None)
     names = [row.name for row in compare(REFERENCE, sim, 0.37, 0.37)]
     assert len(names) == 20 and not any("CV" in name for name in names)
+
+
+def test_a_simulated_collection_that_keeps_too_few_rows_says_so(monkeypatch):
+    import numpy as np
+
+    from dvrk_gym.calibration.phase1 import Phase1Data
+    from dvrk_gym.fidelity import comparison
+
+    n = 93
+    unseen = Phase1Data(
+        reported_position=np.zeros((n, 3)),
+        orientation=np.zeros((n, 3)),
+        left_px=np.full((n, 2), np.nan),
+        right_px=np.full((n, 2), np.nan),
+        areas_px=np.zeros((n, 2)),
+        camera_position=np.full((n, 3), np.nan),
+        trajectory=np.zeros(n, dtype=int),
+        kept=np.zeros(n, dtype=bool),
+    )
+    monkeypatch.setattr(comparison, "run_paper_phase1", lambda *args, **kwargs: unseen)
+    with pytest.raises(ValueError, match="the simulated Phase I kept 0 of its 93 rows, too few for the statistics"):
+        comparison.run_fidelity(n_trajectories=1, progress=False)
+
+
+def test_the_statistics_need_the_rows_of_a_rigid_fit_and_of_the_folds_they_run():
+    X, y = load_paper_phase1()
+    with pytest.raises(ValueError, match="need at least 3 \\(a rigid fit needs 3\\)"):
+        fidelity_statistics(X[:2], y[:2], cross_validation=False)
+    with pytest.raises(ValueError, match="need at least 10 .*10 folds"):
+        fidelity_statistics(X[:6], y[:6])
+    assert fidelity_statistics(X[:6], y[:6], cross_validation=False).rows == 6  # no folds to fill
 
 
 def test_atomic_write_replaces_whole_or_keeps_the_old_file(tmp_path):

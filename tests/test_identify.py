@@ -96,7 +96,7 @@ def test_detector_noise_fit_recovers_the_noise_that_made_a_histogram():
     assert fitted.core_px == pytest.approx(0.9, abs=0.05)
     assert fitted.outlier_px == pytest.approx(3.0, abs=0.15)
     assert fitted.outlier_probability == pytest.approx(0.25, abs=0.03)
-    assert detector_noise.held_out_pvalue(fitted, counts[:9] / 1e4) > 0.5
+    assert detector_noise.held_out_pvalue(fitted, counts / 1e4) > 0.5
 
 
 def test_batched_frames_are_the_kinematics_frames(rows):

@@ -43,9 +43,18 @@ def test_ranges_and_calibrator_lists_parse_and_bad_ones_say_what_is_allowed():
     assert parse_int_list("0-4", "--bias-seeds") == (0, 1, 2, 3, 4)
     assert parse_int_list("0,3,7-9", "--bias-seeds") == (0, 3, 7, 8, 9)
     assert parse_int_list(" 5 ", "--seeds") == (5,)
-    for text, message in (("4-0", "empty"), ("", "not a number"), ("a-3", "not a number"), ("0-2,1", "repeats"), ("-1", "not a number")):
+    for text, message in (
+        ("4-0", "empty; write it low-high, e.g. '0-4'"),
+        ("", "not a non-negative number"),
+        ("a-3", "not a non-negative number"),
+        ("0-2,1", "repeats"),
+        ("-1", "not a non-negative number"),
+        ("0--3", "not a non-negative number"),
+        ("1-2-3", "not a non-negative number"),
+    ):
         with pytest.raises(ValueError, match=message):
             parse_int_list(text, "--bias-seeds")
+    assert parse_int_list("0-4", "--bias-seeds") == parse_int_list(" 0 - 4 ", "--bias-seeds")  # what the empty range's message suggests
     assert parse_calibrators("rbt, DNN,dnn+rf") == ("rbt", "dnn", "dnn+rf")
     for text, message in (("rbt,knn", "unknown.*expected some of rbt,dnn,dnn\\+rf"), (",", "names none"), ("dnn,dnn", "repeats")):
         with pytest.raises(ValueError, match=message):
@@ -186,6 +195,15 @@ def test_failed_units_are_named_the_rest_kept_and_a_rerun_retries_only_them(tmp_
     assert retry.submitted == ["bias1-seed0"]
 
 
+def test_a_grid_whose_every_unit_failed_leaves_no_figure_of_another_grid(tmp_path):
+    run_sweep(SweepSettings(bias_seeds=(0, 1), pipeline=TINY), tmp_path, StandInExecutor(), progress=False)
+    assert (tmp_path / "sweep_errors.png").is_file()
+    with pytest.raises(SweepError, match="This grid's 0 finished units"):
+        run_sweep(SweepSettings(bias_seeds=(5,), pipeline=TINY), tmp_path, StandInExecutor(fail={(5, 0)}), progress=False)
+    assert read_rows(tmp_path / "sweep.csv") == [] and not (tmp_path / "sweep_errors.png").exists()
+    assert sorted(p.name for p in (tmp_path / "units").iterdir()) == ["bias0-seed0.json", "bias1-seed0.json"]  # kept
+
+
 def test_a_damaged_unit_file_is_run_again(tmp_path):
     settings = SweepSettings(bias_seeds=(0, 1), pipeline=TINY)
     run_sweep(settings, tmp_path, StandInExecutor(), progress=False)
@@ -282,7 +300,7 @@ def test_a_unit_gives_the_calibration_table_of_the_pipeline(tmp_path):
     [
         (["--bias-seeds", "4-0"], "the range '4-0' is empty"),
         (["--calibrators", "rbt,knn"], "unknown ['knn']"),
-        (["--seeds", ""], "not a number"),
+        (["--seeds", ""], "not a non-negative number"),
         (["--scheduler", "localhost"], "the scheduler address 'localhost' is malformed (missing port"),
         (["--scheduler", "tcp://127.0.0.1:9", "--connect-timeout", "0.5"], "cannot reach a Dask scheduler at 'tcp://127.0.0.1:9'"),
         (["--workers", "0"], "workers is 0; expected at least 1"),

@@ -57,6 +57,8 @@ class ComparisonRow:
             per-yaw median pitch); else by ratio.
         difference: ``sim - real`` for a share, ``sim / real`` otherwise (nan if real is 0).
         passed: whether ``difference`` meets the target.
+        tolerance: the target's bound: on ``|difference|`` for a share, on
+            ``|difference - 1|`` for a ratio (``RELATIVE_TOLERANCE``).
     """
 
     name: str
@@ -65,23 +67,28 @@ class ComparisonRow:
     share: bool
     difference: float
     passed: bool
-    tolerance: float = SHARE_TOLERANCE
+    tolerance: float
 
     @property
     def target(self) -> str:
         """The target in words: ``"|diff| <= 0.06"`` or ``"ratio 0.75-1.25"``."""
         if self.share:
             return f"|diff| <= {self.tolerance:g}"
-        return f"ratio {1 - RELATIVE_TOLERANCE:.2f}-{1 + RELATIVE_TOLERANCE:.2f}"
+        return f"ratio {1 - self.tolerance:.2f}-{1 + self.tolerance:.2f}"
 
 
-def _row(name: str, real: float, sim: float, share: bool, tolerance: float = SHARE_TOLERANCE) -> ComparisonRow:
+def _row(name: str, real: float, sim: float, share: bool, tolerance: float | None = None) -> ComparisonRow:
+    """``tolerance``: a share's bound (default ``SHARE_TOLERANCE``); a ratio's is ``RELATIVE_TOLERANCE``."""
     if share:
+        tolerance = SHARE_TOLERANCE if tolerance is None else tolerance
         difference = sim - real
         passed = bool(np.isfinite(difference) and abs(difference) <= tolerance)
     else:
+        if tolerance is not None:
+            raise ValueError(f"{name}: a ratio is judged by RELATIVE_TOLERANCE, not by a tolerance of its own")
+        tolerance = RELATIVE_TOLERANCE
         difference = sim / real if real != 0 else float("nan")
-        passed = bool(np.isfinite(difference) and abs(difference - 1.0) <= RELATIVE_TOLERANCE)
+        passed = bool(np.isfinite(difference) and abs(difference - 1.0) <= tolerance)
     return ComparisonRow(
         name=name, real=float(real), sim=float(sim), share=share, difference=float(difference), passed=bool(passed), tolerance=tolerance
     )
@@ -193,7 +200,13 @@ def run_fidelity(
     kept = data.cleaned()
     real_X, real_y = load_paper_phase1()
     real = fidelity_statistics(real_X, real_y, seed=seed)
-    sim = fidelity_statistics(kept.X, kept.y, seed=seed)
+    try:
+        sim = fidelity_statistics(kept.X, kept.y, seed=seed)
+    except ValueError as error:
+        raise ValueError(
+            f"the simulated Phase I kept {len(kept.y)} of its {len(data.y)} rows, too few for the statistics ({error}); "
+            "collect more trajectories or at a higher camera resolution"
+        ) from error
     settings: dict[str, object] = {
         "bias": bias,
         "bias_seed": int(bias_seed),

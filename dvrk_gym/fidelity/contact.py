@@ -134,12 +134,13 @@ def fit_contact(runs: PaperTableRuns, methods: tuple[str, ...], camera: StereoCa
             straight lines the simulator uses. Comparing the fits' residuals says where the
             records put a hinge.
 
-    Raises ValueError if no touch of ``methods`` was sent beyond the dead zone, or for a
-    dead zone out of range.
+    Raises ValueError if no touch of ``methods`` was sent beyond the dead zone, for a
+    dead zone out of range, or for ``methods`` unknown or repeated (a repeat would count
+    its touches twice).
     """
     unknown = set(methods) - set(paper.METHOD_LABELS.values())
-    if not methods or unknown:
-        raise ValueError(f"methods must be some of {sorted(paper.METHOD_LABELS.values())}, got {methods}")
+    if not methods or unknown or len(set(methods)) != len(methods):
+        raise ValueError(f"methods must be some of {sorted(paper.METHOD_LABELS.values())}, each once, got {methods}")
     dead_zone = check_float("dead_zone_m", dead_zone_m, 0.0, MAX_DEAD_ZONE_M, unit="m")
     camera = StereoCamera() if camera is None else camera
     slide_rows, offsets, rise_rows, rises = [], [], [], []

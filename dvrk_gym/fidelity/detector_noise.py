@@ -20,6 +20,7 @@ from scipy.stats import chisquare, norm
 
 from dvrk_gym import paper
 from dvrk_gym.sim.endoscope.noise import DetectionNoise
+from dvrk_gym.utils.checks import check_int
 
 __all__ = [
     "MAX_ROW_DIFFERENCE_PX",
@@ -81,16 +82,32 @@ def _noise(t: np.ndarray) -> DetectionNoise:
     return DetectionNoise(float(np.exp(t[0])), float(np.exp(t[1])), float(1.0 / (1.0 + np.exp(-t[2]))))
 
 
+def _check_counts(counts: np.ndarray) -> np.ndarray:
+    counts = np.asarray(counts)
+    bins = MAX_ROW_DIFFERENCE_PX + 1
+    if (
+        counts.shape != (bins,)
+        or counts.dtype.kind not in "fiu"
+        or not np.isfinite(counts).all()
+        or (counts < 0).any()
+        or counts.sum() <= 0
+    ):
+        raise ValueError(
+            f"counts must be a histogram of {bins} finite, non-negative counts (row differences 0 .. "
+            f"{MAX_ROW_DIFFERENCE_PX} px) holding some rows, got {np.array2string(counts, threshold=12)} of shape {counts.shape}"
+        )
+    return counts
+
+
 def fit_detector_noise(counts: np.ndarray) -> DetectionNoise:
     """Maximum-likelihood detector noise for a histogram of row differences (:func:`histogram`).
 
     Raises:
-        ValueError: ``counts`` is not a 1-D array of finite, non-negative counts with at least
-            one row (an empty histogram would "fit" at the optimiser's starting point).
+        ValueError: ``counts`` is not a histogram of :func:`histogram`'s shape (one count per
+            row difference 0 .. ``MAX_ROW_DIFFERENCE_PX``) of finite, non-negative counts with
+            at least one row (an empty histogram would "fit" at the optimiser's starting point).
     """
-    counts = np.asarray(counts)
-    if counts.ndim != 1 or counts.dtype.kind not in "fiu" or not np.isfinite(counts).all() or (counts < 0).any() or counts.sum() <= 0:
-        raise ValueError(f"counts must be a 1-D histogram of finite, non-negative counts holding some rows, got {counts!r}")
+    counts = _check_counts(counts)
 
     def negative_log_likelihood(t: np.ndarray) -> float:
         return float(-np.sum(counts * np.log(row_difference_probabilities(_noise(t)) + 1e-300)))
@@ -101,7 +118,14 @@ def fit_detector_noise(counts: np.ndarray) -> DetectionNoise:
 
 
 def held_out_pvalue(noise: DetectionNoise, counts: np.ndarray, max_px: int = 8) -> float:
-    """Chi-square p-value of held-out counts (0 .. max_px px, pooled beyond) against the fitted noise."""
+    """Chi-square p-value of held-out counts (0 .. max_px px, pooled beyond) against the fitted noise.
+
+    Raises:
+        ValueError: ``counts`` is not a histogram of :func:`histogram`'s shape, or ``max_px``
+            not an int in [1, ``MAX_ROW_DIFFERENCE_PX``].
+    """
+    counts = _check_counts(counts)
+    max_px = check_int("max_px", max_px, 1, MAX_ROW_DIFFERENCE_PX)
     probabilities = row_difference_probabilities(noise)
     observed = np.append(counts[:max_px], counts[max_px:].sum())
     expected = np.append(probabilities[:max_px], probabilities[max_px:].sum()) * observed.sum()

@@ -39,14 +39,14 @@ from scipy.spatial.transform import Rotation
 
 from dvrk_gym import paper
 from dvrk_gym.calibration.datasets import load_paper_phase1
-from dvrk_gym.calibration.phase1 import PaperExplorationPolicy, collect_phase1, run_paper_phase1
+from dvrk_gym.calibration.phase1 import MAX_TRAJECTORIES, PaperExplorationPolicy, collect_phase1, run_paper_phase1
 from dvrk_gym.envs.exploration import CalibrationExplorationEnv
 from dvrk_gym.fidelity.instrument_model import PARAMETERS, initial_vector, predict_camera_points, predict_pixels
 from dvrk_gym.fidelity.statistics import fidelity_statistics
 from dvrk_gym.sim.endoscope.camera import WORKSPACE_CENTER_M
 from dvrk_gym.sim.endoscope.noise import IDENTIFIED_MARKER_NOISE, DetectionNoise
 from dvrk_gym.sim.robot.bias import BIAS_PRESETS
-from dvrk_gym.utils.checks import check_int
+from dvrk_gym.utils.checks import check_float, check_int
 
 __all__ = [
     "TRAIN_FRACTION",
@@ -78,6 +78,8 @@ TRAIN_FRACTION = 0.7
 BOOTSTRAP_BLOCK = 50
 """Rows per block of the moving-block bootstrap: the residuals' serial correlation fades
 over about 20 rows (lag-10 autocorrelation of the depth residual 0.28, lag 50 0.06)."""
+MAX_BOOTSTRAP_REPLICATES = 10_000
+"""The most replicates :func:`bootstrap_sd` runs (each is a refit of every row)."""
 HUBER_SCALE = 2.0
 """Residuals beyond this many of their scale count linearly (the detector's outliers)."""
 CAMERA_AND_TAPE = tuple(range(10))
@@ -179,11 +181,17 @@ def bootstrap_sd(
     Each replicate draws ``len(rows) / block`` blocks of ``block`` contiguous rows with
     replacement, joins them in the drawn order and refits the free parameters from
     ``fit`` (with its residual scales). Parameters not fitted get sd 0.
+
+    Raises:
+        ValueError: ``replicates`` not an int in [2, ``MAX_BOOTSTRAP_REPLICATES``],
+            ``block`` not an int in [1, rows], or a negative ``seed``.
     """
-    if replicates < 2:
-        raise ValueError(f"replicates = {replicates}; a standard deviation needs at least 2")
-    rng = np.random.default_rng(seed)
+    replicates = check_int("replicates", replicates, 2, MAX_BOOTSTRAP_REPLICATES)
     n = len(commands)
+    block = check_int("block", block, 1, max(n, 1))
+    if n < block:
+        raise ValueError(f"a block bootstrap of blocks of {block} rows needs at least {block} rows, got {n}")
+    rng = np.random.default_rng(check_int("seed", seed, 0))
     starts = rng.integers(0, n - block + 1, size=(replicates, n // block))
     estimates = []
     for k, row_starts in enumerate(starts):
@@ -300,6 +308,18 @@ class SettleLagMatch:
     sim_pitch_autocorrelations: tuple[float, ...]
 
 
+def _check_lag_grid(lags: tuple[float, ...]) -> tuple[float, ...]:
+    """``lags`` as floats, if they are one or more increasing settle lags, each in [0, 1)."""
+    if not lags:
+        raise ValueError("expected at least one settle lag, got none")
+    values = tuple(check_float("settle lag", lag, 0.0, 1.0) for lag in lags)
+    if values[-1] >= 1.0:
+        raise ValueError(f"a settle lag is a fraction in [0, 1), got {values[-1]}")
+    if any(b <= a for a, b in zip(values, values[1:])):
+        raise ValueError(f"lags must increase, got {tuple(lags)}")
+    return values
+
+
 def first_crossing(lags: tuple[float, ...], shares: tuple[float, ...], target: float) -> float:
     """The lag where ``shares`` first fall to ``target``: linear between the two lags of the
     grid (increasing) around the crossing, to 0.01 (the first lag if its share is already
@@ -309,10 +329,9 @@ def first_crossing(lags: tuple[float, ...], shares: tuple[float, ...], target: f
         ValueError: lags and shares differ in length, lags do not increase, or no share
             falls to the target (the grid stops short).
     """
-    if len(lags) != len(shares) or not lags:
+    if len(lags) != len(shares):
         raise ValueError(f"expected one share per lag, got {len(lags)} lags and {len(shares)} shares")
-    if any(b <= a for a, b in zip(lags, lags[1:])):
-        raise ValueError(f"lags must increase, got {lags}")
+    _check_lag_grid(lags)
     for index, share in enumerate(shares):
         if share <= target:
             if index == 0:
@@ -336,6 +355,9 @@ def match_settle_lag(
     at each lag and returns the lag where the same-position share falls to the real one,
     linear between the grid's lags around it (:func:`first_crossing`).
     """
+    lags = _check_lag_grid(tuple(lags))  # before the first collection: each takes about a minute
+    n_trajectories = check_int("n_trajectories", n_trajectories, 1, MAX_TRAJECTORIES)
+    seed = check_int("seed", seed, 0)
     real_X, real_y = load_paper_phase1()
     real_share = fidelity_statistics(real_X, real_y, cross_validation=False).same_position_share
     shares, correlations = [], []

@@ -55,7 +55,7 @@ from sklearn.ensemble import RandomForestRegressor
 from sklearn.linear_model import LinearRegression
 
 from dvrk_gym.calibration.models.features import PAPER_YAWS_RAD, check_inputs, check_targets, nearest_yaw_index
-from dvrk_gym.calibration.models.rigid import RigidBodyCalibrator
+from dvrk_gym.calibration.models.rigid import MIN_GROUP_ROWS, RigidBodyCalibrator
 from dvrk_gym.calibration.models.two_phase import Regressor
 from dvrk_gym.calibration.search import cross_validate
 from dvrk_gym.utils.checks import check_int
@@ -273,14 +273,17 @@ def fidelity_statistics(
 
     Raises:
         ValueError: on bad shapes, non-finite values, units that are not metres and
-            radians, fewer rows than ``folds``, or no consecutive pair for the jitter.
+            radians, fewer rows than a rigid fit needs (3) or, with ``cross_validation``,
+            than ``folds``, or no consecutive pair for the jitter.
     """
     folds = check_int("folds", folds, 2, 1000)
     X = check_inputs(X)
     y = check_targets(y, X.shape[0])
     _check_units(X, y)
-    if X.shape[0] < max(folds, 2):
-        raise ValueError(f"X has {X.shape[0]} rows; the statistics need at least {max(folds, 2)} (folds={folds})")
+    needed = max(folds, MIN_GROUP_ROWS) if cross_validation else MIN_GROUP_ROWS
+    if X.shape[0] < needed:
+        why = f"a rigid fit needs {MIN_GROUP_ROWS}" + (f", the cross-validation's {folds} folds {folds}" if cross_validation else "")
+        raise ValueError(f"X has {X.shape[0]} rows; the statistics need at least {needed} ({why})")
     residual = rigid_residuals_camera(X, y)
     energy = np.sum(residual**2, axis=0)
     steps = _steps(y)

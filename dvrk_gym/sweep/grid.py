@@ -11,6 +11,7 @@ import collections
 import dataclasses
 import itertools
 import operator
+import re
 from dataclasses import dataclass
 from typing import Any
 
@@ -142,8 +143,12 @@ def _check_seeds(values: tuple[int, ...], name: str) -> None:
     _check_unique(values, name)
 
 
+_NUMBER_OR_RANGE = re.compile(r"\s*(?P<first>\d+)\s*(?:-\s*(?P<last>\d+)\s*)?")
+"""One part of a list of seeds: a non-negative integer, or an inclusive range of them ("7-9")."""
+
+
 def parse_int_list(text: str, option: str) -> tuple[int, ...]:
-    """Integers from a list of numbers and inclusive ranges: ``"0-4"``, ``"0,3,7-9"``.
+    """Non-negative integers from a list of numbers and inclusive ranges: ``"0-4"``, ``"0,3,7-9"``.
 
     Args:
         text: the option's value.
@@ -155,12 +160,13 @@ def parse_int_list(text: str, option: str) -> tuple[int, ...]:
     """
     values: list[int] = []
     for part in text.split(","):
-        low, dash, high = part.strip().partition("-")
-        try:
-            first = int(low)
-            last = int(high) if dash else first
-        except ValueError:
-            raise ValueError(f"{option} {text!r}: {part.strip()!r} is not a number or a range; expected e.g. '0-4' or '0,3,7-9'") from None
+        match = _NUMBER_OR_RANGE.fullmatch(part)
+        if match is None:
+            raise ValueError(
+                f"{option} {text!r}: {part.strip()!r} is not a non-negative number or a range of them; expected e.g. '0-4' or '0,3,7-9'"
+            )
+        first = int(match["first"])
+        last = int(match["last"]) if match["last"] is not None else first
         if last < first:
             raise ValueError(f"{option} {text!r}: the range {part.strip()!r} is empty; write it low-high, e.g. '{last}-{first}'")
         if len(values) + last - first + 1 > MAX_UNITS:  # before the list is made: '0-100000000000' would fill the memory

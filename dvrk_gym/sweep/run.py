@@ -119,12 +119,16 @@ def run_sweep(settings: SweepSettings, out: str | os.PathLike, executor: Executo
         computed, failures = _run_units(todo, executor, folder, results, progress, total=len(loaded) + len(todo))
         rows = sweep_rows(settings, results)
         csv_path = write_csv(rows, folder.file(CSV_NAME))
-        figure = plot_errors(rows, folder.file(FIGURE_NAME)) if rows else folder.file(FIGURE_NAME)
+        figure = folder.file(FIGURE_NAME)
+        if rows:
+            plot_errors(rows, figure)
+        else:  # every unit of this grid failed: a figure of another grid's units would not match the table
+            figure.unlink(missing_ok=True)
     if failures:
         listed = "; ".join(f"{name} ({message})" for name, message in failures.items())
         raise SweepError(
-            f"{len(failures)} of {len(todo)} units failed: {listed}. The {len(results)} finished units are in {units_dir} "
-            f"and {csv_path}; the same call runs only the failed ones again"
+            f"{len(failures)} of {len(todo)} units failed: {listed}. This grid's {len(results)} finished units are in "
+            f"{units_dir} and tabled in {csv_path}; the same call runs only the failed ones again"
         )
     return SweepResult(rows, computed, loaded, csv_path, figure, executor.description, time.perf_counter() - start)
 

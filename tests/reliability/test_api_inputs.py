@@ -123,12 +123,65 @@ def test_bad_calibration_settings_name_where_they_came_from(settings):
         PipelineConfig.from_settings(settings, source="runs/cal/pipeline_config.json")
 
 
-@pytest.mark.parametrize("counts", [np.zeros(11), np.full(11, np.nan), -np.ones(11), np.ones((2, 11))])
+@pytest.mark.parametrize("counts", [np.zeros(11), np.full(11, np.nan), -np.ones(11), np.ones((2, 11)), np.ones(5), np.ones(20)])
 def test_the_detector_noise_fit_refuses_a_histogram_it_cannot_fit(counts):
-    from dvrk_gym.fidelity.detector_noise import fit_detector_noise
+    from dvrk_gym.fidelity.detector_noise import fit_detector_noise, held_out_pvalue
+    from dvrk_gym.sim.endoscope.noise import IDENTIFIED_MARKER_NOISE
 
-    with pytest.raises(ValueError, match="counts must be a 1-D histogram"):
+    with pytest.raises(ValueError, match="counts must be a histogram of 11"):
         fit_detector_noise(counts)
+    with pytest.raises(ValueError, match="counts must be a histogram of 11"):
+        held_out_pvalue(IDENTIFIED_MARKER_NOISE, counts)
+
+
+@pytest.mark.parametrize("max_px", [0, 11, 20, 2.5])
+def test_the_held_out_test_refuses_a_pooling_point_beyond_the_histogram(max_px):
+    from dvrk_gym.fidelity.detector_noise import held_out_pvalue
+    from dvrk_gym.sim.endoscope.noise import IDENTIFIED_MARKER_NOISE
+
+    with pytest.raises(ValueError, match="max_px"):
+        held_out_pvalue(IDENTIFIED_MARKER_NOISE, np.ones(11), max_px=max_px)
+
+
+@pytest.mark.parametrize(
+    ("keywords", "name"),
+    [
+        ({"replicates": 2.5}, "replicates"),
+        ({"block": 0}, "block"),
+        ({"block": -5}, "block"),
+        ({"block": 80}, "block"),
+        ({"seed": -1}, "seed"),
+    ],
+)
+def test_the_bootstrap_refuses_blocks_and_replicates_it_cannot_draw(keywords, name):
+    from dvrk_gym.fidelity.identify import InstrumentFit, bootstrap_sd
+    from dvrk_gym.fidelity.instrument_model import initial_vector
+
+    fit = InstrumentFit(initial_vector(np.eye(4)), np.ones(3), (0,))
+    arguments = {"replicates": 2, "seed": 0, "block": 10} | keywords
+    with pytest.raises(ValueError, match=name):
+        bootstrap_sd(fit, np.zeros((60, 6)), np.zeros((60, 3)), **arguments)
+
+
+@pytest.mark.parametrize("lags", [(), (0.3, 0.2), (0.2, 0.2), (0.5, 1.0), (-0.1, 0.2), (0.1, float("nan"))])
+def test_the_settle_lag_match_refuses_its_grid_before_it_collects(lags, monkeypatch):
+    from dvrk_gym.fidelity import identify
+
+    def collect(*args, **kwargs):
+        raise AssertionError("collected a Phase I for a grid it refuses")
+
+    monkeypatch.setattr(identify, "run_paper_phase1", collect)
+    with pytest.raises(ValueError, match="lag"):
+        identify.match_settle_lag(lags=lags, n_trajectories=1)
+
+
+@pytest.mark.parametrize("methods", [("RBT", "RBT"), ("DNN", "DNN+RF", "DNN"), (), ("rbt",)])
+def test_the_contact_fit_counts_each_method_once(methods):
+    from dvrk_gym.calibration.datasets import load_paper_table_runs
+    from dvrk_gym.fidelity.contact import fit_contact
+
+    with pytest.raises(ValueError, match="each once"):
+        fit_contact(load_paper_table_runs(), methods)
 
 
 def test_fidelity_helpers_name_their_bad_counts():
