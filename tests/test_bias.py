@@ -75,6 +75,29 @@ def test_negative_or_nan_magnitude_is_rejected() -> None:
         BiasConfig(wrist_stretch=float("nan"))
 
 
+@pytest.mark.parametrize(
+    ("fields", "name"),
+    [
+        ({"around_identified": "false"}, "around_identified"),  # a string is not False: it read as True
+        ({"around_identified": 1}, "around_identified"),
+        ({"sag_m": "0.001"}, "sag_m"),
+        ({"repeatability_m": 1e3}, "repeatability_m"),
+        ({"backlash_wrist_rad": 2.0}, "backlash_wrist_rad"),
+        ({"wrist_stretch": True}, "wrist_stretch"),
+        ({"wrist_settle_lag": "0.2"}, "wrist_settle_lag"),
+    ],
+)
+def test_fields_of_the_wrong_type_or_beyond_the_view_are_refused(fields, name) -> None:
+    with pytest.raises(ValueError, match=f"BiasConfig.{name}"):
+        BiasConfig(**fields)
+
+
+def test_bias_fields_are_kept_as_floats_and_ten_times_paper_is_allowed() -> None:
+    config = BiasConfig(sag_m=0, backlash_outer_rad=np.float32(0.01))
+    assert type(config.sag_m) is float and type(config.backlash_outer_rad) is float
+    assert BIAS_PRESETS["paper"].scaled(10.0).backlash_wrist_rad > 0.5
+
+
 def test_severe_is_about_twice_paper() -> None:
     paper, severe = BIAS_PRESETS["paper"], BIAS_PRESETS["severe"]
     for name in BiasConfig.magnitude_names():

@@ -164,6 +164,8 @@ def test_compute_reward_is_vectorised_for_her(make_env):
     np.testing.assert_array_equal(env.compute_reward(achieved, desired, [{}] * 5), [0, 0, -1, -1, 0])
     dense = make_env("dvrk_gym/GridTouch-v0").unwrapped
     np.testing.assert_allclose(dense.compute_reward(achieved, desired, None), -1e3 * np.linalg.norm(desired, axis=1))
+    with pytest.raises(ValueError, match="goals must be \\(..., 3\\)"):
+        dense.compute_reward(np.zeros((5, 2)), np.zeros((5, 2)), None)  # was a distance in the plane, silently
 
 
 def test_bad_config_values_are_clear_errors(make_env):

@@ -339,3 +339,34 @@ def test_table_drives_the_worlds_jaws_until_the_world_is_rebuilt():
         assert len(table.add_fragments("pumpkin_seed", rng, n=3)) == 3
     finally:
         world.close()
+
+
+def test_a_table_refuses_waits_moves_and_fragments_it_cannot_make():
+    world = DvrkWorld(WorldConfig(bias="none", camera_resolution=(320, 180)))
+    try:
+        table = DebridementTable(world)
+        for n, rng in ((10**10, np.random.default_rng(0)), (8.0, np.random.default_rng(0)), (-1, np.random.default_rng(0)), (2, 0)):
+            with pytest.raises(ValueError, match="n must be|rng must be"):
+                table.add_fragments("raisin", rng, n=n)  # 10**10 tried to allocate 224 GiB
+        assert world.jaw_driver is None  # nothing laid
+        table.add_fragments("raisin", np.random.default_rng(0), n=2)
+        clock = world.clock.time_s
+        for call in (
+            lambda: table.dwell(1e7),  # hung
+            lambda: table.dwell(float("nan")),
+            lambda: table.actuate_jaws(0.5, duration_s=1e7),
+            lambda: table.actuate_jaws(0.5, duration_s=-1.0),
+            lambda: table.actuate_jaws(float("nan")),
+            lambda: table.move_stepped(world.reported_pose(), duration_s=1e7),  # tried 2.4e9 waypoints
+            lambda: table.move_stepped(world.reported_pose(), duration_s=0.0),
+            lambda: table.move_stepped(world.reported_pose(), min_tip_clearance_m=float("nan")),  # turned the floor off
+        ):
+            with pytest.raises(ValueError, match="seconds|duration_s|jaw_angle_rad|min_tip_clearance_m"):
+                call()
+        assert world.clock.time_s == clock
+        assert table.dwell(-0.05) == 0.0  # what is left of an overrun phase: no wait
+        for index in (-1, 2, 1.0):  # -1 parked the last fragment a slot below the first
+            with pytest.raises(ValueError, match="index must be an int in \\[0, 1\\]"):
+                table.set_aside_fragment(index)
+    finally:
+        world.close()

@@ -284,3 +284,51 @@ def test_the_tape_detector_finds_nothing_outside_its_search_boxes():
         assert any(verdicts) and not all(verdicts)  # the paper's poses put the tape on both sides of the box
     finally:
         world.close()
+
+
+# --- what a world refuses, before anything changes ----------------------------------------
+
+
+@pytest.fixture
+def small_world():
+    world = DvrkWorld(WorldConfig(camera_resolution=(320, 180)))
+    yield world
+    world.close()
+
+
+def _state(world: DvrkWorld) -> tuple:
+    return world.q_cmd.tobytes(), world.q_true.tobytes(), world.jaw_angle, world.clock.time_s
+
+
+@pytest.mark.parametrize("jaw", [float("inf"), float("nan"), 100.0, -1.0, "0.2"])
+def test_a_move_with_a_jaw_angle_out_of_range_is_refused_before_it_moves(small_world, jaw):
+    q = ik.inverse_kinematics(_paper_poses(1)[0])
+    before = _state(small_world)
+    with pytest.raises(ValueError, match="jaw_angle_rad"):
+        small_world.move_joints(q, jaw_angle_rad=jaw)
+    with pytest.raises(ValueError, match="jaw_angle_rad"):
+        small_world.reset_robot(q, jaw_angle_rad=jaw)
+    assert _state(small_world) == before
+    small_world.move_joints(q, jaw_angle_rad=0.3)  # still works
+    assert small_world.jaw_angle == 0.3
+
+
+def test_a_reset_outside_the_joint_limits_is_refused(small_world):
+    before = _state(small_world)
+    with pytest.raises(ik.UnreachablePoseError, match="outside the joint limits"):
+        small_world.reset_robot(np.array([5.0, 0.0, 0.1, 0.0, 0.0, 0.0]))
+    with pytest.raises(ValueError, match="q must be finite"):
+        small_world.reset_robot(np.array([np.nan, 0.0, 0.1, 0.0, 0.0, 0.0]))
+    assert _state(small_world) == before
+
+
+@pytest.mark.parametrize("state_id", [-1, 999, 1.5])
+def test_restoring_a_physics_state_never_saved_is_a_clear_error(small_world, state_id):
+    with pytest.raises(ValueError, match="state_id|no physics state 999"):
+        small_world.restore_physics(state_id)  # -1 made PyBullet load a file and abort the process
+    small_world.restore_physics(small_world.physics.client.saveState())
+
+
+def test_visibility_from_a_camera_that_is_not_there_is_refused(small_world):
+    with pytest.raises(ValueError, match="side must be one of"):
+        small_world.marker_visible_fraction("middle")

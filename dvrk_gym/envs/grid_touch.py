@@ -266,8 +266,12 @@ class GridTouchEnv(DvrkEnv[GridTouchConfig]):
         """Reward for goals (..., 3) in metres, vectorised over leading axes (for HER).
 
         Dense: minus the distance in millimetres. Sparse: 0 within the success radius, else -1.
+        ValueError for goals that are not (..., 3) (a distance over other axes is no touch's).
         """
-        distance = np.linalg.norm(np.asarray(achieved_goal) - np.asarray(desired_goal), axis=-1)
+        achieved, desired = np.asarray(achieved_goal), np.asarray(desired_goal)
+        if achieved.shape[-1:] != (3,) or desired.shape[-1:] != (3,):
+            raise ValueError(f"goals must be (..., 3) positions in metres, got {achieved.shape} and {desired.shape}")
+        distance = np.linalg.norm(achieved - desired, axis=-1)
         if self.config.reward_type == "sparse":
             return -(distance > self.config.distance_threshold_m).astype(np.float64)
         return -1e3 * distance

@@ -22,11 +22,12 @@ import math
 from contextlib import nullcontext
 
 import numpy as np
+import pybullet
 
 from dvrk_gym.sim.compiled import float_paths
 from dvrk_gym.sim.endoscope.baseline import PAPER_BASELINE_M, true_baseline_m
-from dvrk_gym.sim.endoscope.camera import PAPER_INTRINSICS, PixelWindow, StereoCamera, default_camera_pose
-from dvrk_gym.sim.endoscope.detection import Blob, detect_marker, median_kernel_px
+from dvrk_gym.sim.endoscope.camera import PAPER_INTRINSICS, StereoCamera, default_camera_pose
+from dvrk_gym.sim.endoscope.detection import Blob, detect_marker_in_window
 from dvrk_gym.sim.endoscope.noise import PixelNoise, whole_pixels
 from dvrk_gym.sim.endoscope.printed_grid import observe_printed_grid
 from dvrk_gym.sim.endoscope.stereo import StereoDetection, stereo_detection
@@ -39,7 +40,8 @@ from dvrk_gym.sim.robot.body import PSMBody, marker_corners, marker_face_samples
 from dvrk_gym.sim.robot.cables import CableModel
 from dvrk_gym.sim.robot.motion import CartesianMove, SimClock
 from dvrk_gym.sim.robot.motion_limits import MotionLimits
-from dvrk_gym.sim.world_config import JawDriver, MoveResult, WorldConfig
+from dvrk_gym.sim.world_config import JawDriver, MoveResult, WorldConfig, check_jaw_angle, check_joints
+from dvrk_gym.utils.checks import check_int
 
 HOME_JOINTS = np.array([0.0, 0.0, 0.05, 0.0, 0.0, 0.0])
 """A retracted configuration: the tool is 34 mm below the RCM, far outside the camera's view."""
@@ -49,8 +51,6 @@ _OWN_BODIES = {field.name for field in dataclasses.fields(SceneBodies)} | {"psm"
 JAW_SPEED_RAD_S = math.radians(150.0)
 """How fast the jaws open or close, rad/s."""
 
-MARKER_WINDOW_MARGIN_PX = 2
-"""Pixels added around the marker's projected bounding box when rendering its window."""
 MARKER_RAY_STANDOFF_M = 0.00005
 """Visibility rays stop this far in front of the marker's face, metres."""
 MARKER_CIRCLE_CLEARANCE_M = 0.0005
@@ -108,15 +108,19 @@ class DvrkWorld:
                 them as a real arm sent home does (no repeatability noise: no random draw).
             floats: take the cables' float path (compiled: a few ulps from numpy's) and leave
                 the body's joints to be set when asked for (no physics is stepped): GridTouch-v0's.
+
+        Raises (before anything changes):
+            ik.UnreachablePoseError: ``q`` outside the joint limits.
+            ValueError: ``q`` not (6,) finite, or a jaw angle out of :func:`check_jaw_angle`'s range.
         """
-        q = kin.finite_vector(q, 6, "q") if floats else np.array(q, dtype=float)
+        q, jaw = check_joints(q), check_jaw_angle(jaw_angle_rad)
         if relax:
             self.cable.reset(q)
         self.q_cmd = q.copy()
         self.q_true = (
             np.array(float_paths.true_joints(self.cable, self.cable_constants, q.tolist(), None)) if floats else self.cable.true_joints(q)
         )
-        self.jaw_angle = float(jaw_angle_rad)
+        self.jaw_angle = jaw
         if self.jaw_driver is None:
             self._place_body(floats)
         else:  # nothing stays held through a reset
@@ -147,8 +151,13 @@ class DvrkWorld:
 
     def restore_physics(self, state_id: int) -> None:
         """Restore the physics to a ``physics.client.saveState()``, leaving a pending body update
-        pending (``q_true`` is unchanged): the reset that follows sets the body only once."""
-        self._physics.client.restoreState(state_id)
+        pending (``q_true`` is unchanged): the reset that follows sets the body only once.
+        ValueError if no state ``state_id`` was saved here (PyBullet aborts on a negative one)."""
+        state_id = check_int("state_id", state_id, 0)
+        try:
+            self._physics.client.restoreState(state_id)
+        except pybullet.error:
+            raise ValueError(f"no physics state {state_id} was saved in this world") from None
 
     def _sync_body(self) -> None:
         self._body_behind = False
@@ -227,9 +236,7 @@ class DvrkWorld:
 
     def move_joints(self, q: np.ndarray, jaw_angle_rad: float | None = None, noise_rng: np.random.Generator | None = None) -> MoveResult:
         """Command joints directly (within limits); timed as the straight move between the poses."""
-        q = np.asarray(q, dtype=float)
-        if not kin.within_joint_limits(q):
-            raise ik.UnreachablePoseError(f"joints {np.round(q, 4).tolist()} are outside the joint limits")
+        q = check_joints(q)
         move = CartesianMove.plan(self._nominal_pose(self.q_cmd), self._nominal_pose(q), self.config.motion)
         return self._finish_move(q, move.duration_s, jaw_angle_rad, noise_rng, np.zeros(6, dtype=bool))
 
@@ -258,8 +265,9 @@ class DvrkWorld:
         set when asked for (GridTouch-v0's: no physics is stepped after it)."""
         jaw_time = 0.0
         if jaw_angle_rad is not None:
-            jaw_time = abs(float(jaw_angle_rad) - self.jaw_angle) / JAW_SPEED_RAD_S
-            self.jaw_angle = float(jaw_angle_rad)
+            jaw_angle_rad = check_jaw_angle(jaw_angle_rad)  # before anything moves
+            jaw_time = abs(jaw_angle_rad - self.jaw_angle) / JAW_SPEED_RAD_S
+            self.jaw_angle = jaw_angle_rad
         self.q_cmd = np.array(q_target, dtype=float)
         if floats is None:
             self.q_true = self.cable.true_joints(self.q_cmd, noise_rng)
@@ -322,7 +330,7 @@ class DvrkWorld:
         of rays from the camera's optical centre to a grid of points on the marker's faces
         towards it that meet nothing on the way (0: hidden, 1: seen whole). The fast check;
         :meth:`observe_marker` is the pixel path, and the tests measure how the two agree."""
-        origin = self.camera.pose[:3, 3] + (self.camera.baseline_m * self.camera.pose[:3, 0] if side == "right" else 0.0)
+        origin = self.camera.optical_centre(side)
         points, normals = marker_face_samples(self.q_true, origin, self.cable.true_dh)
         if len(points) == 0:
             return 0.0
@@ -332,20 +340,8 @@ class DvrkWorld:
         return float(np.mean([hit[0] == -1 for hit in hits]))
 
     def _detect_in_window(self, side: str, corners_uv: np.ndarray) -> Blob | None:
-        k = self.camera.intrinsics
-        # The median filter reads half its kernel beyond the blob: render that much more.
-        margin = MARKER_WINDOW_MARGIN_PX + median_kernel_px(k.width) // 2
-        low = np.floor(corners_uv.min(axis=0)).astype(int) - margin
-        high = np.ceil(corners_uv.max(axis=0)).astype(int) + margin
-        low = np.maximum(low, 0)
-        high = np.minimum(high, [k.width - 1, k.height - 1])
-        if np.any(high < low):  # entirely outside the image
-            return None
-        window = PixelWindow(int(low[0]), int(low[1]), int(high[0] - low[0] + 1), int(high[1] - low[1] + 1))
-        blob = detect_marker(self.camera.render(self.physics.client, side, window), median_px=median_kernel_px(k.width))
-        if blob is None:
-            return None
-        return Blob(blob.centroid + [window.u0, window.v0], blob.area_px, blob.touches_border)
+        k, client = self.camera.intrinsics, self.physics.client
+        return detect_marker_in_window(lambda window: self.camera.render(client, side, window), (k.width, k.height), corners_uv)
 
     def observe_grid(self) -> tuple[StereoDetection, ...]:
         """Detect the 35 printed circles in both images, in grid order (row-major).

@@ -1,7 +1,8 @@
 """How to build a world (:class:`WorldConfig`), what one commanded move did (:class:`MoveResult`),
-and what drives the tool once something can be held (:class:`JawDriver`).
+and what drives the tool once something can be held (:class:`JawDriver`); the checks of
+what a world is commanded (:func:`check_joints`, :func:`check_jaw_angle`).
 
-All three are re-exported by :mod:`dvrk_gym.sim.world`, which builds and runs the world.
+All five are re-exported by :mod:`dvrk_gym.sim.world`, which builds and runs the world.
 """
 
 from __future__ import annotations
@@ -13,11 +14,35 @@ import numpy as np
 
 from dvrk_gym.sim.endoscope.camera import PAPER_INTRINSICS
 from dvrk_gym.sim.endoscope.noise import IDENTIFIED_MARKER_NOISE, MAX_PIXEL_NOISE_PX, DetectionNoise
+from dvrk_gym.sim.robot import ik
+from dvrk_gym.sim.robot import kinematics as kin
 from dvrk_gym.sim.robot.bias import BiasConfig
 from dvrk_gym.sim.robot.motion_limits import MotionLimits
-from dvrk_gym.utils.checks import check_bool, check_float_fields, check_int_fields, check_resolution
+from dvrk_gym.utils.checks import check_bool, check_float, check_float_fields, check_int_fields, check_resolution
 
-__all__ = ["JawDriver", "MoveResult", "WorldConfig"]
+__all__ = ["JawDriver", "MoveResult", "WorldConfig", "check_jaw_angle", "check_joints"]
+
+
+def check_jaw_angle(value: float) -> float:
+    """A jaw opening as a float, rad, if it is finite and in [``JAW_LOWER_RAD``, ``JAW_UPPER_RAD``].
+
+    Raises:
+        ValueError: naming ``jaw_angle_rad`` and the range.
+    """
+    return check_float("jaw_angle_rad", value, kin.JAW_LOWER_RAD, kin.JAW_UPPER_RAD, unit="rad")
+
+
+def check_joints(q: np.ndarray) -> np.ndarray:
+    """Joints (6,) rad / m as a float array, if finite and within the joint limits.
+
+    Raises:
+        ValueError: not (6,) finite numbers.
+        ik.UnreachablePoseError: outside the limits.
+    """
+    q = kin.finite_vector(q, 6, "q")
+    if not kin.within_joint_limits(q):
+        raise ik.UnreachablePoseError(f"joints {np.round(q, 4).tolist()} are outside the joint limits")
+    return q
 
 
 @dataclass(frozen=True)

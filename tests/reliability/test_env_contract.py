@@ -178,6 +178,27 @@ def test_a_refused_reset_through_the_training_yaws_keeps_their_schedule(made):
     assert refused._episodes == twin._episodes == 1
 
 
+@pytest.mark.parametrize("klass", ENV_CLASSES)
+def test_an_env_dropped_without_close_frees_its_physics_server_at_once(klass):
+    """No reference cycle keeps a dropped env's server: a loop of envs made and dropped
+    (a hyper-parameter search) would hold one server, and its memory, per env until the
+    garbage collector ran."""
+    import gc
+
+    import pybullet
+
+    env = klass(camera_resolution=RESOLUTION)
+    env.reset(seed=0)
+    server = env.world.physics.client._client
+    assert pybullet.getConnectionInfo(server)["isConnected"]
+    gc.disable()
+    try:
+        del env
+        assert not pybullet.getConnectionInfo(server)["isConnected"]
+    finally:
+        gc.enable()
+
+
 def test_a_closed_debridement_keeps_its_buffered_frames_to_itself(made):
     env = made(DebridementEnv, render_mode="rgb_array_list")
     env.reset(seed=0)  # buffers the first frame

@@ -45,6 +45,11 @@ _CV_TO_GL = np.diag([1.0, -1.0, -1.0, 1.0])
 _SIDES = ("left", "right")
 
 
+def _check_side(side: object) -> None:
+    if side not in _SIDES:
+        raise ValueError(f"side must be one of {_SIDES}, got {side!r}")
+
+
 @dataclass(frozen=True)
 class CameraIntrinsics:
     """Pinhole intrinsics of one camera of the rectified pair.
@@ -296,10 +301,14 @@ class StereoCamera:
         z = k.fx * self.calibrated_baseline_m / math.sqrt(du * du + dv * dv)
         return [(left[0] - k.cx) * z / k.fx, (left[1] - k.cy) * z / k.fy, z]
 
+    def optical_centre(self, side: str) -> np.ndarray:
+        """Where the ``side`` ("left" or "right") camera's optical centre is, (3,) world frame, m."""
+        _check_side(side)
+        return self.pose[:3, 3] + (self.baseline_m * self.pose[:3, 0] if side == "right" else 0.0)
+
     def view_matrix(self, side: str) -> list[float]:
         """OpenGL view matrix (world -> GL eye) of ``side``, column-major list of 16 floats."""
-        if side not in _SIDES:
-            raise ValueError(f"side must be one of {_SIDES}, got {side!r}")
+        _check_side(side)
         cam_from_world = self._cam_from_world.copy()
         if side == "right":
             cam_from_world[0, 3] -= self.baseline_m

@@ -6,12 +6,14 @@ coordinates (u right, v down; pixel centres at integers, the OpenCV convention).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import cv2
 import numpy as np
 
 from dvrk_gym import paper
+from dvrk_gym.sim.endoscope.camera import PixelWindow
 
 RED_HUE_MAX = 8
 """Red hue lies in [0, RED_HUE_MAX] or [180 - RED_HUE_MAX, 180) in OpenCV's 0-180 hue scale."""
@@ -19,6 +21,8 @@ RED_MIN_SATURATION = 150
 RED_MIN_VALUE = 50
 MIN_MARKER_AREA_PX = 12
 """A red blob smaller than this (at any resolution) is noise, not the marker."""
+MARKER_WINDOW_MARGIN_PX = 2
+"""Pixels added around the marker's projected bounding box when rendering its window."""
 
 DARK_MAX_VALUE = 45
 """A printed circle is darker than this (0-255) in grey level."""
@@ -82,6 +86,32 @@ def detect_marker(rgb: np.ndarray, min_area_px: float = MIN_MARKER_AREA_PX, medi
     height, width = mask.shape
     touches = x == 0 or y == 0 or x + w >= width or y + h >= height
     return Blob(np.array(centroids[largest], dtype=float), area, touches)
+
+
+def detect_marker_in_window(
+    render: Callable[[PixelWindow], np.ndarray], image_size_px: tuple[int, int], corners_uv: np.ndarray
+) -> Blob | None:
+    """:func:`detect_marker` (with the authors' median kernel) in the window of an image of
+    ``image_size_px`` (width, height) where a marker whose corners project to ``corners_uv``
+    (N, 2) px can appear: their bounding box, plus ``MARKER_WINDOW_MARGIN_PX`` and the half
+    kernel the median filter reads beyond the blob, cut to the image. ``render(window)``
+    draws the window's pixels, which are the full image's there.
+
+    Returns:
+        The marker in full-image pixel coordinates; None when the window lies outside the
+        image or holds no marker.
+    """
+    width, height = image_size_px
+    margin = MARKER_WINDOW_MARGIN_PX + median_kernel_px(width) // 2
+    low = np.maximum(np.floor(corners_uv.min(axis=0)).astype(int) - margin, 0)
+    high = np.minimum(np.ceil(corners_uv.max(axis=0)).astype(int) + margin, [width - 1, height - 1])
+    if np.any(high < low):  # entirely outside the image
+        return None
+    window = PixelWindow(int(low[0]), int(low[1]), int(high[0] - low[0] + 1), int(high[1] - low[1] + 1))
+    blob = detect_marker(render(window), median_px=median_kernel_px(width))
+    if blob is None:
+        return None
+    return Blob(blob.centroid + [window.u0, window.v0], blob.area_px, blob.touches_border)
 
 
 def detect_circles(rgb: np.ndarray, min_area_px: float, max_area_px: float) -> np.ndarray:

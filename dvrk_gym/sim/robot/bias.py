@@ -21,6 +21,7 @@ import numpy as np
 
 from dvrk_gym.sim import identified
 from dvrk_gym.sim.robot import kinematics as kin
+from dvrk_gym.utils.checks import check_bool, check_float
 
 __all__ = [
     "BiasConfig",
@@ -35,6 +36,7 @@ __all__ = [
     "outer_stretch_gains",
     "NOMINAL_WRIST_COUPLING",
     "INSTRUMENT_SPREAD",
+    "MAX_MAGNITUDE",
 ]
 
 _N_JOINTS = 6
@@ -58,6 +60,11 @@ INSTRUMENT_SPREAD = 0.1
 
 
 _NOT_MAGNITUDES = ("around_identified", "wrist_settle_lag")
+MAX_MAGNITUDE = {"rad": 1.0, "m": 0.05, "": 1.0}
+"""The largest magnitude a :class:`BiasConfig` takes, by the unit its field's name ends
+in (rad, m, or none: the wrist's stretch): ten times the ``paper`` instrument's largest
+term of each kind is well inside (its wrist backlash, 0.059 rad; its repeatability, 1 mm;
+its wrist stretch, 0.09), and beyond them the tool leaves the endoscope's view."""
 
 
 @dataclass(frozen=True)
@@ -112,12 +119,21 @@ class BiasConfig:
     wrist_settle_lag: float = 0.0
 
     def __post_init__(self) -> None:
+        """Check every field (a real number in its range; ``around_identified`` a bool) and
+        keep the numbers as floats.
+
+        Raises:
+            ValueError: naming the field and its range.
+        """
         for name in self.magnitude_names():
-            value = getattr(self, name)
-            if not (np.isfinite(value) and value >= 0):
-                raise ValueError(f"BiasConfig.{name} = {value}; expected a finite value >= 0")
-        if not 0.0 <= self.wrist_settle_lag < 1.0:
-            raise ValueError(f"BiasConfig.wrist_settle_lag = {self.wrist_settle_lag}; expected a value in [0, 1)")
+            unit = name.rsplit("_", 1)[-1] if name.endswith(("_rad", "_m")) else ""
+            value = check_float(f"BiasConfig.{name}", getattr(self, name), 0.0, MAX_MAGNITUDE[unit], unit=unit)
+            object.__setattr__(self, name, value)
+        object.__setattr__(self, "around_identified", check_bool("BiasConfig.around_identified", self.around_identified))
+        lag = check_float("BiasConfig.wrist_settle_lag", self.wrist_settle_lag, 0.0, 1.0)
+        if lag >= 1.0:
+            raise ValueError(f"BiasConfig.wrist_settle_lag = {lag}; expected a value in [0, 1)")
+        object.__setattr__(self, "wrist_settle_lag", lag)
 
     @classmethod
     def magnitude_names(cls) -> tuple[str, ...]:

@@ -54,6 +54,7 @@ from dvrk_gym.sim.table import holding
 from dvrk_gym.sim.table.fragments import Fragment
 from dvrk_gym.sim.table.gripper_config import GripperConfig
 from dvrk_gym.sim.table.holding import JAW_LINKS, Hold, Touch
+from dvrk_gym.utils.checks import check_float
 
 GRASP_TIP_CLEARANCE_M = 0.0007
 """Where to stop the closed jaw tip above the paper before closing, m. With the paper's
@@ -128,8 +129,12 @@ class Gripper:
             self._restore_pose_in_link(name, relative)
 
     def command_jaw(self, jaw_angle_rad: float) -> None:
-        """Set the opening the jaws move towards (radians; <= 0 closes fully)."""
-        self.jaw_target = float(jaw_angle_rad)
+        """Set the opening the jaws move towards (radians; <= 0 closes fully).
+
+        Raises:
+            ValueError: an opening that is not finite or beyond ``kin.JAW_UPPER_RAD``.
+        """
+        self.jaw_target = check_float("jaw_angle_rad", jaw_angle_rad, None, kin.JAW_UPPER_RAD, unit="rad")
 
     def step(self, q_next: np.ndarray | None = None) -> None:
         """One physics step: the arm moves to ``q_next`` (None: stays), the jaws move.

@@ -14,6 +14,7 @@ tool through the gripper, so held fragments go along. :meth:`DvrkWorld.rebuild
 from __future__ import annotations
 
 import math
+import weakref
 
 import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
@@ -30,6 +31,7 @@ from dvrk_gym.sim.table.grasp import Gripper
 from dvrk_gym.sim.table.gripper_config import GripperConfig
 from dvrk_gym.sim.table.layout import sample_layout
 from dvrk_gym.sim.world import DvrkWorld, MoveResult
+from dvrk_gym.utils.checks import check_float, check_int
 
 PARKING_ORIGIN_M = np.array([0.14, -0.03, -0.175])
 PARKING_PITCH_M = 0.015
@@ -38,6 +40,12 @@ FRAGMENT_SETTLE_STEPS = 24
 """Physics steps (0.1 s) that let new fragments settle onto the paper before a trial."""
 MAX_JAW_SETTLE_S = 2.0
 """Longest :meth:`DebridementTable.actuate_jaws` waits for the jaws to stop, seconds."""
+MAX_STEPPED_S = 60.0
+"""The longest wait, jaw actuation or stepped move a table takes, seconds (a pick's phases take one or two)."""
+MAX_FRAGMENTS = 64
+"""The most fragments :meth:`DebridementTable.add_fragments` lays (a trial: 8)."""
+MAX_TIP_CLEARANCE_M = 0.05
+"""The largest floor :meth:`DebridementTable.move_stepped` keeps the tip above or below the paper, m."""
 
 
 class DebridementTable:
@@ -61,11 +69,23 @@ class DebridementTable:
     def __init__(self, world: DvrkWorld, gripper_config: GripperConfig | None = None, contact: PaperContact = COMPLIANT) -> None:
         if not isinstance(contact, PaperContact):
             raise ValueError(f"contact must be a PaperContact, got {type(contact).__name__}")
-        self.world = world
+        self._world = weakref.ref(world)  # the world holds the table (its jaw driver): no cycle, so a dropped env frees its server at once
         self.gripper_config = gripper_config
         self.contact = contact
         self.fragments: list[Fragment] = []
         self.gripper: Gripper | None = None
+
+    @property
+    def world(self) -> DvrkWorld:
+        """The world the table sits on (held weakly: the world, or the env, owns the table).
+
+        Raises:
+            RuntimeError: the world has been deleted.
+        """
+        world = self._world()
+        if world is None:
+            raise RuntimeError("this table's world has been deleted; make a world and a table for it")
+        return world
 
     # ----------------------------------------------------------------- fragments
     def add_fragments(self, kind: str | FragmentType, rng: np.random.Generator, n: int = FRAGMENTS_PER_TRIAL) -> list[Fragment]:
@@ -79,7 +99,12 @@ class DebridementTable:
         Raises:
             RuntimeError: if the world has fragments (of this table or another) since it
                 was last rebuilt.
+            ValueError: ``n`` not an int in [0, ``MAX_FRAGMENTS``], or ``rng`` not a
+                numpy Generator.
         """
+        n = check_int("n", n, 0, MAX_FRAGMENTS)
+        if not isinstance(rng, np.random.Generator):
+            raise ValueError(f"rng must be a numpy Generator (np.random.default_rng(seed)), got {type(rng).__name__}")
         world = self.world
         if self.gripper is not None or world.jaw_driver is not None:
             raise RuntimeError("this world already has fragments; call world.rebuild() first")
@@ -97,8 +122,12 @@ class DebridementTable:
 
         It is let go of (even if pierced), and parked on the tray far outside the camera's
         view of the paper, where it stays still and touches nothing.
+
+        Raises:
+            ValueError: ``index`` is not that of a fragment laid (0 .. len(fragments) - 1).
         """
         gripper = self._require_gripper()
+        index = check_int("index", index, 0, len(self.fragments) - 1)
         fragment = self.fragments[index]
         gripper.release(fragment.name)
         c = self.world.physics.client
@@ -149,8 +178,18 @@ class DebridementTable:
                 do not see it), metres; None: no floor.
             limits: speed limits of this move (default: the world's).
             duration_s: make the move last exactly this long at constant speed, with
-                no settling (a control period), seconds; None: the trapezoidal profile.
+                no settling (a control period), seconds in (0, ``MAX_STEPPED_S``]; None: the
+                trapezoidal profile.
+
+        Raises:
+            ValueError: a duration or a clearance out of range (``MAX_TIP_CLEARANCE_M``).
         """
+        if duration_s is not None:
+            duration_s = check_float("duration_s", duration_s, 0.0, MAX_STEPPED_S, low_open=True, unit="s")
+        if min_tip_clearance_m is not None:
+            min_tip_clearance_m = check_float(
+                "min_tip_clearance_m", min_tip_clearance_m, -MAX_TIP_CLEARANCE_M, MAX_TIP_CLEARANCE_M, unit="m"
+            )
         world = self.world
         gripper = self._require_gripper()
         q_target, clamped = ik.inverse_kinematics_clamped(pose, q_ref=world.q_cmd)
@@ -158,7 +197,7 @@ class DebridementTable:
         if duration_s is None:
             move = CartesianMove.plan(world.reported_pose(), end, limits or world.config.motion)
         else:
-            move = CartesianMove(world.reported_pose(), end, float(duration_s), 0.0)
+            move = CartesianMove(world.reported_pose(), end, duration_s, 0.0)
         dt = world.physics.time_step_s
         offset_start = world.q_true - world.cable.true_joints(world.q_cmd)
         floor = None if min_tip_clearance_m is None else float(WORKSPACE_CENTER_M[2]) + min_tip_clearance_m
@@ -224,15 +263,17 @@ class DebridementTable:
 
         Physics steps with the arm still, for ``duration_s`` seconds or, when None, until
         the jaws stop moving (at most MAX_JAW_SETTLE_S). Returns the simulated seconds
-        taken (also added to the clock).
+        taken (also added to the clock). ValueError for a duration outside [0, ``MAX_STEPPED_S``] s.
         """
+        if duration_s is not None:
+            duration_s = check_float("duration_s", duration_s, 0.0, MAX_STEPPED_S, unit="s")
         gripper = self._require_gripper()
         gripper.command_jaw(jaw_angle_rad)
         dt = self.world.physics.time_step_s
         if duration_s is None:
             steps = gripper.settle_jaws(max_steps=int(round(MAX_JAW_SETTLE_S / dt)))
         else:
-            steps = max(0, int(round(duration_s / dt)))
+            steps = int(round(duration_s / dt))
             for _ in range(steps):
                 gripper.step()
         self.world.jaw_angle = gripper.jaw_angle
@@ -246,7 +287,10 @@ class DebridementTable:
 
     def dwell(self, seconds: float, step_physics: bool = True) -> float:
         """Wait ``seconds`` with the arm still (physics stepped, if asked and there are
-        fragments); returns the simulated seconds taken (also added to the clock)."""
+        fragments); returns the simulated seconds taken (also added to the clock). A wait of
+        zero or less (what is left of a phase another step overran) takes none; ValueError
+        for one that is not finite or above ``MAX_STEPPED_S``."""
+        seconds = check_float("seconds", seconds, None, MAX_STEPPED_S, unit="s")
         dt = self.world.physics.time_step_s
         steps = max(0, int(round(seconds / dt)))
         if step_physics and self.gripper is not None:
