@@ -255,6 +255,10 @@ def curve_evaluator(config: TrainConfig) -> CurveEvaluator:
 class LearningCurve(BaseCallback):
     """Evaluate at evenly spaced env steps and show a progress bar.
 
+    A point is measured at the first env step at or past its mark, before the gradient
+    updates that step's rollout brings; the last one is measured again when the training
+    ends if updates came after it, so it is the model the training returns (and saves).
+
     Args:
         env: the evaluation env (wrapped as the agent sees it).
         total_steps: the run's env steps.
@@ -275,6 +279,7 @@ class LearningCurve(BaseCallback):
         self.points: list[CurvePoint] = []
         self.eval_seconds = 0.0
         self.resumed = False
+        self._updates_measured: int | None = None  # the model's gradient updates when the last point was measured
         self._bar = tqdm(total=total_steps, desc="training", unit="step", disable=not progress)
 
     def record(self) -> dict[str, Any]:
@@ -301,11 +306,20 @@ class LearningCurve(BaseCallback):
         self.points, self.marks, self.eval_seconds, self.resumed = points, marks, eval_seconds, True
         self._bar.update(env_steps)
 
+    def _updates(self) -> int | None:
+        """The model's gradient updates so far (stable-baselines3's count; None if it keeps none)."""
+        updates = getattr(self.model, "_n_updates", None)
+        return int(updates) if isinstance(updates, (int, np.integer)) else None
+
     def evaluate(self) -> None:
+        """Measure the model now; a measure at the env step of the last point replaces it."""
         start = time.perf_counter()
         point = self.measure(self.model, self.eval_env, self.num_timesteps, self.seed)
         self.eval_seconds += time.perf_counter() - start
+        if self.points and self.points[-1].env_steps == point.env_steps:
+            self.points.pop()
         self.points.append(point)
+        self._updates_measured = self._updates()
         self.marks = [m for m in self.marks if m > self.num_timesteps]
         self._bar.set_postfix(mm=f"{point.mm_error:.2f}", success=f"{point.success_rate:.2f}")
         logger.info("%d env steps: %.2f mm, %.1f px, success %.2f", point.env_steps, point.mm_error, point.pixel_error, point.success_rate)
@@ -321,7 +335,10 @@ class LearningCurve(BaseCallback):
         return True
 
     def _on_training_end(self) -> None:
-        if not self.points or self.points[-1].env_steps != self.num_timesteps:
+        # The last mark is measured at the last env step, before the gradient updates that
+        # follow it: measured again, the last point is the model the training returns.
+        updates = self._updates()
+        if not self.points or self.points[-1].env_steps != self.num_timesteps or updates is None or updates != self._updates_measured:
             self.evaluate()
         self._bar.close()
 
