@@ -365,3 +365,89 @@ def test_cli_train_then_evaluate_round_trip(tmp_path, capsys):
     assert rows[-1]["robot_moves"] == 30 and np.isfinite(rows[-1]["mm_error"])
     summary = json.loads((tmp_path / "eval" / "baseline_table.json").read_text())["summary"]
     assert summary["sac"]["all settings"]["mm"]["n"] == 6 * N_CIRCLES
+
+
+# --- several models in one evaluation ---------------------------------------------------------
+
+
+def _loaded(tmp_path, name: str, **settings):
+    from pathlib import Path
+
+    from dvrk_gym.baselines.checkpoints import LoadedAgent
+
+    config = TrainConfig(agent="sac", steps=300, camera_resolution=settings.pop("camera_resolution", TINY), **settings)
+    return LoadedAgent(model=None, config=config, env_steps=300, path=Path(tmp_path / name))
+
+
+def test_models_trained_alike_but_for_a_setting_are_named_apart_not_refused(tmp_path):
+    from dvrk_gym.baselines.checkpoints import distinct_labels
+
+    plain, severe, other = _loaded(tmp_path, "a.zip"), _loaded(tmp_path, "b.zip", bias="severe"), _loaded(tmp_path, "c.zip", seed=1)
+    named = distinct_labels([plain, severe, other])
+    assert [agent.label for agent in named] == [
+        "sac (300 steps, seed 0; bias 'paper')",
+        "sac (300 steps, seed 0; bias 'severe')",
+        "sac (300 steps, seed 1)",  # its label was its own
+    ]
+    copies = distinct_labels([plain, _loaded(tmp_path, "copy.zip")])  # the same settings: their files tell them apart
+    assert [agent.label for agent in copies] == [
+        f"sac (300 steps, seed 0; {tmp_path / 'a.zip'})",
+        f"sac (300 steps, seed 0; {tmp_path / 'copy.zip'})",
+    ]
+    with pytest.raises(ValueError, match="given more than once"):
+        distinct_labels([plain, _loaded(tmp_path, "a.zip")])
+
+
+def _evaluate_args(tmp_path, models, *extra):
+    parser = argparse.ArgumentParser(prog="dvrk-gym")
+    add_commands(parser.add_subparsers(dest="command", required=True))
+    argv = ["baseline", "evaluate", "--model", *models, "--calibration", str(tmp_path / "cal"), "--out", str(tmp_path / "eval")]
+    return parser.parse_args([*argv, "--no-progress", *extra])
+
+
+@pytest.mark.parametrize("order", [(0, 1), (1, 0)])
+def test_the_calibrators_pick_at_their_own_resolution_whatever_the_order_of_the_models(tmp_path, monkeypatch, order):
+    """They ran at the first model's resolution: their rows changed with the order of --model."""
+    from dvrk_gym.baselines import checkpoints, comparison
+    from dvrk_gym.evaluation import trials
+
+    _fake_calibration_run(tmp_path / "cal", {"RBT": 6.0, "DNN": 2.0, "DNN+RF": 1.0})  # calibrated at TINY
+    agents = {"a.zip": _loaded(tmp_path, "a.zip", camera_resolution=(480, 270)), "b.zip": _loaded(tmp_path, "b.zip")}
+    ran_at = []
+
+    def calibrators(folder, n_trials, seed, fragment, camera_resolution=None, calibrators=comparison.CALIBRATORS, progress=False):
+        ran_at.append(camera_resolution)
+        return [], comparison._pipeline_config(folder)
+
+    monkeypatch.setattr(checkpoints, "load_agent", lambda path: agents[path.name])
+    monkeypatch.setattr(comparison, "benchmark_debridement", lambda agent, n, **kwargs: [])
+    monkeypatch.setattr(comparison, "calibration_debridement_rows", calibrators)
+    monkeypatch.setattr(
+        comparison,
+        "debridement_row",
+        lambda label, moves, trials, source: comparison.DebridementRow(label, moves, 1, 0, 1, 0, 0, 0.0, source),
+    )
+    monkeypatch.setattr(trials, "format_trial_table", lambda *args: "")
+    models = [str(tmp_path / ["a.zip", "b.zip"][i]) for i in order]
+    args = _evaluate_args(tmp_path, models, "--transfer", "--trials", "1")
+    monkeypatch.setattr("dvrk_gym.cli.baselines._evaluate_touch_grid", lambda agents, args: [])
+    assert args.func(args) == 0
+    report = json.loads((tmp_path / "eval" / "debridement.json").read_text())
+    assert ran_at == [None] and report["calibrators_camera_resolution"] == list(TINY)
+    assert [note for note in report["notes"] if "camera_resolution" in note] == [
+        "sac (300 steps, seed 0; camera_resolution (480, 270)): camera_resolution (480, 270), but the calibration run used (320, 180)"
+    ]
+
+
+def test_agents_benchmarked_at_another_seed_than_the_calibrators_rows_are_noted(tmp_path, monkeypatch):
+    from dvrk_gym.baselines import checkpoints, comparison
+
+    _fake_calibration_run(tmp_path / "cal", {"RBT": 6.0, "DNN": 2.0, "DNN+RF": 1.0})  # seed 0
+    table = {label: CircleErrors(pixel=np.ones(N_CIRCLES), mm=np.ones(N_CIRCLES), yaw=np.zeros(N_CIRCLES)) for label, _ in YAW_SETTINGS}
+    monkeypatch.setattr(checkpoints, "load_agent", lambda path: _loaded(tmp_path, "a.zip"))
+    monkeypatch.setattr(comparison, "benchmark_agent", lambda agent, seed, progress: table)
+    for extra, noted in ((["--seed", "3"], True), ([], False), (["--seed", "0"], False)):
+        args = _evaluate_args(tmp_path, [str(tmp_path / "a.zip")], *extra)
+        assert args.func(args) == 0
+        notes = json.loads((tmp_path / "eval" / "comparison.json").read_text())["notes"]
+        assert any("the calibrators' rows with the calibration run's seed 0" in note for note in notes) == noted, extra

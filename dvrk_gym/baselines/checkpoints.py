@@ -24,6 +24,7 @@ import hashlib
 import io
 import json
 import pickle
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -39,6 +40,7 @@ from dvrk_gym.sim.robot.bias import resolve_bias
 from dvrk_gym.utils.atomic import atomic_path, atomic_write_json, read_json
 from dvrk_gym.utils.bounded_zip import ArchiveLimits, open_archive, read_member
 from dvrk_gym.utils.checks import check_bool, check_int
+from dvrk_gym.utils.run_folder import flatten_settings
 from dvrk_gym.utils.source_fingerprint import SourceFingerprint, source_fingerprint
 
 FORMAT = "dvrk_gym.baselines/1"
@@ -71,6 +73,7 @@ class LoadedAgent:
             -> one line (empty: none). Keywords whose default changed are set back to the
             recorded values in ``config.env_overrides``; a changed instrument is only noted.
         source: the dvrk_gym that trained it (None: not recorded, a file saved before it was).
+        name: its label, when one was given (:func:`distinct_labels`); None: :attr:`label`'s own.
     """
 
     model: BaseAlgorithm
@@ -79,11 +82,36 @@ class LoadedAgent:
     path: Path
     env_changes: dict[str, str] = field(default_factory=dict)
     source: SourceFingerprint | None = None
+    name: str | None = None
 
     @property
     def label(self) -> str:
-        """A short name for tables: the agent, its budget and seed."""
-        return f"{self.config.agent} ({self.env_steps} steps, seed {self.config.seed})"
+        """A short name for tables: the agent, its budget and seed (or the ``name`` given)."""
+        return self.name if self.name is not None else f"{self.config.agent} ({self.env_steps} steps, seed {self.config.seed})"
+
+
+def distinct_labels(agents: Sequence[LoadedAgent]) -> list[LoadedAgent]:
+    """The agents, those that share a label named apart by the training settings that differ
+    among them (``"sac (300 steps, seed 0; bias 'severe')"``), or by their files when none does.
+
+    Raises:
+        ValueError: one file given twice.
+    """
+    paths = [agent.path.resolve() for agent in agents]
+    repeated = sorted({str(path) for path in paths if paths.count(path) > 1})
+    if repeated:
+        raise ValueError(f"{repeated} given more than once; give each model once")
+    named = list(agents)
+    for label in {agent.label for agent in agents}:
+        group = [i for i, agent in enumerate(agents) if agent.label == label]
+        if len(group) < 2:
+            continue
+        settings = [flatten_settings(agents[i].config.to_dict()) for i in group]
+        differing = sorted({key for flat in settings for key in flat if len({repr(other.get(key)) for other in settings}) > 1})
+        for i, flat in zip(group, settings):
+            apart = ", ".join(f"{key} {flat.get(key)!r}" for key in differing) if differing else str(agents[i].path)
+            named[i] = dataclasses.replace(agents[i], name=f"{label[:-1]}; {apart})")
+    return named
 
 
 def settings_path(model_path: Path) -> Path:

@@ -89,7 +89,13 @@ def benchmark_agent(agent: LoadedAgent, seed: int = BENCHMARK_SEED, progress: bo
 
 
 def agent_row(agent: LoadedAgent, settings: dict[str, CircleErrors]) -> ComparisonRow:
-    """The comparison row of a benchmarked agent."""
+    """The comparison row of a benchmarked agent (``settings``: :func:`benchmark_agent`'s table).
+
+    Raises:
+        ValueError: an empty table.
+    """
+    if not settings:
+        raise ValueError(f"{agent.label}: no benchmark settings to make a row of")
     mm = np.concatenate([e.mm for e in settings.values()])
     pixel = np.concatenate([e.pixel for e in settings.values()])
     return ComparisonRow(agent.label, agent.env_steps, float(np.mean(mm)), float(np.mean(pixel)), str(agent.path))
@@ -287,10 +293,12 @@ def calibration_debridement_rows(
         calibrators: which of :data:`CALIBRATORS`.
 
     Raises:
-        ValueError: an unknown calibrator name.
+        ValueError: no calibrators, a string instead of a list, or an unknown name.
         FileNotFoundError: the folder lacks a calibrator's model file.
     """
     folder = Path(folder)
+    if isinstance(calibrators, str) or not calibrators:  # "rbt" would be the letters r, b, t
+        raise ValueError(f"calibrators must be a list of some of {list(CALIBRATORS)}, got {calibrators!r}")
     unknown = sorted(set(calibrators) - set(CALIBRATORS))
     if unknown:
         raise ValueError(f"unknown calibrator(s) {unknown}; valid: {list(CALIBRATORS)}")

@@ -306,11 +306,6 @@ class LearningCurve(BaseCallback):
         self.points, self.marks, self.eval_seconds, self.resumed = points, marks, eval_seconds, True
         self._bar.update(env_steps)
 
-    def _updates(self) -> int | None:
-        """The model's gradient updates so far (stable-baselines3's count; None if it keeps none)."""
-        updates = getattr(self.model, "_n_updates", None)
-        return int(updates) if isinstance(updates, (int, np.integer)) else None
-
     def evaluate(self) -> None:
         """Measure the model now; a measure at the env step of the last point replaces it."""
         start = time.perf_counter()
@@ -319,7 +314,7 @@ class LearningCurve(BaseCallback):
         if self.points and self.points[-1].env_steps == point.env_steps:
             self.points.pop()
         self.points.append(point)
-        self._updates_measured = self._updates()
+        self._updates_measured = getattr(self.model, "_n_updates", None)  # stable-baselines3's count of gradient updates
         self.marks = [m for m in self.marks if m > self.num_timesteps]
         self._bar.set_postfix(mm=f"{point.mm_error:.2f}", success=f"{point.success_rate:.2f}")
         logger.info("%d env steps: %.2f mm, %.1f px, success %.2f", point.env_steps, point.mm_error, point.pixel_error, point.success_rate)
@@ -337,7 +332,7 @@ class LearningCurve(BaseCallback):
     def _on_training_end(self) -> None:
         # The last mark is measured at the last env step, before the gradient updates that
         # follow it: measured again, the last point is the model the training returns.
-        updates = self._updates()
+        updates = getattr(self.model, "_n_updates", None)
         if not self.points or self.points[-1].env_steps != self.num_timesteps or updates is None or updates != self._updates_measured:
             self.evaluate()
         self._bar.close()

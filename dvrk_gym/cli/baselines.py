@@ -117,15 +117,12 @@ def _run_train(args: argparse.Namespace) -> int:
 
 def _run_evaluate(args: argparse.Namespace) -> int:
     from dvrk_gym.baselines.budgets import GRID_TOUCH_ID
-    from dvrk_gym.baselines.checkpoints import load_agent
+    from dvrk_gym.baselines.checkpoints import distinct_labels, load_agent
 
     if args.trials < 1:
         raise ValueError(f"--trials must be >= 1, got {args.trials}")
     writable_folder(args.out)
-    agents = [load_agent(path) for path in args.model]
-    labels = [agent.label for agent in agents]
-    if len(set(labels)) < len(labels):
-        raise ValueError(f"two models have the same agent, steps and seed ({labels}); give each once")
+    agents = distinct_labels([load_agent(path) for path in args.model])  # two trained alike but for --bias...: named apart
     written: list[Path] = []
     grid_agents = [agent for agent in agents if agent.config.spec.env_id == GRID_TOUCH_ID]
     if grid_agents:
@@ -164,6 +161,11 @@ def _evaluate_touch_grid(agents: list, args: argparse.Namespace) -> list[Path]:
     if calibration is not None:
         rows += [agent_row(agent, table[key]) for key, agent in zip(keys, agents)]
         notes = [note for agent in agents for note in setting_mismatches(agent, calibration)]
+        if seed != calibration.seed:  # the calibrators' rows are the run's own benchmark, at its seed
+            notes.append(
+                f"the agents were benchmarked with --seed {seed}, the calibrators' rows with the calibration run's seed "
+                f"{calibration.seed}: other random yaws (leave --seed out to use the run's)"
+            )
         comparison = format_comparison(rows, notes)
         print()
         print(comparison)
@@ -192,11 +194,12 @@ def _evaluate_debridement(agents: list, args: argparse.Namespace) -> list[Path]:
         trials = benchmark_debridement(agent, args.trials, seed=seed, fragment=args.fragment, progress=not args.no_progress)
         texts.append(format_trial_table(trials, agent.label, args.fragment, seed))
         rows.append(debridement_row(agent.label, agent.env_steps, trials, str(agent.path)))
-    if args.calibration is not None:
-        resolution = agents[0].config.camera_resolution
+    calibrators_resolution = None
+    if args.calibration is not None:  # the calibrators run at the resolution they were calibrated at; agents at others are noted
         calibrators, calibration = calibration_debridement_rows(
-            args.calibration, args.trials, seed, args.fragment, resolution, progress=not args.no_progress
+            args.calibration, args.trials, seed, args.fragment, progress=not args.no_progress
         )
+        calibrators_resolution = list(calibration.camera_resolution)
         rows = calibrators + rows
         notes = [note for agent in agents for note in setting_mismatches(agent, calibration, picks=True)]
     text = "\n\n".join(texts + [format_debridement_comparison(rows, notes)])
@@ -207,6 +210,7 @@ def _evaluate_debridement(agents: list, args: argparse.Namespace) -> list[Path]:
         "seed": seed,
         "trials": args.trials,
         "fragment": args.fragment,
+        "calibrators_camera_resolution": calibrators_resolution,
         "rows": [{**row.__dict__, "success_rate": row.success_rate} for row in rows],
         "notes": notes,
     }

@@ -19,8 +19,12 @@ import gymnasium as gym
 import numpy as np
 from tqdm.auto import tqdm
 
+from dvrk_gym.utils.checks import check_int
+
 Policy = Callable[[Any], np.ndarray]
 Options = dict[str, Any] | Callable[[int], dict[str, Any]] | None
+MAX_EPISODES = 1_000_000
+"""The most episodes :func:`run_episodes` runs in one call."""
 
 
 @dataclass(frozen=True)
@@ -91,9 +95,12 @@ def run_episodes(
         options: reset options, fixed or a function of the episode index.
         progress: show a progress bar.
         description: the progress bar's label.
+
+    Raises:
+        ValueError: ``n_episodes`` not an int in [1, ``MAX_EPISODES``], or a negative ``seed``.
     """
-    if n_episodes < 1:
-        raise ValueError(f"n_episodes must be >= 1, got {n_episodes}")
+    n_episodes = check_int("n_episodes", n_episodes, 1, MAX_EPISODES)
+    seed = check_int("seed", seed, 0)
     act = as_policy(policy)
     results = []
     for index in tqdm(range(n_episodes), desc=description, disable=not progress):

@@ -59,19 +59,19 @@ class RunFolderBusy(RuntimeError):
     """Another process owns the run folder (the message names the folder and the owner's process id)."""
 
 
-def _flatten(value: Any, prefix: str = "") -> dict[str, Any]:
-    """A JSON tree as ``{"a.b": leaf}`` (lists are leaves)."""
+def flatten_settings(value: Any, prefix: str = "") -> dict[str, Any]:
+    """A JSON tree (nested dicts) as ``{"a.b": leaf}`` (lists are leaves)."""
     if not isinstance(value, dict):
         return {prefix: value}
     flat: dict[str, Any] = {}
     for key, item in value.items():
-        flat.update(_flatten(item, f"{prefix}.{key}" if prefix else str(key)))
+        flat.update(flatten_settings(item, f"{prefix}.{key}" if prefix else str(key)))
     return flat
 
 
 def settings_differences(found: Any, wanted: Any) -> list[str]:
     """What differs between two JSON settings trees: ``["seed: 0 there, 1 here", ...]``."""
-    there, here = _flatten(found), _flatten(wanted)
+    there, here = flatten_settings(found), flatten_settings(wanted)
     missing = object()
     return [
         f"{key}: {there.get(key, 'unset')!r} there, {here.get(key, 'unset')!r} here"

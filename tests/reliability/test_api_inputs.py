@@ -290,3 +290,32 @@ def test_a_profile_with_agents_that_are_not_names_is_a_clear_error():
 
     with pytest.raises(ValueError, match="rl_agents must be a list of agent names"):
         Profile.from_dict({"name": "x", "rl_agents": [["sac"]]})
+
+
+@pytest.mark.parametrize("calibrators", ["rbt", [], ()])
+def test_the_calibrators_debridement_rows_want_a_list_of_names(calibrators, tmp_path):
+    from dvrk_gym.baselines.comparison import calibration_debridement_rows
+
+    with pytest.raises(ValueError, match="calibrators must be a list"):  # "rbt" was the letters r, b, t
+        calibration_debridement_rows(tmp_path, calibrators=calibrators)
+
+
+@pytest.mark.parametrize(
+    ("keywords", "name"), [({"n_episodes": 1.5}, "n_episodes"), ({"n_episodes": 0}, "n_episodes"), ({"seed": -1}, "seed")]
+)
+def test_episodes_are_counted_in_whole_numbers_before_any_runs(keywords, name):
+    from dvrk_gym.evaluation.episodes import run_episodes
+
+    arguments = {"n_episodes": 2, "seed": 0} | keywords
+    with pytest.raises(ValueError, match=name):
+        run_episodes(None, lambda observation: None, **arguments)
+
+
+def test_an_agent_row_of_no_benchmark_is_refused(tmp_path):
+    from dvrk_gym.baselines.checkpoints import LoadedAgent
+    from dvrk_gym.baselines.comparison import agent_row
+    from dvrk_gym.baselines.training import TrainConfig
+
+    agent = LoadedAgent(model=None, config=TrainConfig(agent="sac", steps=10), env_steps=10, path=tmp_path / "a.zip")
+    with pytest.raises(ValueError, match="no benchmark settings"):
+        agent_row(agent, {})
