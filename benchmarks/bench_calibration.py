@@ -16,7 +16,10 @@ from pathlib import Path
 import dvrk_gym  # noqa: F401
 from dvrk_gym import paper
 from dvrk_gym.calibration.benchmark import format_table
+from dvrk_gym.calibration.models.dnn import MAX_EPOCHS
+from dvrk_gym.calibration.phase1 import MAX_TRAJECTORIES
 from dvrk_gym.calibration.pipeline import PipelineConfig, run_calibration
+from dvrk_gym.cli.options import check_flag_bounds
 
 
 def main() -> None:
@@ -25,6 +28,7 @@ def main() -> None:
     parser.add_argument("--trajectories", type=int, default=paper.PHASE1_TRAJECTORIES, help="Phase I trajectories (default: %(default)s)")
     parser.add_argument("--epochs", type=int, default=paper.DNN_EPOCHS, help="DNN epochs (default: %(default)s)")
     args = parser.parse_args()
+    check_flag_bounds(parser, args, {"trajectories": (1, MAX_TRAJECTORIES), "epochs": (1, MAX_EPOCHS)})
     out = args.out or Path(tempfile.mkdtemp(prefix="dvrk_gym_calibration_"))
     start = time.perf_counter()
     result = run_calibration(out, PipelineConfig(n_trajectories=args.trajectories, dnn_epochs=args.epochs), progress=False)

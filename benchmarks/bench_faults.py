@@ -28,6 +28,7 @@ from pathlib import Path
 import numpy as np
 import psutil
 
+from dvrk_gym.cli.options import check_flag_bounds
 from dvrk_gym.reproduce import TINY
 from dvrk_gym.reproduce.run import seeded_results
 
@@ -80,6 +81,7 @@ def main() -> None:
     parser.add_argument("--profile", type=Path, help="a profile JSON (default: dvrk_gym.reproduce.TINY)")
     parser.add_argument("--out", type=Path, help="where the runs go (default: a temporary folder, removed at the end)")
     args = parser.parse_args()
+    check_flag_bounds(parser, args, {"kills": (0, 10**4), "workers": (1, 64), "seed": (0, 2**31 - 1)})
     root = args.out or Path(tempfile.mkdtemp(prefix="bench_faults_"))
     root.mkdir(parents=True, exist_ok=True)
     profile = args.profile or root / "tiny.json"

@@ -19,6 +19,7 @@ import gymnasium as gym
 import psutil
 
 import dvrk_gym  # noqa: F401
+from dvrk_gym.cli.options import check_flag_bounds
 
 MB = 1e6
 
@@ -65,6 +66,7 @@ def main() -> None:
     parser.add_argument("--cycles", type=int, default=200, help="make/reset/close cycles (default: %(default)s)")
     parser.add_argument("--resolution", type=int, nargs=2, default=(480, 270), metavar=("W", "H"), help="camera, pixels")
     args = parser.parse_args()
+    check_flag_bounds(parser, args, {"resets": (1, 10**7), "cycles": (1, 10**6), "resolution": (None, None)})
     resolution = (args.resolution[0], args.resolution[1])
     marks = tuple(sorted({m for m in (50, 200, 500, args.resets) if m <= args.resets}))
     print(f"Debridement-v0 at {resolution[0]}x{resolution[1]}, RSS growth after the first reset:")

@@ -22,7 +22,7 @@ import torch
 
 from dvrk_gym import paper
 from dvrk_gym.calibration.datasets import load_paper_phase1
-from dvrk_gym.calibration.models.dnn import DEFAULT_LEARNING_RATE, DNNCalibrator
+from dvrk_gym.calibration.models.dnn import DEFAULT_LEARNING_RATE, MAX_EPOCHS, DNNCalibrator
 from dvrk_gym.calibration.search import (
     CHOSEN_NET,
     PAPER_EPOCHS,
@@ -34,6 +34,7 @@ from dvrk_gym.calibration.search import (
     plot_search,
     run_search,
 )
+from dvrk_gym.cli.options import check_flag_bounds
 
 
 def _time_training(X, y, epochs: int) -> tuple[float, float]:
@@ -108,6 +109,7 @@ def main() -> None:
         help="contiguous folds in row order, as the authors ran it, or shuffled ones (default: %(default)s)",
     )
     args = parser.parse_args()
+    check_flag_bounds(parser, args, {"folds": (2, 1000), "epochs": (1, MAX_EPOCHS), "seed": (0, 2**31 - 1)})
     logging.basicConfig(level=logging.WARNING)
     torch.set_num_threads(1)  # the network trains on one thread; --throughput's plain product too, like with like
     X, y = load_paper_phase1()

@@ -171,6 +171,8 @@ from dataclasses import dataclass, field
 
 import gymnasium as gym
 
+from dvrk_gym.cli.options import check_flag_bounds
+
 INSTALL = 'pip install -e ".[bench]"  (or: pip install panda-gym==3.0.7)'
 REFERENCE = "PandaReach-v3"
 
@@ -247,6 +249,9 @@ def main() -> int:
     parser.add_argument("--resolution", type=int, nargs=2, default=(1920, 1080), metavar=("W", "H"), help="our endoscope images")
     parser.add_argument("--profile", metavar="ENV_ID", default=None, help="instead: cProfile one of our envs' steps")
     args = parser.parse_args()
+    check_flag_bounds(
+        parser, args, {"steps": (1, 10**7), "picks": (1, 10**5), "rounds": (1, 1000), "seed": (0, 2**31 - 1), "resolution": (None, None)}
+    )
     if args.profile is not None:
         return profile_env(args.profile, args.steps, args.picks, tuple(args.resolution), args.seed)
     try:

@@ -12,6 +12,7 @@ import time
 
 import numpy as np
 
+from dvrk_gym.cli.options import check_flag_bounds
 from dvrk_gym.envs.exploration import sample_paper_poses
 from dvrk_gym.sim.endoscope.camera import PAPER_INTRINSICS
 from dvrk_gym.sim.robot import kinematics as kin
@@ -30,6 +31,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--n", type=int, default=400, help="marker detections to time (default: %(default)s)")
     args = parser.parse_args()
+    check_flag_bounds(parser, args, {"n": (1, 10**6)})
     rng = np.random.default_rng(0)
     poses = sample_paper_poses(rng, args.n)
     joints = [inverse_kinematics(p) for p in poses]

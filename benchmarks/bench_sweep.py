@@ -22,7 +22,10 @@ from pathlib import Path
 from distributed import LocalCluster
 
 from dvrk_gym import paper
+from dvrk_gym.calibration.models.dnn import MAX_EPOCHS
+from dvrk_gym.calibration.phase1 import MAX_TRAJECTORIES
 from dvrk_gym.calibration.pipeline import PipelineConfig
+from dvrk_gym.cli.options import check_flag_bounds
 from dvrk_gym.parallel.dask_executor import DaskExecutor
 from dvrk_gym.sweep import LocalExecutor, SweepResult, SweepSettings, format_rows, parse_calibrators, parse_int_list, run_sweep
 from dvrk_gym.sweep.table import TIME_COLUMNS
@@ -42,6 +45,9 @@ def main() -> None:
     parser.add_argument("--resolution", type=int, nargs=2, default=(640, 360), metavar=("W", "H"), help="pixels (default: 640 360)")
     parser.add_argument("--paper", action="store_true", help="the paper's budget instead (57 trajectories, 1000 epochs, 1920 x 1080)")
     args = parser.parse_args()
+    check_flag_bounds(
+        parser, args, {"workers": (1, 64), "trajectories": (1, MAX_TRAJECTORIES), "epochs": (1, MAX_EPOCHS), "resolution": (None, None)}
+    )
     if args.paper:
         pipeline = PipelineConfig()
     else:

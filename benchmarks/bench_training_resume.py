@@ -41,6 +41,7 @@ import torch
 import dvrk_gym.baselines.resume.writer as writer
 from dvrk_gym.baselines import TrainConfig, load_agent, train
 from dvrk_gym.baselines.resume import STATE_FILE_NAME
+from dvrk_gym.cli.options import check_flag_bounds
 
 RESOLUTION = (320, 180)
 
@@ -162,6 +163,11 @@ def main() -> None:
     parser.add_argument("--kill-steps", type=int, default=300, help="env steps of part 2's trainings (default: %(default)s)")
     parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args()
+    check_flag_bounds(
+        parser, args, {"steps": (1, 10**7), "save_every": (1, None), "kills": (0, 1000), "kill_steps": (1, 10**7), "seed": (0, 2**31 - 1)}
+    )
+    if args.save_every > args.steps:
+        parser.error(f"--save-every {args.save_every} is more than --steps {args.steps}: a training that never saves has nothing to time")
     folder = Path(tempfile.mkdtemp(prefix="bench_training_resume_"))
     try:
         cost(args.steps, args.save_every, args.seed, folder)

@@ -7,6 +7,7 @@ import argparse
 import contextlib
 import os
 import tempfile
+from collections.abc import Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -48,6 +49,27 @@ def check_common_options(args: argparse.Namespace) -> None:
         check_float("--connect-timeout", args.connect_timeout, 0.0, MAX_CONNECT_TIMEOUT_S, low_open=True, unit="s")
     if getattr(args, "trials", None) is not None:
         check_int("--trials", args.trials, 1, MAX_TRIALS)
+
+
+def check_flag_bounds(
+    parser: argparse.ArgumentParser, args: argparse.Namespace, bounds: Mapping[str, tuple[float | None, float | None]]
+) -> None:
+    """Exit with ``parser``'s one-line error (status 2) for a flag outside its bounds, before
+    any work: ``{"steps": (1, None)}`` (inclusive; None: unbounded). ``resolution`` is checked
+    as an image size (its bounds are ignored); each value of a flag of several is checked;
+    flags left at None are not. For the scripts of ``benchmarks/`` as for the commands.
+    """
+    for name, (low, high) in bounds.items():
+        value = getattr(args, name)
+        flag = "--" + name.replace("_", "-")
+        try:
+            if name == "resolution":
+                check_resolution(flag, value)
+            elif value is not None:
+                for item in value if isinstance(value, (list, tuple)) else (value,):
+                    check_float(flag, item, low, high)
+        except ValueError as error:
+            parser.error(str(error))
 
 
 def add_instrument_options(parser: argparse.ArgumentParser, resolution: bool = True, note: str = "") -> None:
