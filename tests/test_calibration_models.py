@@ -108,6 +108,42 @@ def test_rigid_group_with_fewer_than_three_rows_uses_all_data_fit(data) -> None:
     assert model.group_rows_.tolist() == [len(X) - 2, 0, 0, 0, 2]
 
 
+@pytest.mark.parametrize("layout", ["same point", "a line"])
+def test_rigid_group_whose_rows_span_no_plane_uses_all_data_fit(data, layout) -> None:
+    """Three rows at one point (or on a line) fix no rotation: their own fit was arbitrary (57.6 mm off)."""
+    X, y = data
+    X = X.copy()
+    X[:, 3] = np.where(np.arange(len(X)) < 4, PAPER_YAWS_RAD[0], PAPER_YAWS_RAD[2])
+    X[:4, :3] = X[0, :3] if layout == "same point" else X[0, :3] + np.outer(np.arange(4), [0.001, 0.002, 0.0])
+    model = RigidBodyCalibrator().fit(X, y)
+    rotation, translation = fit_rigid_transform(X[:, :3], y)
+    np.testing.assert_allclose(model.rotations_[0], rotation, atol=1e-12)
+    np.testing.assert_allclose(model.translations_[0], translation, atol=1e-12)
+    with pytest.raises(ValueError, match="lie on a line"):
+        RigidBodyCalibrator().fit(X[:4], y[:4])
+
+
+@pytest.mark.parametrize(("column", "scale", "message"), [(0, 1e3, "positions reach .*expected metres"), (3, 180 / np.pi, "angles reach")])
+def test_calibrators_refuse_millimetres_and_degrees(data, column, scale, message) -> None:
+    X, y = data
+    wrong = X.copy()
+    wrong[:, column if column < 3 else slice(3, 6)] *= scale
+    for model in (RigidBodyCalibrator(), LinearCalibrator(), DNNCalibrator(epochs=1, progress=False)):
+        with pytest.raises(ValueError, match=message):
+            model.fit(wrong, y)
+
+
+def test_the_dnn_is_float32_whatever_torchs_default_dtype(data) -> None:
+    X, y = data
+    reference = DNNCalibrator(epochs=2, seed=0, progress=False).fit(X, y).predict(X)
+    default = torch.get_default_dtype()
+    torch.set_default_dtype(torch.float64)  # it failed: "mat1 and mat2 must have the same dtype"
+    try:
+        np.testing.assert_array_equal(DNNCalibrator(epochs=2, seed=0, progress=False).fit(X, y).predict(X), reference)
+    finally:
+        torch.set_default_dtype(default)
+
+
 def test_dnn_fits_smooth_map_well_under_its_variance(data) -> None:
     X, y = data
     model = DNNCalibrator(hidden_layers=2, units=32, epochs=100, batch_size=100, learning_rate=1e-2, progress=False).fit(X[:300], y[:300])

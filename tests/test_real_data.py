@@ -66,7 +66,7 @@ def test_contiguous_folds_give_back_the_authors_linear_figure(paper_data) -> Non
 
 
 class _RecordingModel:
-    """A model that remembers which rows it was asked to predict (by their first column)."""
+    """A model that remembers which rows it was asked to predict (by their first column, in mm)."""
 
     tested: list[np.ndarray] = []
 
@@ -74,12 +74,12 @@ class _RecordingModel:
         return self
 
     def predict(self, X: np.ndarray) -> np.ndarray:
-        _RecordingModel.tested.append(X[:, 0].astype(int))
+        _RecordingModel.tested.append(np.round(X[:, 0] * 1e3).astype(int))
         return np.zeros((len(X), 3))
 
 
 def test_contiguous_folds_are_blocks_of_rows_in_order() -> None:
-    X = np.column_stack([np.arange(25.0), np.zeros((25, 5))])
+    X = np.column_stack([np.arange(25.0) * 1e-3, np.zeros((25, 5))])  # metres, in row order
     _RecordingModel.tested = []
     cross_validate(lambda seed: _RecordingModel(), X, np.zeros((25, 3)), folds=5, shuffle=False)
     assert [list(rows) for rows in _RecordingModel.tested] == [list(range(5 * k, 5 * k + 5)) for k in range(5)]

@@ -26,7 +26,18 @@ class Calibrator(Protocol):
 
 
 def grid_touch_target(observation: dict[str, np.ndarray]) -> Target:
-    """GridTouch-v0's target: the circle as the endoscope sees it, with the episode's yaw."""
+    """GridTouch-v0's target: the circle as the endoscope sees it, with the episode's yaw.
+
+    Raises:
+        ValueError: the observation is not GridTouch-v0's (Debridement-v0's wants
+            ``target=fragment_target``).
+    """
+    if not isinstance(observation, dict) or not {"desired_goal", "observation"} <= set(observation):
+        keys = sorted(observation) if isinstance(observation, dict) else type(observation).__name__
+        raise ValueError(
+            f"the default target reads GridTouch-v0's observation ('desired_goal', 'observation'), got {keys}; "
+            "give CalibratedPolicy a target for other envs (Debridement-v0: target=fragment_target)"
+        )
     return np.asarray(observation["desired_goal"], dtype=float), float(observation["observation"][-1])
 
 

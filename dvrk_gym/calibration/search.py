@@ -40,6 +40,7 @@ from dvrk_gym.calibration.models.features import check_inputs, check_targets
 from dvrk_gym.calibration.models.forests import ForestCalibrator
 from dvrk_gym.calibration.models.linear import LinearCalibrator
 from dvrk_gym.calibration.models.two_phase import Regressor
+from dvrk_gym.utils.checks import check_int
 
 __all__ = [
     "CHOSEN_NET",
@@ -212,9 +213,16 @@ def cross_validate(
 
     Returns:
         Per-fold mean squared L2 error of the held-out predictions, in mm^2.
+
+    Raises:
+        ValueError: ``folds`` not an int in [2, rows], or ``max_folds`` not None or a
+            positive int (no fold scored would be a NaN error).
     """
     X = check_inputs(X)
     y = check_targets(y, X.shape[0])
+    folds = check_int("folds", folds, 2, max(2, X.shape[0]))
+    if max_folds is not None:
+        max_folds = check_int("max_folds", max_folds, 1)
     errors: list[float] = []
     splitter = KFold(n_splits=folds, shuffle=True, random_state=seed) if shuffle else KFold(n_splits=folds)
     for train, test in splitter.split(X):

@@ -92,8 +92,13 @@ def test_the_dnn_refuses_what_overflows_it_instead_of_predicting_nan():
     dnn = DNNCalibrator(epochs=1, progress=False).fit(X, y)
     far = X[:1].copy()
     far[0, 0] = 1e300
-    with pytest.raises(ValueError, match="X row 0 .* gives no finite prediction"):
+    with pytest.raises(ValueError, match="X.s positions reach 1e\\+300; expected metres"):  # it gave NaN, then no finite prediction
         dnn.predict(far)
+    narrow = X.copy()
+    narrow[:, 0] = 1e-44 * np.arange(len(X))  # a spread of about 1e-42 m: 1 mm away is beyond float32
+    tight = DNNCalibrator(epochs=1, progress=False).fit(narrow, y)
+    with pytest.raises(ValueError, match="X row 0 .* gives no finite prediction"):
+        tight.predict(narrow[:1] + [1e-3, 0, 0, 0, 0, 0])
     assert np.isfinite(dnn.predict(X)).all()
 
 
@@ -319,3 +324,22 @@ def test_an_agent_row_of_no_benchmark_is_refused(tmp_path):
     agent = LoadedAgent(model=None, config=TrainConfig(agent="sac", steps=10), env_steps=10, path=tmp_path / "a.zip")
     with pytest.raises(ValueError, match="no benchmark settings"):
         agent_row(agent, {})
+
+
+@pytest.mark.parametrize(("keywords", "name"), [({"max_folds": 0}, "max_folds"), ({"folds": 1}, "folds"), ({"folds": 10**6}, "folds")])
+def test_a_cross_validation_that_would_score_no_fold_is_refused(keywords, name):
+    from dvrk_gym.calibration.models.linear import LinearCalibrator
+    from dvrk_gym.calibration.search import cross_validate
+
+    X, y = _rows()
+    with pytest.raises(ValueError, match=name):  # max_folds=0 gave a NaN error
+        cross_validate(lambda seed: LinearCalibrator(), X, y, **keywords)
+
+
+def test_the_default_calibrated_target_names_the_env_it_reads():
+    from dvrk_gym.calibration.models.rigid import RigidBodyCalibrator
+    from dvrk_gym.calibration.policy import CalibratedPolicy
+
+    policy = CalibratedPolicy(RigidBodyCalibrator().fit(*_rows()))
+    with pytest.raises(ValueError, match="target=fragment_target"):  # was a bare KeyError 'desired_goal'
+        policy({"fragment_positions": np.zeros((8, 3)), "fragment_seen": np.ones(8)})

@@ -71,10 +71,11 @@ def _build_network(hidden_layers: int, units: int, activation: str) -> nn.Sequen
     layers: list[nn.Module] = []
     width = _INPUT_FEATURES
     for _ in range(hidden_layers):
-        # Built on the meta device so construction draws nothing from torch's global RNG.
-        layers += [nn.Linear(width, units, device="meta"), ACTIVATIONS[activation]()]
+        # Built on the meta device so construction draws nothing from torch's global RNG; in
+        # float32 whatever torch's default dtype (the inputs are float32).
+        layers += [nn.Linear(width, units, device="meta", dtype=torch.float32), ACTIVATIONS[activation]()]
         width = units
-    layers.append(nn.Linear(width, _OUTPUTS, device="meta"))
+    layers.append(nn.Linear(width, _OUTPUTS, device="meta", dtype=torch.float32))
     return nn.Sequential(*layers).to_empty(device="cpu")
 
 

@@ -47,6 +47,13 @@ def calibrator_layout(features: tuple[str, ...] | None = None) -> dict[str, list
     return layout if features is None else {**layout, "features": list(features)}
 
 
+MAX_POSITION_M = 1.0
+"""The farthest position a calibrator takes, m: the dVRK's workspace and camera lie within
+0.3 m of the base; a larger number is another unit (millimetres)."""
+MAX_ANGLE_RAD = 2.0 * np.pi
+"""The largest angle a calibrator takes, rad (a larger number is degrees)."""
+
+
 def check_inputs(X: object, name: str = "X", columns: int = 6) -> np.ndarray:
     """Validate a 2-D array of finite numbers with a fixed number of columns.
 
@@ -60,7 +67,9 @@ def check_inputs(X: object, name: str = "X", columns: int = 6) -> np.ndarray:
 
     Raises:
         ValueError: If it does not hold real numbers (complex, bool, text, objects), is not
-            2-D with ``columns`` columns, is empty or not finite.
+            2-D with ``columns`` columns, is empty or not finite, or (a calibrator's inputs:
+            six columns) its positions or angles are not in metres and radians
+            (``MAX_POSITION_M``, ``MAX_ANGLE_RAD``).
     """
     try:
         raw = np.asarray(X)
@@ -76,7 +85,19 @@ def check_inputs(X: object, name: str = "X", columns: int = 6) -> np.ndarray:
     if not np.all(np.isfinite(array)):
         row = int(np.argwhere(~np.isfinite(array))[0, 0])
         raise ValueError(f"{name} row {row} is not finite ({array[row]}); expected finite values")
+    if columns == 6:  # a calibrator's inputs
+        _check_si_units(array, name)
     return array
+
+
+def _check_si_units(array: np.ndarray, name: str) -> None:
+    """Positions (the first three columns) within ``MAX_POSITION_M`` and angles (the others)
+    within ``MAX_ANGLE_RAD``: millimetres or degrees would fit a model that is silently wrong."""
+    position = np.abs(array[:, :3]).max()
+    if position > MAX_POSITION_M:
+        raise ValueError(f"{name}'s positions reach {position:.4g}; expected metres (within {MAX_POSITION_M:g} m of the origin)")
+    if np.abs(array[:, 3:]).max() > MAX_ANGLE_RAD:
+        raise ValueError(f"{name}'s angles reach {np.abs(array[:, 3:]).max():.4g}; expected radians (within 2 pi)")
 
 
 def check_targets(y: object, rows: int, name: str = "y") -> np.ndarray:

@@ -23,6 +23,18 @@ __all__ = ["RigidBodyCalibrator", "fit_rigid_transform"]
 _LOGGER = logging.getLogger(__name__)
 MIN_GROUP_ROWS = 3  # a rigid transform needs three non-collinear points
 _ROTATION_TOL = 1e-9
+MIN_PLANE_SPREAD_M = 1e-7
+"""Rows whose second principal spread (RMS about their line of best fit) is below this, m,
+lie on a line: they fix no rotation about it."""
+
+
+def spans_a_plane(points: np.ndarray) -> bool:
+    """Whether (N, 3) points (m) are at least three and not (near) collinear: their second
+    principal RMS spread is at least ``MIN_PLANE_SPREAD_M``."""
+    if len(points) < MIN_GROUP_ROWS:
+        return False
+    spreads = np.linalg.svd(points - points.mean(axis=0), compute_uv=False) / np.sqrt(len(points))
+    return bool(spreads[1] >= MIN_PLANE_SPREAD_M)
 
 
 def fit_rigid_transform(source: np.ndarray, target: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -44,7 +56,8 @@ def fit_rigid_transform(source: np.ndarray, target: np.ndarray) -> tuple[np.ndar
 class RigidBodyCalibrator(SavableModel):
     """Per-yaw rigid transforms from camera position to base position.
 
-    A yaw group with fewer than three training rows uses the transform fitted to all rows.
+    A yaw group whose training rows do not span a plane (fewer than three, or on a line:
+    :func:`spans_a_plane`) uses the transform fitted to all rows.
     """
 
     KIND = "rigid_body_calibrator"
@@ -58,21 +71,24 @@ class RigidBodyCalibrator(SavableModel):
         """Fit on inputs X (N, 6: metres, radians) and base positions y (N, 3, metres).
 
         Raises:
-            ValueError: On bad shapes or values, or fewer than three rows in all.
+            ValueError: On bad shapes or values, fewer than three rows in all, or rows whose
+                camera positions lie on a line.
         """
         X = check_inputs(X)
         y = check_targets(y, X.shape[0])
         if X.shape[0] < MIN_GROUP_ROWS:
             raise ValueError(f"X has {X.shape[0]} rows; a rigid fit needs at least {MIN_GROUP_ROWS}")
+        if not spans_a_plane(X[:, :3]):
+            raise ValueError("the rows' camera positions lie on a line; a rigid fit needs three that do not")
         groups = nearest_yaw_index(X[:, 3])
         fallback = fit_rigid_transform(X[:, :3], y)
         rotations, translations = [], []
         for g in range(len(PAPER_YAWS_RAD)):
             rows = groups == g
-            if np.count_nonzero(rows) >= MIN_GROUP_ROWS:
+            if spans_a_plane(X[rows, :3]):
                 rotation, translation = fit_rigid_transform(X[rows, :3], y[rows])
             else:
-                _LOGGER.info("yaw group %d has %d rows; using the all-data rigid transform", g, np.count_nonzero(rows))
+                _LOGGER.info("yaw group %d's %d rows span no plane; using the all-data rigid transform", g, np.count_nonzero(rows))
                 rotation, translation = fallback
             rotations.append(rotation)
             translations.append(translation)

@@ -17,6 +17,9 @@ from collections.abc import Mapping
 from typing import Any, Protocol
 
 import numpy as np
+from sklearn.base import BaseEstimator
+from sklearn.exceptions import NotFittedError
+from sklearn.utils.validation import check_is_fitted
 
 from dvrk_gym.calibration.models.dnn import DNNCalibrator
 from dvrk_gym.calibration.models.features import calibrator_layout, check_inputs, check_targets
@@ -39,9 +42,16 @@ class Regressor(Protocol):
 
 def _looks_fitted(model: Any) -> bool:
     """scikit-learn's convention: fitted attributes end in ``_``; one that is set means fitted.
-
-    A model with no such attributes (a user's own class) is taken as given: fitted.
+    A scikit-learn estimator is asked with its own ``check_is_fitted`` (an unfitted
+    ``MultiOutputRegressor`` has no such attribute at all). A model with none (a user's own
+    class) is taken as given: fitted.
     """
+    if isinstance(model, BaseEstimator) and not type(model).__module__.startswith("dvrk_gym."):
+        try:
+            check_is_fitted(model)
+        except NotFittedError:
+            return False
+        return True
     learned = [value for name, value in vars(model).items() if name.endswith("_") and not name.startswith("__")]
     return any(value is not None for value in learned) if learned else True
 
@@ -52,7 +62,9 @@ class TwoPhaseCalibrator(SavableModel):
     Args:
         dnn: The Phase I model: the paper's network by default (3 x 300 ReLU, 1000 epochs),
             or any regressor with ``fit``/``predict`` on SI arrays, fitted or not.
-        forests: The Phase II residual forests (default: 100 trees, default depth).
+        forests: The Phase II residual forests (default: 100 trees, default depth); fitted
+            ones (``ResidualForests.load``) are used as they are: they must have been fitted
+            on the residuals of ``dnn``'s predictions.
         seed: Seed for the default components (ignored for components passed in).
 
     Example::
@@ -71,7 +83,7 @@ class TwoPhaseCalibrator(SavableModel):
         self.dnn: Regressor = dnn if dnn is not None else DNNCalibrator(seed=seed)
         self.forests = forests if forests is not None else ResidualForests(seed=seed)
         self.phase1_fitted_ = dnn is not None and _looks_fitted(dnn)
-        self.phase2_fitted_ = False
+        self.phase2_fitted_ = forests is not None and forests.forests_ is not None  # fitted forests passed in are used
 
     def fit_phase1(self, X: np.ndarray, y: np.ndarray) -> TwoPhaseCalibrator:
         """Fit the network on Phase I inputs X (N, 6: m, rad) and base positions y (N, 3, m).
