@@ -56,6 +56,18 @@ def test_tiny_reproduce_writes_report_results_and_figures(tiny_reproduction):
         assert heading in report
     assert "| DNN+RF, paper | 10.5 | 14.2 | 12.8 | 12.1 | 8.9 | 14.7 | 1.08 |" in report  # the paper beside the simulation
     assert "figures/bias_field.png" in report
+    short = sorted({r["epochs"] for r in data["search"] if r["epochs"] is not None})
+    assert f"The nets here trained {', '.join(map(str, short))} epochs, not the paper's 1000" in report  # a tiny profile's nets
+
+
+def test_the_model_search_says_nothing_of_short_training_when_the_nets_had_the_papers():
+    from dvrk_gym.reproduce.report import _search_section
+
+    row = {"name": "DNN_u300_h3_relu", "mean_mm2": 1.0, "std_mm2": 0.1, "fold_mm2": [1.0], "split_folds": 10, "epochs": 1000}
+    data = {"search": [row, {**row, "name": "Lin_EA", "epochs": None}], "search_paper_mm2": {}, "figures": {}}
+    assert not any("epochs, not the paper's" in line for line in _search_section(data))
+    data["search"][0]["epochs"] = 30
+    assert sum("The nets here trained 30 epochs, not the paper's 1000" in line for line in _search_section(data)) == 1
 
 
 def test_rerun_resumes_from_the_cache_and_refuses_other_settings(tiny_reproduction, tmp_path):

@@ -241,6 +241,12 @@ def _search_section(data: dict[str, Any]) -> list[str]:
         f"The paper's figures are on its real data (the authors' own re-run of it: {authors} mm^2).",
         "",
     ]
+    short = sorted({r["epochs"] for r in data["search"] if r["epochs"] is not None and r["epochs"] < paper.DNN_EPOCHS})
+    if short:  # a quick profile: the nets' gap to the paper is their training's, not the data's
+        lines[-1:-1] = [
+            f"The nets here trained {', '.join(map(str, short))} epochs, not the paper's {paper.DNN_EPOCHS}: their difference "
+            "from the paper's figure is mostly the short training (sigmoid nets most), not the simulated data.",
+        ]
     return (
         lines
         + _table(["model", "mm^2 (mean +- sd)", "folds", "epochs", "paper mm^2", "difference"], rows)
