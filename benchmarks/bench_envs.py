@@ -65,10 +65,10 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--steps", type=int, default=500, help="GridTouch steps to time (default: %(default)s)")
     parser.add_argument("--trajectories", type=int, default=57, help="Phase I trajectories (default: %(default)s)")
-    parser.add_argument("--starts", type=int, default=4, help="GridTouch envs made and reset in turn (default: %(default)s)")
+    parser.add_argument("--starts", type=int, default=4, help="GridTouch envs made and reset in turn, at least 2 (default: %(default)s)")
     args = parser.parse_args()
     check_flag_bounds(parser, args, {"steps": (1, 10**7), "trajectories": (1, 10**4), "starts": (2, 1000)})
-    starts = start_times(max(args.starts, 2))
+    starts = start_times(args.starts)
     rate = grid_touch_rate(args.steps)
     printed_grid.clear_cache()  # Phase I's figure includes its own world's grid detection, as before the cache
     elapsed, raw, kept = phase1_collection(args.trajectories)

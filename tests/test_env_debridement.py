@@ -16,6 +16,7 @@ from dvrk_gym.envs.grid_touch import tool_pose
 from dvrk_gym.envs.picks import PHASES
 from dvrk_gym.paper import DEBRIDEMENT_PHASE_S as PAPER_PHASE_S
 from dvrk_gym.sim.physics.scene import WORKSPACE_CENTER_M
+from dvrk_gym.sim.robot import ik
 from dvrk_gym.sim.robot import kinematics as kin
 from dvrk_gym.sim.table import judge
 from dvrk_gym.sim.table.contact import COMPLIANT
@@ -318,3 +319,64 @@ def test_judge_rules():
     assert judge.physics_failure(np.zeros((2, 3)) + [0.04, 0.04, -0.16]) is None
     assert "left the scene" in judge.physics_failure(np.array([[0.04, 0.04, -0.16], [3.0, 0.0, 0.0]]))
     assert "finite" in judge.physics_failure(np.array([[np.nan, 0.0, 0.0]]))
+
+
+# --- what a pick is judged on ---------------------------------------------------------------
+
+
+def _aim_at_centre(env, index: int) -> np.ndarray:
+    """The tool position at fragment ``index``'s true centre, its yaw (a review's aim)."""
+    fragment = env.unwrapped.table.fragments[index]
+    return np.array([*fragment.position(), (fragment.yaw() + math.pi / 2) % math.pi - math.pi / 2], dtype=np.float32)
+
+
+def test_a_pick_is_judged_on_the_fragment_the_jaws_took_not_the_one_nearest_the_tip(make):
+    """Aimed at fragment 1, the jaws took it and dropped it in the receptacle; the judge took
+    fragment 7, nearer the tip as the jaws closed: outcome A, and 7 was set aside untouched."""
+    env = make()
+    env.reset(seed=0)
+    env.step(_aim_at_centre(env, 0))
+    _, reward, _, _, info = env.step(_aim_at_centre(env, 1))
+    assert (info["pick_fragment"], info["outcome"], reward) == (1, "-", 1.0)
+    assert judge.in_receptacle(env.unwrapped.table.fragments[1].position())
+    assert 7 not in env.unwrapped._episode.set_aside and env.unwrapped.table.fragments[7].on_paper()
+
+
+def _touch_over(env, index: int, offset_m) -> np.ndarray:
+    """The command whose nominal closed-jaw tip lies 2.7 mm over fragment ``index``'s centre,
+    moved by ``offset_m`` (x, y) (bias "none": the nominal tip is the true one)."""
+    fragment = env.unwrapped.table.fragments[index]
+    yaw = (fragment.yaw() + math.pi / 2) % math.pi - math.pi / 2
+    goal = np.array([*(fragment.position()[:2] + offset_m), SURFACE_Z_M + 0.0027])
+    command = goal.copy()
+    for _ in range(6):
+        command = command + goal - kin.touch_point(ik.inverse_kinematics(tool_pose(command, yaw)))
+    return np.array([*command, yaw], dtype=np.float32)
+
+
+def test_a_raisin_pierced_as_it_drops_is_outcome_c(make):
+    """The pierce was recorded at the end of the first five phases only: raisin 4, pierced
+    as the jaws opened over the receptacle and left on a tip, was judged A."""
+    env = make(fragment="raisin")
+    env.reset(seed=3)
+    rng = np.random.default_rng(3)
+    for _ in range(5):
+        _, _, _, _, info = env.step(_touch_over(env, env.unwrapped._on_paper()[0], rng.normal(0.0, 0.002, 2)))
+    assert (info["pick_fragment"], info["outcome"]) == (4, "C")
+
+
+def test_delta_mode_rewards_each_fragment_once(make):
+    """A fragment lifted over the receptacle's rim and let fall back in scored again each time."""
+    from dvrk_gym.sim.physics.scene import RECEPTACLE_CENTER_M
+
+    env = make(action_mode="delta")
+    env.reset(seed=0)
+    client, fragment = env.unwrapped.world.physics.client, env.unwrapped.table.fragments[0]
+    total = 0.0
+    for _ in range(3):
+        client.resetBasePositionAndOrientation(fragment.body_id, (RECEPTACLE_CENTER_M + [0, 0, 0.016]).tolist(), [0, 0, 0, 1])
+        client.resetBaseVelocity(fragment.body_id, [0, 0, 0], [0, 0, 0])
+        for _ in range(5):
+            _, reward, _, _, info = env.step(np.zeros(4, dtype=np.float32))
+            total += reward
+    assert total == 1.0 and info["delivered"] == 1

@@ -233,3 +233,23 @@ def test_nested_settings_can_be_given_as_dicts_and_bad_ones_are_refused():
         DebridementConfig(timing={"grip_dwell": 1.0})  # a misspelt field
     with pytest.raises(ValueError, match="timing must be a PickTiming"):
         DebridementConfig(timing=0.5)
+
+
+def test_partial_gripper_and_timing_dicts_change_only_their_fields_of_the_envs_defaults():
+    from dvrk_gym.envs.debridement_config import DEFAULT_PICK_TIMING, SERRATED_GRIPPER, DebridementConfig
+
+    config = DebridementConfig(gripper={"grip_force_n": 1.0}, timing={"travel": {"max_speed_m_s": 0.065}, "grip_dwell_s": 1.4})
+    assert config.gripper.jaw_friction == SERRATED_GRIPPER.jaw_friction  # was the class default, 1.0 against 1.5
+    assert config.timing.travel == DEFAULT_PICK_TIMING.travel  # its acceleration was the class default's
+    assert config.timing.grip_dwell_s == 1.4 and config.timing.descend == DEFAULT_PICK_TIMING.descend
+
+
+@pytest.mark.parametrize("period", [0.01, 0.03, 0.1001])
+def test_a_control_period_of_no_whole_number_of_physics_steps_is_refused(period):
+    from dvrk_gym.envs.debridement_config import PHYSICS_STEP_S, DebridementConfig
+    from dvrk_gym.sim.physics.client import DEFAULT_TIME_STEP_S
+
+    assert PHYSICS_STEP_S == DEFAULT_TIME_STEP_S
+    with pytest.raises(ValueError, match="not a whole number of physics steps"):  # 0.01 s lasted 0.0125
+        DebridementConfig(control_period_s=period)
+    assert DebridementConfig(control_period_s=0.05).control_period_s == 0.05

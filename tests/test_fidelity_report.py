@@ -119,7 +119,9 @@ def test_a_simulated_collection_that_keeps_too_few_rows_says_so(monkeypatch):
         kept=np.zeros(n, dtype=bool),
     )
     monkeypatch.setattr(comparison, "run_paper_phase1", lambda *args, **kwargs: unseen)
-    with pytest.raises(ValueError, match="the simulated Phase I kept 0 of its 93 rows, too few for the statistics"):
+    with pytest.raises(
+        ValueError, match="no statistics of the simulated Phase I's 0 kept rows \\(of 93\\): X has no rows.*collect more trajectories"
+    ):
         comparison.run_fidelity(n_trajectories=1, progress=False)
 
 

@@ -370,3 +370,12 @@ def test_a_table_refuses_waits_moves_and_fragments_it_cannot_make():
                 table.set_aside_fragment(index)
     finally:
         world.close()
+
+
+def test_a_table_keeps_the_world_it_sits_on():
+    """``DebridementTable(DvrkWorld(...))`` on one line: the table is all that holds the world."""
+    table = DebridementTable(DvrkWorld(WorldConfig(bias="none", camera_resolution=(320, 180))))
+    try:
+        assert len(table.add_fragments("raisin", np.random.default_rng(0), n=2)) == 2
+    finally:
+        table.world.close()

@@ -96,3 +96,19 @@ def test_an_unfitted_scikit_learn_estimator_is_not_taken_for_a_fitted_one(rows):
     with pytest.raises(ValueError, match="fit_phase2 called before fit_phase1"):  # was scikit-learn's NotFittedError, later
         model.fit_phase2(X, y)
     assert TwoPhaseCalibrator(dnn=MultiOutputRegressor(GradientBoostingRegressor(n_estimators=5)).fit(X, y)).phase1_fitted_
+
+
+def test_a_users_own_estimator_on_scikit_learns_base_is_taken_as_fitted(rows):
+    from sklearn.base import BaseEstimator, RegressorMixin
+
+    class Mine(RegressorMixin, BaseEstimator):  # stores nothing ending in "_"
+        def fit(self, X, y):
+            return self
+
+        def predict(self, X):
+            return np.asarray(X)[:, :3]
+
+    X, _ = rows
+    model = TwoPhaseCalibrator(dnn=Mine())
+    assert model.phase1_fitted_
+    np.testing.assert_array_equal(model.predict(X), X[:, :3])

@@ -110,7 +110,8 @@ class DebridementEnv(DvrkEnv[DebridementConfig]):
     holds a fragment (other rows are 0).
 
     Reward: primitive mode 1 for a delivered fragment; delta mode the number of
-    fragments that reached the receptacle during the step.
+    fragments let go of in the receptacle for the first time during the step (each once
+    per episode; ``info["is_success"]``: every fragment lies there, let go of).
 
     Reset options:
         ``"relax"``: True relaxes the cables as the arm goes to its start above the
@@ -289,7 +290,6 @@ class DebridementEnv(DvrkEnv[DebridementConfig]):
     # ------------------------------------------------------------------ delta control
     def _delta(self, action: np.ndarray) -> tuple[float, dict[str, Any]]:
         table, config = self.table, self.config
-        before = self._delivered()
         wanted = self.world.reported_pose()[:3, 3] + action[:3]
         target = np.clip(wanted, DELTA_BOX_LOW_M, DELTA_BOX_HIGH_M)
         self._jaw_target = float(np.clip(self._jaw_target + action[3], CLOSED_JAW_RAD, kin.JAW_FULLY_OPEN_RAD))
@@ -298,9 +298,11 @@ class DebridementEnv(DvrkEnv[DebridementConfig]):
         move = table.move_stepped(pose, self.np_random, GRASP_TIP_CLEARANCE_M, duration_s=config.control_period_s)
         table.dwell(config.control_period_s - move.duration_s)
         delivered = self._delivered()
+        new = delivered - self._episode.rewarded  # each fragment once: one lifted out and dropped back in scores no more
+        self._episode.rewarded |= new
         clamped = [f"position:{axis}" for axis, c in zip("xyz", target != wanted) if c]
         clamped += [f"joint:{kin.JOINT_NAMES[j]}" for j in np.flatnonzero(move.joints_clamped)]
-        return float(len(delivered - before)), {"clamped_joints": clamped, "delivered": len(delivered)}
+        return float(len(new)), {"clamped_joints": clamped, "delivered": len(delivered)}
 
     # ------------------------------------------------------------------ what is true
     def _on_paper(self) -> list[int]:
@@ -313,7 +315,12 @@ class DebridementEnv(DvrkEnv[DebridementConfig]):
         ]
 
     def _delivered(self) -> set[int]:
-        return {i for i, f in enumerate(self.table.fragments) if i not in self._episode.set_aside and judge.in_receptacle(f.position())}
+        """Indices of the fragments lying in the receptacle, let go of (truth)."""
+        held = self.table.held()
+        fragments = self.table.fragments
+        return {
+            i for i, f in enumerate(fragments) if i not in self._episode.set_aside and i not in held and judge.in_receptacle(f.position())
+        }
 
     def _physics_failure(self) -> str | None:
         world = self.world
@@ -363,6 +370,7 @@ class _Episode:
     outcomes: list[str] = field(default_factory=list)
     phase_s: list[np.ndarray] = field(default_factory=list)
     set_aside: set[int] = field(default_factory=set)
+    rewarded: set[int] = field(default_factory=set)  # delta mode: fragments whose delivery was rewarded
     steps: int = 0
 
 

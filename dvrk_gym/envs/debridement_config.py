@@ -7,6 +7,7 @@ registering the env can read its defaults (:mod:`dvrk_gym.envs`).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 
@@ -87,6 +88,10 @@ class PickTiming:
 
 DEFAULT_PICK_TIMING = PickTiming()
 """The default pick timing of Debridement-v0 (tuned to the paper's phase durations)."""
+_LIMITS = ("travel", "descend", "carry")
+PHYSICS_STEP_S = 1.0 / 240.0
+"""The physics step of every world, s (``sim.physics.client.DEFAULT_TIME_STEP_S``, which this
+module does not import: it would load PyBullet for a command's ``--help``)."""
 SERRATED_GRIPPER = GripperConfig(jaw_friction=SERRATED_JAW_FRICTION)
 """The default gripper of Debridement-v0: GripperConfig with the serrated jaws' friction."""
 
@@ -130,13 +135,17 @@ class DebridementConfig(EnvConfig):
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        # Settings read back from JSON (a saved agent's, say) hold the nested configs as dicts.
+        # Settings read back from JSON (a saved agent's, say) hold the nested configs as dicts;
+        # a dict of some fields changes those of the env's defaults (not of the classes' own).
         try:
             if isinstance(self.timing, dict):
-                limits = {k: MotionLimits(**v) if isinstance(v, dict) else v for k, v in self.timing.items()}
-                object.__setattr__(self, "timing", PickTiming(**limits))  # type: ignore[arg-type]  # checked below
+                limits = {
+                    k: dataclasses.replace(getattr(DEFAULT_PICK_TIMING, k), **v) if isinstance(v, dict) and k in _LIMITS else v
+                    for k, v in self.timing.items()
+                }
+                object.__setattr__(self, "timing", dataclasses.replace(DEFAULT_PICK_TIMING, **limits))
             if isinstance(self.gripper, dict):
-                object.__setattr__(self, "gripper", GripperConfig(**self.gripper))
+                object.__setattr__(self, "gripper", dataclasses.replace(SERRATED_GRIPPER, **self.gripper))
         except TypeError as error:  # a misspelt field
             raise ValueError(f"bad timing or gripper settings: {error}") from error
         if not isinstance(self.timing, PickTiming) or not isinstance(self.gripper, GripperConfig):
@@ -156,3 +165,9 @@ class DebridementConfig(EnvConfig):
             "delta_yaw_rad": (-math.pi / 2, math.pi / 2, False),
         }
         check_float_fields("DebridementConfig", self, bounds, units={"control_period_s": "s", "max_delta_m": "m"})
+        steps = self.control_period_s / PHYSICS_STEP_S
+        if abs(steps - round(steps)) > 1e-6:  # a move lasts whole physics steps: 0.01 s took 0.0125
+            raise ValueError(
+                f"control_period_s = {self.control_period_s} s is not a whole number of physics steps of {PHYSICS_STEP_S:.6g} s "
+                f"(1/240 s); use e.g. {max(1, round(steps)) * PHYSICS_STEP_S:.6g}"
+            )

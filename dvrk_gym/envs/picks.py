@@ -45,8 +45,9 @@ class PickRun:
     """What one pick did, for the judge.
 
     Attributes:
-        record: where the jaws were when they began to close, against the fragments on
-            the paper before the pick (None: none was on the paper).
+        record: where the jaws were when they began to close, against the fragment they
+            took (held when the grip ended), or, if they took none, the fragment of those on
+            the paper before the pick they came nearest to (None: none was on the paper).
         pierced: indices of the fragments a jaw tip held pierced at the end of a phase.
         phase_s: how long each of PHASES took, s, (6,).
         joints_clamped: which joints a move had to clamp into their limits, bool (6,).
@@ -129,10 +130,14 @@ class PickPrimitive:
         phase_done()
         move = table.move_stepped(tool_pose(target - [0.0, 0.0, timing.grip_depth_m], yaw), rng, GRASP_TIP_CLEARANCE_M, timing.descend)
         joints_clamped |= move.joints_clamped
-        record = judge.grip_record(world.true_touch_point(), poses_before, sizes, candidates)
+        tip = world.true_touch_point()
         phase_done()
         spent = table.actuate_jaws(CLOSED_JAW_RAD)
         table.dwell(timing.grip_dwell_s - spent, step_physics=False)
+        # The pick is the fragment the jaws took, if they took one (a neighbour may lie
+        # nearer the tip as they close); else the one they came nearest to.
+        taken = [i for i in table.held() if i in candidates]
+        record = judge.grip_record(tip, poses_before, sizes, taken or candidates)
         phase_done()
         lifted = world.reported_pose()[:3, 3] + [0.0, 0.0, timing.raise_height_m]
         table.move_stepped(tool_pose(lifted, yaw), rng, limits=timing.descend)
@@ -143,7 +148,5 @@ class PickPrimitive:
         spent = table.actuate_jaws(kin.JAW_FULLY_OPEN_RAD, timing.drop_fall_s)
         spent += world.move_to(tool_pose(drop, 0.0), None, rng, True, timing.travel).duration_s
         table.dwell(timing.drop_dwell_s - spent, step_physics=False)
-        marks.append(world.clock.time_s)
-        if self.on_phase is not None:
-            self.on_phase()
+        phase_done()  # a raisin pierced as it drops counts too
         return PickRun(record, pierced, np.diff(marks), joints_clamped)

@@ -204,8 +204,8 @@ def run_fidelity(
         sim = fidelity_statistics(kept.X, kept.y, seed=seed)
     except ValueError as error:
         raise ValueError(
-            f"the simulated Phase I kept {len(kept.y)} of its {len(data.y)} rows, too few for the statistics ({error}); "
-            "collect more trajectories or at a higher camera resolution"
+            f"no statistics of the simulated Phase I's {len(kept.y)} kept rows (of {len(data.y)}): {error}; "
+            "with few rows kept, collect more trajectories or at a higher camera resolution"
         ) from error
     settings: dict[str, object] = {
         "bias": bias,

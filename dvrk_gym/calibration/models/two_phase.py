@@ -42,11 +42,11 @@ class Regressor(Protocol):
 
 def _looks_fitted(model: Any) -> bool:
     """scikit-learn's convention: fitted attributes end in ``_``; one that is set means fitted.
-    A scikit-learn estimator is asked with its own ``check_is_fitted`` (an unfitted
+    scikit-learn's own estimators are asked with its ``check_is_fitted`` (an unfitted
     ``MultiOutputRegressor`` has no such attribute at all). A model with none (a user's own
-    class) is taken as given: fitted.
+    class, built on scikit-learn's base or not) is taken as given: fitted.
     """
-    if isinstance(model, BaseEstimator) and not type(model).__module__.startswith("dvrk_gym."):
+    if isinstance(model, BaseEstimator) and type(model).__module__.startswith("sklearn."):
         try:
             check_is_fitted(model)
         except NotFittedError:

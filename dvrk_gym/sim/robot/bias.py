@@ -141,7 +141,9 @@ class BiasConfig:
         return tuple(f.name for f in dataclasses.fields(cls) if f.name not in _NOT_MAGNITUDES)
 
     def scaled(self, factor: float) -> BiasConfig:
-        """This configuration with every magnitude multiplied by factor (>= 0)."""
+        """This configuration with every magnitude multiplied by factor (>= 0); ValueError
+        for one that takes a magnitude past ``MAX_MAGNITUDE`` (the ``paper`` instrument's
+        wrist stretch passes at 11 times)."""
         return dataclasses.replace(self, **{name: getattr(self, name) * factor for name in self.magnitude_names()})
 
 

@@ -14,7 +14,6 @@ tool through the gripper, so held fragments go along. :meth:`DvrkWorld.rebuild
 from __future__ import annotations
 
 import math
-import weakref
 
 import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
@@ -69,23 +68,11 @@ class DebridementTable:
     def __init__(self, world: DvrkWorld, gripper_config: GripperConfig | None = None, contact: PaperContact = COMPLIANT) -> None:
         if not isinstance(contact, PaperContact):
             raise ValueError(f"contact must be a PaperContact, got {type(contact).__name__}")
-        self._world = weakref.ref(world)  # the world holds the table (its jaw driver): no cycle, so a dropped env frees its server at once
+        self.world = world
         self.gripper_config = gripper_config
         self.contact = contact
         self.fragments: list[Fragment] = []
         self.gripper: Gripper | None = None
-
-    @property
-    def world(self) -> DvrkWorld:
-        """The world the table sits on (held weakly: the world, or the env, owns the table).
-
-        Raises:
-            RuntimeError: the world has been deleted.
-        """
-        world = self._world()
-        if world is None:
-            raise RuntimeError("this table's world has been deleted; make a world and a table for it")
-        return world
 
     # ----------------------------------------------------------------- fragments
     def add_fragments(self, kind: str | FragmentType, rng: np.random.Generator, n: int = FRAGMENTS_PER_TRIAL) -> list[Fragment]:
