@@ -221,6 +221,24 @@ def test_agent_files_without_a_recorded_env_load_on_this_versions_defaults(tmp_p
     assert agent.config.env_overrides == {} and list(agent.env_changes) == ["env"] and "predate" in agent.env_changes["env"]
 
 
+def test_an_agent_saved_with_some_gripper_fields_keeps_the_defaults_it_learnt_with():
+    """A partial gripper dict once filled the rest from the class (jaw friction 1.0); it now fills
+    it from the env's (1.5): an agent saved before is evaluated with what it learnt with, noted."""
+    import dataclasses
+
+    from dvrk_gym.baselines.checkpoints import _recorded_world, env_record
+    from dvrk_gym.sim.table.gripper_config import GripperConfig
+
+    config = TrainConfig(agent="sac_pick", env_overrides={"gripper": {"grip_force_n": 2.0}})
+    saved = env_record(config)
+    saved["kwargs"]["gripper"] = json.loads(json.dumps(dataclasses.asdict(GripperConfig(grip_force_n=2.0))))
+    restored, changes = _recorded_world(config, saved)
+    assert restored.env_overrides["gripper"]["jaw_friction"] == 1.0 and "gripper" in changes
+    saved["kwargs"]["gripper"]["grip_force_n"] = 3.0  # a field the settings give: a contradiction
+    with pytest.raises(ValueError, match="env records gripper"):
+        _recorded_world(config, saved)
+
+
 @pytest.mark.parametrize(
     "world, message",
     [

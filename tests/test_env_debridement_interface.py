@@ -244,7 +244,7 @@ def test_partial_gripper_and_timing_dicts_change_only_their_fields_of_the_envs_d
     assert config.timing.grip_dwell_s == 1.4 and config.timing.descend == DEFAULT_PICK_TIMING.descend
 
 
-@pytest.mark.parametrize("period", [0.01, 0.03, 0.1001])
+@pytest.mark.parametrize("period", [0.01, 0.03, 0.1001, 1e-9])
 def test_a_control_period_of_no_whole_number_of_physics_steps_is_refused(period):
     from dvrk_gym.envs.debridement_config import PHYSICS_STEP_S, DebridementConfig
     from dvrk_gym.sim.physics.client import DEFAULT_TIME_STEP_S

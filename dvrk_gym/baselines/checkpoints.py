@@ -196,8 +196,10 @@ def _recorded_world(config: TrainConfig, recorded: Any) -> tuple[TrainConfig, di
         raise ValueError(f"env id {recorded.get('id')!r}, but agent {config.agent!r} learns {config.spec.env_id!r}")
     current = env_record(config)
     mine, now = recorded["kwargs"], current["kwargs"]
-    for key in config.env_kwargs():  # set by the training settings themselves: the record must agree
+    for key, given in config.env_kwargs().items():  # set by the training settings themselves: the record must agree
         if key in mine and not _agrees(mine[key], now[key]):
+            if isinstance(given, dict) and _agrees(mine[key], given):  # some fields given, the rest defaults that changed since
+                continue
             raise ValueError(f"env records {key} = {mine[key]!r}, but the training settings give {now[key]!r}")
     restore, changes = {}, {}
     for key in sorted((set(mine) | set(now)) - set(DISPLAY_ONLY)):

@@ -166,7 +166,7 @@ class DebridementConfig(EnvConfig):
         }
         check_float_fields("DebridementConfig", self, bounds, units={"control_period_s": "s", "max_delta_m": "m"})
         steps = self.control_period_s / PHYSICS_STEP_S
-        if abs(steps - round(steps)) > 1e-6:  # a move lasts whole physics steps: 0.01 s took 0.0125
+        if round(steps) < 1 or abs(steps - round(steps)) > 1e-6:  # a move lasts whole physics steps: 0.01 s took 0.0125
             raise ValueError(
                 f"control_period_s = {self.control_period_s} s is not a whole number of physics steps of {PHYSICS_STEP_S:.6g} s "
                 f"(1/240 s); use e.g. {max(1, round(steps)) * PHYSICS_STEP_S:.6g}"
