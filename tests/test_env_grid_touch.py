@@ -268,3 +268,12 @@ def test_the_rigid_paper_is_the_simulator_before_the_compliant_one(make_env):
         info = env.step(np.array([*command[:2], command[2] + dz, 0.5], dtype=np.float32))[4]
         touches.append([*info["true_tip_position"], *info["reported_position"]])
     np.testing.assert_allclose(touches, RIGID_TOUCHES_BEFORE_THE_COMPLIANT_PAPER, rtol=0, atol=1e-12)
+
+
+def test_the_envs_own_float32_yaw_is_a_yaw_it_takes(make_env):
+    env = make_env("dvrk_gym/GridTouch-v0")
+    for yaw in (np.float32(np.pi / 2), np.float32(-np.pi / 2)):  # 4e-8 beyond pi/2: it was refused
+        observation, _ = env.reset(seed=0, options={"yaw": yaw})
+        assert abs(float(observation["observation"][-1])) == pytest.approx(np.pi / 2)
+    with pytest.raises(ValueError, match="option 'yaw'"):
+        env.reset(options={"yaw": np.pi / 2 + 1e-3})

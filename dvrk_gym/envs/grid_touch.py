@@ -70,9 +70,9 @@ def _check_yaw_option(yaw: Any) -> float | str:
     if isinstance(yaw, (bool, np.bool_)) or not isinstance(yaw, numbers.Real):  # no bools, complex numbers or text
         raise ValueError(message)
     value = float(yaw)
-    if not (np.isfinite(value) and abs(value) <= np.pi / 2 + 1e-9):
+    if not (np.isfinite(value) and abs(value) <= np.pi / 2 + 1e-6):  # the env's own float32 yaw of +-pi/2 is 4e-8 beyond
         raise ValueError(message)
-    return value
+    return min(max(value, -np.pi / 2), np.pi / 2)
 
 
 def _clip_camera(position: np.ndarray) -> np.ndarray:
