@@ -330,13 +330,13 @@ def test_record_video_writes_an_episode_of_every_env(env_id, tmp_path):
 
 
 def test_debridement_renders_the_frames_of_a_pick_phase_by_phase():
-    env = gym.make("dvrk_gym/Debridement-v0", camera_resolution=(160, 96), render_mode="rgb_array_list")
+    env = gym.make("dvrk_gym/Debridement-v0", camera_resolution=(160, 90), render_mode="rgb_array_list")
     try:
         env.reset(seed=0)
         assert len(env.render()) == 1  # the table as the episode starts
         env.step(env.action_space.sample())
         frames = env.render()
-        assert len(frames) == 6 and all(frame.shape == (96, 160, 3) for frame in frames)  # the paper's six phases
+        assert len(frames) == 6 and all(frame.shape == (90, 160, 3) for frame in frames)  # the paper's six phases
         assert env.render() == []  # each frame is handed out once
         assert not all(np.array_equal(frames[0], frame) for frame in frames[1:])  # the arm moved
     finally:

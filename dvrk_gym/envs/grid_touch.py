@@ -183,7 +183,7 @@ class GridTouchEnv(DvrkEnv[GridTouchConfig]):
         self._achieved = np.zeros(3)
         self._touched = False  # whether the arm touched the paper since the last reset
         # The goals are the circles as the endoscope sees them: a resolution that loses one
-        # (160 x 96 loses circle 33, whose goal would be NaN) is refused now, not at its episode.
+        # (128 x 72 loses five, whose goals would be NaN) is refused now, not at its episode.
         missed = [i for i, seen in enumerate(self.world.observe_grid()) if not np.isfinite(seen.camera_position).all()]
         if missed:
             self.close()

@@ -50,8 +50,9 @@ class WorldConfig:
     """How to build a world.
 
     Attributes:
-        camera_resolution: (width, height) of each endoscope image in pixels; the paper's
-            intrinsics are scaled to it.
+        camera_resolution: (width, height) of each endoscope image in pixels, of the paper's
+            16:9 aspect to a pixel (the detector's noise, search boxes and whole pixels scale
+            with the width); the paper's intrinsics are scaled to it.
         bias: the cable bias, a preset name ("none", "paper", "severe") or a BiasConfig.
         bias_seed: which instrument to draw from the bias distribution.
         gui: open the PyBullet GUI (needs a display).
@@ -82,7 +83,14 @@ class WorldConfig:
 
     def __post_init__(self) -> None:
         check_float_fields("WorldConfig", self, {"pixel_noise_px": (0.0, MAX_PIXEL_NOISE_PX, False)})
-        object.__setattr__(self, "camera_resolution", check_resolution("camera_resolution", self.camera_resolution))
+        width, height = check_resolution("camera_resolution", self.camera_resolution)
+        matching = width * PAPER_INTRINSICS.height / PAPER_INTRINSICS.width  # the height of the paper's aspect
+        if abs(matching - height) > 1.0:
+            raise ValueError(  # the detector's noise, search boxes and whole pixels scale with the width alone
+                f"camera_resolution must keep the endoscope's {PAPER_INTRINSICS.width} x {PAPER_INTRINSICS.height} aspect "
+                f"(16:9, to a pixel), got {width} x {height}; e.g. {width} x {round(matching)}"
+            )
+        object.__setattr__(self, "camera_resolution", (width, height))
         check_int_fields("WorldConfig", self, {"bias_seed": (0, 2**31 - 1)})
         if not isinstance(self.bias, (str, BiasConfig)):
             raise ValueError(f"bias must be a preset name or a BiasConfig, got {self.bias!r}")

@@ -143,8 +143,16 @@ def test_the_training_yaw_wrapper_refuses_an_episode_count_it_cannot_carry(made,
 
 
 def test_a_resolution_that_loses_a_printed_circle_is_refused_when_grid_touch_is_made():
-    with pytest.raises(ValueError, match=r"160 x 96 px the endoscope does not find printed circle\(s\) \[33\]"):
-        GridTouchEnv(camera_resolution=(160, 96))
+    with pytest.raises(ValueError, match=r"128 x 72 px the endoscope does not find printed circle\(s\) \[2, 5, 14, 15, 30\]"):
+        GridTouchEnv(camera_resolution=(128, 72))
+
+
+@pytest.mark.parametrize("resolution", [(160, 96), (640, 480), (1920, 1440), (1280, 1080)])
+def test_a_camera_of_another_aspect_than_the_endoscopes_is_refused(resolution):
+    """The detector's noise, search boxes and whole pixels scale with the width: at 640 x 480 a
+    marker inside the authors' left search box was dropped, one outside the right one kept."""
+    with pytest.raises(ValueError, match="must keep the endoscope's 1920 x 1080 aspect"):
+        GridTouchEnv(camera_resolution=resolution)
 
 
 @pytest.mark.parametrize("klass", ENV_CLASSES)
