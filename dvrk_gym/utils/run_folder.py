@@ -7,7 +7,8 @@ dvrk_gym made the results (:func:`~dvrk_gym.utils.source_fingerprint.source_fing
 version and a digest of the package's files, under the reserved key :data:`SOURCE_KEY`): a
 folder stamped by another version of the simulator, or by one from before stamps had it, is
 refused too, since the simulator's code (its identified instrument, its collector...) changes
-between versions and its cached results would be mixed with this one's. Each result is a file in the
+between versions and its cached results would be mixed with this one's; and so is a folder
+that holds files but no stamp (one deleted, say): their settings are unknown. Each result is a file in the
 folder: :meth:`RunFolder.cached` loads it when it is there, else makes and saves it, and a
 result that cannot be read back (cut short by a full disk, edited by hand) is named in a
 warning, moved aside as ``<name>.corrupt`` and made again.
@@ -87,9 +88,9 @@ def _read_stamp(path: Path) -> dict[str, Any] | None:
     try:
         stamp = read_json(path)
     except (ValueError, OSError) as error:
-        raise ValueError(f"{path} is unreadable ({error}); delete it, or the folder, to start the run again") from None
+        raise ValueError(f"{path} is unreadable ({error}); delete the folder to start the run again") from None
     if not isinstance(stamp, dict):
-        raise ValueError(f"{path} holds {type(stamp).__name__}, not the settings object this tool writes; delete it or the folder")
+        raise ValueError(f"{path} holds {type(stamp).__name__}, not the settings object this tool writes; delete the folder")
     return stamp
 
 
@@ -283,7 +284,14 @@ class RunFolder:
             raise ValueError(f"{SOURCE_KEY!r} is reserved for the stamp's source fingerprint; give the setting another name")
         here = source_fingerprint()
         found = _read_stamp(self.stamp)
-        if found is not None:
+        if found is None:  # files already here were made with settings no stamp recorded: never taken as these
+            unknown = sorted(p.name for p in self.path.iterdir() if p.is_file() and p.name != LOCK_FILE and not p.name.startswith("."))
+            if unknown:
+                raise ValueError(
+                    f"{self.path} holds files but no settings stamp ({self.stamp.name}): {unknown[:5]}"
+                    f"{' ...' if len(unknown) > 5 else ''} were made with settings nobody recorded; use an empty folder, or delete these"
+                )
+        else:
             _refuse_other_source(self.stamp, found.pop(SOURCE_KEY, None), here, RESUME_REMEDY)
             if found != wanted:
                 differences = "; ".join(settings_differences(found, wanted))

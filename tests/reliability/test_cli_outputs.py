@@ -82,9 +82,16 @@ def test_baseline_train_checks_its_folder_before_training(capsys, read_only_fold
 
 
 def test_collect_refuses_to_overwrite_phase1_without_force(capsys, tmp_path):
-    (tmp_path / "phase1.npz").write_bytes(b"the old data")
-    _fails_in_one_line(capsys, ["collect", "--out", str(tmp_path), "--trajectories", "1"], "phase1.npz exists", "--force")
+    (tmp_path / "phase1.npz").write_bytes(b"the old data")  # of no recorded settings: refused, --force or not
+    for force in ([], ["--force"]):
+        _fails_in_one_line(capsys, ["collect", "--out", str(tmp_path), "--trajectories", "1", *force], "no settings stamp", "phase1.npz")
     assert (tmp_path / "phase1.npz").read_bytes() == b"the old data"
+    stamped = tmp_path / "stamped"
+    assert main(["collect", "--out", str(stamped), "--trajectories", "1", "--resolution", "320", "180", "--no-progress"]) == 0
+    capsys.readouterr()
+    _fails_in_one_line(
+        capsys, ["collect", "--out", str(stamped), "--trajectories", "1", "--resolution", "320", "180"], "phase1.npz exists", "--force"
+    )
 
 
 @pytest.mark.parametrize("exists", [False, True], ids=["missing-folder", "folder-without-model"])

@@ -195,6 +195,20 @@ def test_a_damaged_settings_stamp_is_an_error_naming_it(tmp_path):
         read_settings(tmp_path, "settings.json")
 
 
+def test_results_left_without_a_stamp_are_never_taken_as_a_new_runs(tmp_path):
+    """Deleting the stamp (as an unreadable one's error said) let a run with other settings
+    load the old results and stamp the folder with its own: models of another instrument."""
+    with RunFolder(tmp_path, {"bias": "paper"}) as folder:
+        folder.write_json("model.json", {"made with": "paper"})
+    (tmp_path / "settings.json").unlink()
+    with pytest.raises(ValueError, match=r"holds files but no settings stamp \(settings.json\): \['model.json'\]"):
+        RunFolder(tmp_path, {"bias": "none"})
+    assert not (tmp_path / "settings.json").exists()  # not stamped with the refused settings
+    (tmp_path / "model.json").unlink()
+    with RunFolder(tmp_path, {"bias": "none"}) as folder:  # an empty folder (but its lock) is a new run's
+        assert folder.read_json("model.json") is None
+
+
 def _stamped_by(folder: Path, source) -> dict[str, bytes]:
     """A run folder with a result, its stamp's source fingerprint replaced by ``source`` (left out
     when None), as another dvrk_gym would have left it; returns its files' bytes (not the lock)."""
