@@ -9,3 +9,8 @@ def middle_of_the_grid(env):
 
 
 NOT_CALLABLE = 42
+
+
+def no_policy(env):
+    """A factory that makes no policy (a number): refused in one line."""
+    return 42

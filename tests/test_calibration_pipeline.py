@@ -223,6 +223,10 @@ def test_cli_reports_bad_arguments_clearly(tmp_path, capsys):
     assert main(["evaluate", "--policy", factory, "--protocol", "raw", "--out", str(tmp_path)]) == 2
     assert "a --policy sends its own actions as they are" in capsys.readouterr().err
     assert not (tmp_path / "evaluation.json").exists()
+    made = ["evaluate", "--policy", "policies_for_tests:no_policy", "--episodes", "1", "--resolution", "640", "360", "--out", str(tmp_path)]
+    assert main(made) == 2  # was a 22-line traceback from the first step
+    err = capsys.readouterr().err.strip()
+    assert "made no policy" in err and len(err.splitlines()) == 1
 
 
 def test_cli_collect_writes_phase1_data(tmp_path, capsys):

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 from pathlib import Path
+from typing import Any
 
 from dvrk_gym import paper
 from dvrk_gym.cli.options import add_instrument_options, add_progress_option, writable_folder
@@ -111,7 +112,7 @@ def _run_evaluate(args: argparse.Namespace) -> int:
 
 def _evaluate_policy(args: argparse.Namespace) -> int:
     from dvrk_gym.envs import ENV_CONFIGS
-    from dvrk_gym.evaluation.episodes import evaluate_policy, load_policy_factory, summarize_metric
+    from dvrk_gym.evaluation.episodes import as_policy, evaluate_policy, load_policy_factory, summarize_metric
 
     args.env = DEFAULT_POLICY_ENV if args.env is None else args.env
     args.episodes = DEFAULT_POLICY_EPISODES if args.episodes is None else args.episodes
@@ -127,7 +128,16 @@ def _evaluate_policy(args: argparse.Namespace) -> int:
         raise ValueError(f"--options must be a JSON object, got {args.options!r}")
     writable_folder(args.out)
     world = {"bias": args.bias, "bias_seed": args.bias_seed, "camera_resolution": tuple(args.resolution)}
-    results = evaluate_policy(factory, args.env, args.episodes, seed=args.seed, options=options, progress=not args.no_progress, **world)
+
+    def checked(env: Any) -> Any:  # what the factory made must be a policy: one line, not a traceback from the first step
+        policy = factory(env)
+        try:
+            as_policy(policy)
+        except TypeError as error:
+            raise ValueError(f"--policy {args.policy} made no policy: {error}") from None
+        return policy
+
+    results = evaluate_policy(checked, args.env, args.episodes, seed=args.seed, options=options, progress=not args.no_progress, **world)
     names = sorted({name for r in results for name in r.metrics})
     print(f"{args.policy} on {args.env}, {args.episodes} episodes (seed {args.seed})")
     print(f"{'metric':<22}{'mean':>10}{'s.e.':>9}{'median':>10}{'min':>10}{'max':>10}")
