@@ -31,12 +31,15 @@ CALIBRATOR_LOADERS: dict[str, Any] = {"rbt": RigidBodyCalibrator, "dnn": DNNCali
 """The class that reads each calibrator's model file, by the calibrator's name."""
 
 
-def load_calibrator(folder: str | os.PathLike, name: str, bias: str = "paper", bias_seed: int = 0) -> tuple[Any, dict[str, Any]]:
+def load_calibrator(
+    folder: str | os.PathLike, name: str, bias: str = "paper", bias_seed: int = 0, camera_resolution: tuple[int, int] | None = None
+) -> tuple[Any, dict[str, Any]]:
     """A calibrator from a calibration run folder, and the run's settings.
 
     Runs the calibration pipeline in ``folder`` first if the model file is missing (its
     stages are cached, so an interrupted run resumes). The settings come from the
-    folder's stamp when it has one, else from ``bias``/``bias_seed``.
+    folder's stamp when it has one, else from ``bias``/``bias_seed`` and ``camera_resolution``
+    (None: the paper's).
 
     Args:
         folder: a folder written by ``dvrk-gym calibrate`` or ``evaluate``.
@@ -53,7 +56,8 @@ def load_calibrator(folder: str | os.PathLike, name: str, bias: str = "paper", b
     if name not in CALIBRATOR_FILES:
         raise ValueError(f"unknown calibrator {name!r}; expected one of {sorted(CALIBRATOR_FILES)}")
     folder = Path(folder)
-    settings = read_pipeline_settings(folder) or {"bias": bias, "bias_seed": bias_seed}
+    given = {"bias": bias, "bias_seed": bias_seed} | ({} if camera_resolution is None else {"camera_resolution": list(camera_resolution)})
+    settings = read_pipeline_settings(folder) or given
     path = folder / CALIBRATOR_FILES[name]
     retired = folder / RETIRED_CALIBRATOR_FILES[name]
     if not path.exists() and retired.exists():

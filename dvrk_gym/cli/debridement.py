@@ -17,7 +17,7 @@ from pathlib import Path
 from dvrk_gym import paper
 from dvrk_gym.cli.options import add_instrument_options, add_progress_option, writable_folder
 from dvrk_gym.sim.table.contact import CONTACTS, DEFAULT_CONTACT
-from dvrk_gym.utils.checks import check_int
+from dvrk_gym.utils.checks import check_int, check_resolution
 
 
 def _run_debride(args: argparse.Namespace) -> int:
@@ -41,11 +41,15 @@ def _run_debride(args: argparse.Namespace) -> int:
             "or add --calibrate to run the calibration there first"
         )
     writable_folder(args.out)
-    calibrator, settings = load_calibrator(args.calibration, args.calibrator, args.bias, args.bias_seed)
+    calibrator, settings = load_calibrator(args.calibration, args.calibrator, args.bias, args.bias_seed, tuple(args.resolution))
     bias = settings.get("bias", args.bias)
+    # the picks see through the endoscope the calibration was made with, as its instrument
+    resolution = check_resolution(
+        f"the camera_resolution in {args.calibration}'s settings", settings.get("camera_resolution", args.resolution)
+    )
     bias_seed = check_int(f"the bias_seed in {args.calibration}'s settings", settings.get("bias_seed", args.bias_seed), 0, 2**31 - 1)
     policy = CalibratedPolicy(calibrator, target=fragment_target)
-    world = {"bias": bias, "bias_seed": bias_seed, "camera_resolution": tuple(args.resolution)}
+    world = {"bias": bias, "bias_seed": bias_seed, "camera_resolution": resolution}
     trials = run_debridement(policy, args.trials, args.seed, args.fragment, **world, progress=not args.no_progress, contact=args.contact)
     text = format_trial_table(trials, args.calibrator, args.fragment, args.seed)
     print(text)
@@ -56,7 +60,7 @@ def _run_debride(args: argparse.Namespace) -> int:
         "calibration": str(args.calibration),
         "bias": bias,
         "bias_seed": bias_seed,
-        "camera_resolution": list(args.resolution),
+        "camera_resolution": list(resolution),
         "contact": args.contact,
     }
     other_paper = args.contact != DEFAULT_CONTACT

@@ -5,6 +5,7 @@ cannot be written, a ``phase1.npz`` that ``collect`` would overwrite, a ``--cali
 folder with no model, a bad profile, a run folder another process owns.
 """
 
+import json
 import os
 import re
 import stat
@@ -283,3 +284,13 @@ def test_a_refused_command_does_not_remove_folders_an_earlier_call_made(capsys, 
     made = writable_folder(tmp_path / "made")  # as an earlier command in this process would
     _fails_in_one_line(capsys, ["baseline", "evaluate", "--model", "missing.zip", "--out", str(tmp_path / "other")], "missing.zip")
     assert made.is_dir() and not (tmp_path / "other").exists()
+
+
+def test_debride_picks_through_the_endoscope_its_calibration_was_made_with(small_calibration, tmp_path, capsys):
+    """The calibration was made at 640 x 360; debride ran its picks at --resolution's default,
+    1920 x 1080, and recorded that, with no word of the difference."""
+    out = tmp_path / "out"
+    assert main(["debride", "--calibration", str(small_calibration), "--trials", "1", "--out", str(out), "--no-progress"]) == 0
+    capsys.readouterr()
+    (cell,) = out.glob("*.json")
+    assert json.loads(cell.read_text())["camera_resolution"] == [640, 360]
