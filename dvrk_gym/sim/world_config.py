@@ -40,7 +40,7 @@ def check_joints(q: np.ndarray) -> np.ndarray:
         ik.UnreachablePoseError: outside the limits.
     """
     q = kin.finite_vector(q, 6, "q")
-    if not kin.within_joint_limits(q):
+    if kin.joint_limit_violations(q, kin.JOINT_LIMIT_TOLERANCE):  # within_joint_limits would check q's values again
         raise ik.UnreachablePoseError(f"joints {np.round(q, 4).tolist()} are outside the joint limits")
     return q
 

@@ -96,8 +96,9 @@ def _check_si_units(array: np.ndarray, name: str) -> None:
     position = np.abs(array[:, :3]).max()
     if position > MAX_POSITION_M:
         raise ValueError(f"{name}'s positions reach {position:.4g}; expected metres (within {MAX_POSITION_M:g} m of the origin)")
-    if np.abs(array[:, 3:]).max() > MAX_ANGLE_RAD:
-        raise ValueError(f"{name}'s angles reach {np.abs(array[:, 3:]).max():.4g}; expected radians (within 2 pi)")
+    angle = np.abs(array[:, 3:]).max()
+    if angle > MAX_ANGLE_RAD:
+        raise ValueError(f"{name}'s angles reach {angle:.4g}; expected radians (within 2 pi)")
 
 
 def check_targets(y: object, rows: int, name: str = "y") -> np.ndarray:
