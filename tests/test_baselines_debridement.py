@@ -82,6 +82,21 @@ def test_unit_actions_map_onto_the_pick_box_and_carry_the_yaw():
     assert action.dtype == np.float32 and action.shape == (4,) and action[3] == pytest.approx(0.25)
 
 
+def test_fragment_target_refuses_a_seen_fragment_without_a_finite_position() -> None:
+    observation = {
+        "fragment_seen": np.array([0, 1, 0], np.float32),
+        "fragment_positions": np.array([[np.nan] * 3, [0.01, -0.02, 0.19], [0.0] * 3], np.float32),
+        "fragment_angles": np.array([np.nan, 0.3, 0.0], np.float32),
+    }
+    position, _ = fragment_target(observation)  # the first row is not seen: its NaN does not matter
+    np.testing.assert_allclose(position, [0.01, -0.02, 0.19], rtol=1e-6)
+    for key, row in (("fragment_positions", [0.01, np.nan, 0.19]), ("fragment_angles", np.inf)):
+        broken = {name: value.copy() for name, value in observation.items()}
+        broken[key][1] = row
+        with pytest.raises(ValueError, match="fragment 1 is seen"):
+            fragment_target(broken)
+
+
 def test_pick_observation_is_the_calibrated_policys_target_scaled_with_a_paper_yaw(debridement_env):
     observation, _ = debridement_env.reset(seed=4)
     assert observation["fragment_seen"].any()

@@ -192,6 +192,9 @@ def test_a_calibration_folders_stamp_reads_back_as_its_config_and_another_versio
         run_calibration(tmp_path, config, progress=False)
     assert not (tmp_path / "phase1.npz").exists()  # refused before any stage ran
     assert PipelineConfig.from_settings(read_pipeline_settings(tmp_path)) == config  # still read
+    # its models were fitted on another simulator: debride, baseline evaluate and the benchmarks refuse them
+    with pytest.raises(ValueError, match=r"another version of dvrk_gym's simulator .*dvrk-gym calibrate --out NEW_FOLDER"):
+        load_calibrator(tmp_path, "rbt")
 
 
 def test_cli_evaluates_any_policy_from_a_factory(tmp_path, capsys):

@@ -352,6 +352,26 @@ def test_the_median_filter_drops_a_sliver_but_keeps_the_tape() -> None:
         detect_marker(image, median_px=4)
 
 
+@pytest.mark.parametrize(
+    "bad",
+    [np.zeros((60, 60, 3), np.float32), np.zeros((60, 60, 4), np.uint8), np.zeros((60, 60), np.uint8), np.zeros((0, 60, 3), np.uint8)],
+    ids=["float", "rgba", "grey", "empty"],
+)
+def test_the_detectors_refuse_an_image_that_is_not_uint8_rgb(bad: np.ndarray) -> None:
+    from dvrk_gym.sim.endoscope.detection import detect_circles
+    from dvrk_gym.sim.endoscope.fragment_detection import detect_fragments
+
+    marker = np.zeros((60, 60, 3), np.uint8)
+    marker[10:30, 10:30] = (220, 10, 10)
+    assert detect_marker(marker) is not None  # the same scene as uint8 RGB is found
+    for detect in (lambda im: detect_marker(im), lambda im: detect_circles(im, 1.0, 100.0), lambda im: detect_fragments(im, 1.0)):
+        with pytest.raises(ValueError, match="uint8"):
+            detect(bad)
+    # The float image of the same marker in [0, 1] used to find nothing, silently.
+    with pytest.raises(ValueError, match="float"):
+        detect_marker(marker.astype(np.float32) / 255.0)
+
+
 def test_the_right_image_shift_moves_the_right_centroid_left_and_draws_nothing() -> None:
     noise = DetectionNoise(core_px=1.0, outlier_px=5.0, outlier_probability=0.2, right_shift_px=2.5)
     np.testing.assert_array_equal(noise.shift("right"), [-2.5, 0.0])

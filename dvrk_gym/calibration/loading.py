@@ -20,10 +20,12 @@ from dvrk_gym.calibration.models.two_phase import TwoPhaseCalibrator
 from dvrk_gym.calibration.pipeline import (
     CALIBRATOR_FILES,
     RETIRED_CALIBRATOR_FILES,
+    SETTINGS_STAMP,
     PipelineConfig,
     read_pipeline_settings,
     run_calibration,
 )
+from dvrk_gym.utils.run_folder import check_made_here
 
 logger = logging.getLogger(__name__)
 
@@ -48,8 +50,10 @@ def load_calibrator(
         bias_seed: which instrument, for a folder without settings.
 
     Raises:
-        ValueError: an unknown calibrator name; or, when the pipeline has to run, a folder
-            stamped with other settings or by another dvrk_gym (:class:`~dvrk_gym.utils.run_folder.RunFolder`).
+        ValueError: an unknown calibrator name; a folder stamped by another dvrk_gym (its
+            calibrators were fitted on that version's simulated instrument, and would be
+            judged on this one's); or, when the pipeline has to run, a folder stamped with
+            other settings (:class:`~dvrk_gym.utils.run_folder.RunFolder`).
         ModelFileError: the folder holds the calibrator only in the retired ``.npz`` format (the
             message gives the command that makes it again), or its model file is bad.
     """
@@ -62,6 +66,7 @@ def load_calibrator(
     retired = folder / RETIRED_CALIBRATOR_FILES[name]
     if not path.exists() and retired.exists():
         raise ModelFileError(retired_format_message(retired))
+    check_made_here(folder, SETTINGS_STAMP, remedy="calibrate again with this version: dvrk-gym calibrate --out NEW_FOLDER")
     if not path.exists():
         logger.warning("%s has no %s: running the calibration pipeline there (cached stages)", folder, path.name)
         run_calibration(folder, PipelineConfig.from_settings(settings, source=f"the settings of {folder}"), benchmark=False)

@@ -53,6 +53,19 @@ def _one_line(error: BaseException, args: argparse.Namespace) -> str:
     return _CONFIG_FIELD.sub(flag, text)
 
 
+def keeps_work_when_interrupted(args: argparse.Namespace) -> bool:
+    """Whether an interrupted run of this command keeps finished stages that the same command
+    picks up again: the calibration pipeline's cached stages (calibrate, evaluate without
+    --policy, debride --calibrate), reproduce's and sweep's tasks, a training's saved state."""
+    if args.command in ("calibrate", "reproduce", "sweep"):
+        return True
+    if args.command == "evaluate":
+        return not args.policy
+    if args.command == "debride":
+        return bool(args.calibrate)
+    return args.command == "baseline" and args.baseline_command == "train"
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of the ``dvrk-gym`` command."""
     parser = argparse.ArgumentParser(
@@ -87,7 +100,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     except KeyboardInterrupt:
         remove_empty_created_folders()
-        print(f"dvrk-gym {args.command}: interrupted (cached stages are kept: the same command resumes)", file=sys.stderr)
+        kept = "cached stages are kept: the same command resumes" if keeps_work_when_interrupted(args) else "nothing is kept: run it again"
+        print(f"dvrk-gym {args.command}: interrupted ({kept})", file=sys.stderr)
         return 130
 
 

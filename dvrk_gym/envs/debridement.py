@@ -96,7 +96,10 @@ def fragment_target(observation: dict[str, np.ndarray]) -> tuple[np.ndarray, flo
         return NOTHING_SEEN_TARGET_M.copy(), 0.0
     i = int(seen[0])
     position = np.asarray(observation["fragment_positions"][i], dtype=float)
-    return position, image_angle_to_yaw(float(observation["fragment_angles"][i]))
+    angle = float(observation["fragment_angles"][i])
+    if position.shape != (3,) or not (np.all(np.isfinite(position)) and math.isfinite(angle)):
+        raise ValueError(f"fragment {i} is seen but its position {position.tolist()} m or angle {angle} rad is not finite (3,)")
+    return position, image_angle_to_yaw(angle)
 
 
 class DebridementEnv(DvrkEnv[DebridementConfig]):

@@ -294,3 +294,38 @@ def test_debride_picks_through_the_endoscope_its_calibration_was_made_with(small
     capsys.readouterr()
     (cell,) = out.glob("*.json")
     assert json.loads(cell.read_text())["camera_resolution"] == [640, 360]
+
+
+@pytest.mark.parametrize(
+    "argv, resumes",
+    [
+        (["calibrate", "--trajectories", "1"], True),
+        (["evaluate", "--trajectories", "1"], True),
+        (["evaluate", "--policy", "x:y"], False),
+        (["debride", "--calibrate"], True),
+        (["debride"], False),
+        (["baseline", "train", "--algo", "sac", "--steps", "10"], True),
+        (["search", "--quick"], False),
+        (["collect", "--trajectories", "1"], False),
+        (["demo", "--circles", "1"], False),
+    ],
+)
+def test_ctrl_c_says_the_command_resumes_only_where_it_keeps_its_stages(capsys, tmp_path, monkeypatch, argv, resumes):
+    from dvrk_gym.cli import main as cli_main
+
+    def interrupted(args):
+        raise KeyboardInterrupt
+
+    parser = cli_main.build_parser()
+    parse = parser.parse_args
+
+    def parse_and_interrupt(arguments=None):
+        args = parse(arguments)
+        args.func = interrupted
+        return args
+
+    monkeypatch.setattr(parser, "parse_args", parse_and_interrupt)
+    monkeypatch.setattr(cli_main, "build_parser", lambda: parser)
+    assert cli_main.main([*argv, "--out", str(tmp_path / "out")]) == 130
+    err = capsys.readouterr().err
+    assert ("the same command resumes" in err) is resumes and ("nothing is kept" in err) is not resumes, err

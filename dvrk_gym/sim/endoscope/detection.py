@@ -45,9 +45,21 @@ class Blob:
     touches_border: bool
 
 
+def check_rgb(rgb: np.ndarray) -> np.ndarray:
+    """``rgb`` as a contiguous uint8 (h, w, 3) array, or a ValueError naming what it is.
+
+    The thresholds here are on 0-255 levels: a float image in [0, 1] would pass through
+    OpenCV's colour conversions and find nothing, silently.
+    """
+    image = np.asarray(rgb)
+    if image.dtype != np.uint8 or image.ndim != 3 or image.shape[2] != 3 or min(image.shape[:2]) < 1:
+        raise ValueError(f"expected an RGB image, uint8 (height, width, 3); got {image.dtype} {image.shape}")
+    return np.ascontiguousarray(image)
+
+
 def red_mask(rgb: np.ndarray) -> np.ndarray:
-    """Binary mask (uint8, 0 or 255) of the strongly red pixels of an RGB image."""
-    hsv = cv2.cvtColor(np.ascontiguousarray(rgb), cv2.COLOR_RGB2HSV)
+    """Binary mask (uint8, 0 or 255) of the strongly red pixels of an RGB image (uint8, (h, w, 3))."""
+    hsv = cv2.cvtColor(check_rgb(rgb), cv2.COLOR_RGB2HSV)
     low = cv2.inRange(hsv, (0, RED_MIN_SATURATION, RED_MIN_VALUE), (RED_HUE_MAX, 255, 255))
     high = cv2.inRange(hsv, (180 - RED_HUE_MAX, RED_MIN_SATURATION, RED_MIN_VALUE), (180, 255, 255))
     return cv2.bitwise_or(low, high)
@@ -126,7 +138,7 @@ def detect_circles(rgb: np.ndarray, min_area_px: float, max_area_px: float) -> n
         (N, 2) centroids (u, v) in pixels, sorted by v then u (top to bottom, left to right
         within rows of similar v).
     """
-    grey = cv2.cvtColor(np.ascontiguousarray(rgb), cv2.COLOR_RGB2GRAY)
+    grey = cv2.cvtColor(check_rgb(rgb), cv2.COLOR_RGB2GRAY)
     dark = (grey < DARK_MAX_VALUE).astype(np.uint8) * 255
     contours, _ = cv2.findContours(dark, cv2.RETR_LIST, cv2.CHAIN_APPROX_NONE)
     found = []

@@ -31,7 +31,7 @@ import cv2
 import numpy as np
 
 from dvrk_gym.sim.endoscope.camera import PixelWindow, StereoCamera
-from dvrk_gym.sim.endoscope.detection import RED_HUE_MAX
+from dvrk_gym.sim.endoscope.detection import RED_HUE_MAX, check_rgb
 from dvrk_gym.sim.endoscope.noise import PixelNoise
 from dvrk_gym.sim.physics.scene import PHANTOM_SIZE_M, WORKSPACE_CENTER_M
 
@@ -103,7 +103,7 @@ class FragmentDetection:
 
 def fragment_mask(rgb: np.ndarray) -> np.ndarray:
     """Binary mask (uint8, 0 or 255) of the pixels that look like a fragment."""
-    hsv = cv2.cvtColor(np.ascontiguousarray(rgb), cv2.COLOR_RGB2HSV)
+    hsv = cv2.cvtColor(check_rgb(rgb), cv2.COLOR_RGB2HSV)
     return cv2.inRange(hsv, (RED_HUE_MAX + 1, MIN_SATURATION, MIN_VALUE), (MAX_HUE, 255, 255))
 
 
