@@ -193,6 +193,16 @@ def test_reproduce_refuses_a_folder_made_by_an_older_dvrk_gym_before_running_any
 
 
 # ---------------------------------------------------------------- the paper's numbers
+def test_the_committed_full_report_is_the_rendering_of_its_results():
+    """docs/reproduce: report.md is what the report's renderer makes of results.json, so the two never disagree."""
+    from dvrk_gym.reproduce.report import render_report
+
+    docs = Path(__file__).resolve().parents[1] / "docs" / "reproduce"
+    results = json.loads((docs / "results.json").read_text())
+    assert results["settings"]["profile"]["name"] == "full"
+    assert (docs / "report.md").read_text() == render_report(results)
+
+
 def test_the_papers_numbers_agree_with_each_other():
     for method, pixels in paper.CALIBRATION_PIXELS.items():
         assert len(pixels) == len(paper.CALIBRATION_SETTINGS)
