@@ -290,6 +290,46 @@ def test_an_agent_zip_not_written_with_its_settings_is_refused(tmp_path):
     assert load_agent(path).env_steps == 0
 
 
+def test_an_agent_zip_that_is_a_fifo_or_a_link_to_a_device_is_refused_not_read_forever(tmp_path):
+    import os
+
+    path = _untrained_agent(tmp_path)
+    path.unlink()
+    path.symlink_to("/dev/zero")  # its digest was read until the end that never comes
+    with pytest.raises(ValueError, match="not a regular file, not an agent's zip"):
+        load_agent(path)
+    path.unlink()
+    os.mkfifo(path)  # an open for reading blocked until a writer came
+    with pytest.raises(ValueError, match="not a regular file, not an agent's zip"):
+        load_agent(path)
+
+
+def test_an_agent_with_weights_that_are_not_finite_is_refused_naming_its_file(tmp_path):
+    import io
+    import zipfile
+
+    import torch
+
+    path = _untrained_agent(tmp_path)
+    with zipfile.ZipFile(path) as archive:
+        members = {info: archive.read(info) for info in archive.infolist()}
+    with zipfile.ZipFile(path, "w") as archive:
+        for info, data in members.items():
+            if info.filename == "policy.pth":
+                weights = torch.load(io.BytesIO(data), weights_only=True)
+                name = next(key for key, value in weights.items() if value.is_floating_point() and value.ndim == 2)
+                weights[name][0, 0] = float("nan")
+                buffer = io.BytesIO()
+                torch.save(weights, buffer)
+                data = buffer.getvalue()
+            archive.writestr(info, data)
+    settings = json.loads(path.with_suffix(".json").read_text())
+    settings["zip_sha256"] = hashlib.sha256(path.read_bytes()).hexdigest()  # a careful edit: the digest made to fit
+    path.with_suffix(".json").write_text(json.dumps(settings))
+    with pytest.raises(ValueError, match=f"{path}: policy.pth holds weights that are not finite \\({name}"):
+        load_agent(path)
+
+
 def test_a_recorded_env_this_version_cannot_build_is_refused_clearly(tmp_path):
     path = _untrained_agent(tmp_path)
     settings_file = path.with_suffix(".json")

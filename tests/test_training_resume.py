@@ -143,6 +143,10 @@ def _edit_json(path, edit) -> None:
         (lambda s: s["envs"][0]["layers"][-1]["state"].update(np_random={"bit_generator": "MT19937"}), "np_random"),
         (lambda s: s["envs"][0]["layers"].pop(), "stack"),
         (lambda s: s["rng"].update(numpy=[1, 2]), "TrainingStateError|ValueError|values to unpack"),
+        (lambda s: s["rng"]["numpy"].__setitem__(2, 2**31 - 1), "MT19937 state"),  # numpy crashed the process on it
+        (lambda s: s["rng"]["numpy"].__setitem__(2, 625), "MT19937 state"),  # numpy drew garbage from it
+        (lambda s: s["rng"]["numpy"][1].__setitem__(0, 2**32), "32-bit words"),
+        (lambda s: s["rng"]["python"][1].__setitem__(-1, 10**6), "TrainingStateError|ValueError|state"),
         (lambda s: s["progress"]["curve"].update(marks=[1]), "later marks"),
         (lambda s: s["progress"]["curve"]["points"][0].update(mm_error="x"), "mm_error must be a real number"),
         (lambda s: s["progress"]["curve"]["points"][0].update(env_steps=-1), "env_steps"),

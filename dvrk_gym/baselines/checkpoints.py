@@ -146,13 +146,21 @@ def save_agent(result: TrainResult, path: Path) -> Path:
 
 
 def _zip_sha256(path: Path) -> str:
-    """The SHA-256 of an agent's zip, read in chunks after checking its size."""
+    """The SHA-256 of an agent's zip, read in chunks after checking it is a regular file of a
+    bounded size (a FIFO or a link to a device there would block or never end), reading no
+    more than that bound should it grow meanwhile."""
+    if path.exists() and not path.is_file():
+        raise ValueError(f"{path} is {'a folder' if path.is_dir() else 'not a regular file'}, not an agent's zip")
+    limit = AGENT_FILE_LIMITS.max_file_bytes
     size = path.stat().st_size
-    if size > AGENT_FILE_LIMITS.max_file_bytes:
-        raise ValueError(f"{path}: {size:,} bytes; an agent's zip has at most {AGENT_FILE_LIMITS.max_file_bytes:,}")
-    digest = hashlib.sha256()
+    if size > limit:
+        raise ValueError(f"{path}: {size:,} bytes; an agent's zip has at most {limit:,}")
+    digest, read = hashlib.sha256(), 0
     with open(path, "rb") as file:
         for chunk in iter(lambda: file.read(2**20), b""):
+            read += len(chunk)
+            if read > limit:
+                raise ValueError(f"{path} grew past {limit:,} bytes while it was read; an agent's zip has at most that")
             digest.update(chunk)
     return digest.hexdigest()
 
@@ -304,6 +312,9 @@ def _policy_weights(path: Path) -> dict[str, torch.Tensor]:
         raise ValueError(f"{path}: {POLICY_WEIGHTS} is not a plain tensor state dict ({type(error).__name__}: {error})") from None
     if not isinstance(weights, dict) or not all(isinstance(value, torch.Tensor) for value in weights.values()):
         raise ValueError(f"{path}: {POLICY_WEIGHTS} is not a state dict of tensors")
+    broken = [name for name, value in weights.items() if value.is_floating_point() and not bool(torch.isfinite(value).all())]
+    if broken:  # else the first action fails in torch's distribution, naming neither the file nor the weights
+        raise ValueError(f"{path}: {POLICY_WEIGHTS} holds weights that are not finite ({', '.join(map(str, broken[:3]))})")
     return weights
 
 

@@ -161,6 +161,22 @@ class Phase1Data(ArrayRecord):
         "kept": ((), "b"),
     }
 
+    @classmethod
+    def value_problem(cls, data: dict[str, np.ndarray]) -> str | None:
+        """No rows; a commanded or reported pose that is not finite; or a kept row without a
+        finite camera position (what the calibrators fit on)."""
+        if len(data["kept"]) == 0:
+            return "it holds no rows"
+        for name, rows in (
+            ("reported_position", data["reported_position"]),
+            ("orientation", data["orientation"]),
+            ("camera_position of a kept row", data["camera_position"][data["kept"]]),
+        ):
+            bad = np.flatnonzero(~np.isfinite(rows).all(axis=1))
+            if bad.size:
+                return f"{name} is not finite in {bad.size} rows (the first: {rows[bad[0]].tolist()})"
+        return None
+
     @property
     def n_raw(self) -> int:
         return int(len(self.kept))

@@ -45,6 +45,15 @@ class Phase2Data(ArrayRecord):
         "circle": ((), "iu"),
     }
 
+    @classmethod
+    def value_problem(cls, data: dict[str, np.ndarray]) -> str | None:
+        """A position or orientation that is not finite (every touch saw its circle and was corrected)."""
+        for name in ("camera_position", "orientation", "commanded", "corrected"):
+            bad = np.flatnonzero(~np.isfinite(data[name]).all(axis=1))
+            if bad.size:
+                return f"{name} is not finite in {bad.size} rows (the first: {data[name][bad[0]].tolist()})"
+        return None
+
     @property
     def X(self) -> np.ndarray:
         """Calibrator inputs (N, 6): camera position (m), yaw, pitch, roll (rad)."""

@@ -115,4 +115,13 @@ class ArrayRecord:
                 )
         if len(rows) != 1:
             raise ValueError(f"{path}: {cls.__name__}'s arrays must have one row per sample, got lengths {sorted(rows)}")
+        problem = cls.value_problem(data)
+        if problem is not None:
+            raise ValueError(f"{path} is not usable {cls.__name__} data: {problem}")
         return cls(**{name: data[name] for name in names})
+
+    @classmethod
+    def value_problem(cls, data: dict[str, np.ndarray]) -> str | None:
+        """What is wrong with the values of arrays whose shapes and kinds :meth:`load` has
+        checked (a subclass states its rules: rows that must be finite, say), or None."""
+        return None

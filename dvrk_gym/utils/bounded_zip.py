@@ -46,6 +46,7 @@ def open_archive(source: str | os.PathLike | bytes, limits: ArchiveLimits = Arch
 
     Raises:
         FileNotFoundError: no such file.
+        PermissionError: this process may not read it.
         ArchiveLimitError: not a zip archive, or larger than the limits.
     """
     opened: io.BytesIO | Path
@@ -62,6 +63,8 @@ def open_archive(source: str | os.PathLike | bytes, limits: ArchiveLimits = Arch
         raise ArchiveLimitError(f"{name}: {size:,} bytes; at most {limits.max_file_bytes:,} are read")
     try:
         archive = zipfile.ZipFile(opened)
+    except PermissionError:  # the file may be whole: the caller must not take it for a damaged one
+        raise
     except (zipfile.BadZipFile, OSError, ValueError, EOFError) as error:
         raise ArchiveLimitError(f"{name}: not a readable zip archive ({error})") from None
     try:

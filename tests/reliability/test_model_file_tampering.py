@@ -223,6 +223,23 @@ def test_a_forest_with_other_hyper_parameters_is_refused(saved):
     _refused(ForestCalibrator.load, saved["forest"], "hyper-parameters ['n_jobs']")
 
 
+@pytest.mark.parametrize("count", ["n_outputs_", "n_features_in_"])
+def test_a_forest_counting_its_outputs_in_floats_is_refused(saved, count):
+    """3.0 == 3 passed the count check, and predict then failed in numpy, far from the file."""
+
+    def edit(schema, files):
+        schema["content"]["content"][count] = {  # a JSON node typed str whose JSON is a float: skops hands back 3.0
+            "__class__": "str",
+            "__module__": "builtins",
+            "__loader__": "JsonNode",
+            "content": "3.0" if count == "n_outputs_" else "9.0",
+            "is_json": True,
+        }
+
+    edit_skops(saved["forest"], "forest.skops", edit)
+    _refused(ForestCalibrator.load, saved["forest"], "feature and output counts")
+
+
 def test_a_tree_declaring_a_billion_outputs_is_refused_before_it_is_built(saved):
     """scikit-learn allocates an array of the declared output count before it reads the nodes."""
 
@@ -305,3 +322,35 @@ def test_manifest_json_nested_too_deeply_is_refused(saved):
     members[MANIFEST] = b"[" * 100_000 + b"]" * 100_000
     write_members(saved["dnn"], members, compression=zipfile.ZIP_DEFLATED)
     _refused(DNNCalibrator.load, saved["dnn"], "model.json is not valid JSON")
+
+
+def test_a_tensor_of_a_dtype_numpy_lacks_is_refused(saved):
+    """safetensors names BF16 and F8 tensors that numpy has no dtype for: a KeyError, once a 20-line traceback."""
+    import struct
+
+    members = read_members(saved["dnn"])
+    data = members[ARRAYS]
+    length = struct.unpack("<Q", data[:8])[0]
+    header = json.loads(data[8 : 8 + length])
+    header["layer0_bias"].update(dtype="BF16", shape=[header["layer0_bias"]["shape"][0] * 2])  # the same bytes
+    text = json.dumps(header).encode()
+    members[ARRAYS] = struct.pack("<Q", len(text)) + text + data[8 + length :]
+    write_members(saved["dnn"], resign(members))
+    _refused(DNNCalibrator.load, saved["dnn"], "not readable by safetensors as numpy arrays")
+
+
+def test_a_folder_where_a_model_file_should_be_is_named_as_one(tmp_path):
+    (tmp_path / "dnn.zip").mkdir()
+    _refused(DNNCalibrator.load, tmp_path / "dnn.zip", "a folder, not a model file")
+
+
+def test_a_model_file_this_process_may_not_read_is_a_permission_error_not_a_damaged_file(saved, monkeypatch):
+    """A run folder moves a damaged result aside and makes it again; a whole file it may not read must not be taken for one."""
+    import zipfile as zip_module
+
+    def denied(*args, **kwargs):
+        raise PermissionError(13, "Permission denied", str(saved["dnn"]))
+
+    monkeypatch.setattr(zip_module, "ZipFile", denied)
+    with pytest.raises(PermissionError):
+        DNNCalibrator.load(saved["dnn"])

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import io
 import json
+import math
 import random
 import zipfile
 import zlib
@@ -46,6 +47,9 @@ from dvrk_gym.baselines.resume.state_file import (
 from dvrk_gym.utils.bounded_zip import ArchiveLimitError, ArchiveLimits, open_archive, read_member
 from dvrk_gym.utils.checks import check_int
 from dvrk_gym.utils.source_fingerprint import SourceFingerprint, source_fingerprint
+
+MT19937_WORDS = 624
+"""The words of numpy's legacy generator's state; its position runs from 0 to this."""
 
 
 def restore_training_state(path: str | Path, model: Any, config: dict[str, Any]) -> dict[str, Any]:
@@ -271,7 +275,13 @@ def _restore_generators(model: OffPolicyAlgorithm, rng: Any) -> None:
     if not isinstance(rng, dict) or set(rng) != {"numpy", "python", "action_space"}:
         raise ValueError("'rng' must hold the 'numpy', 'python' and 'action_space' generators")
     name, keys, pos, has_gauss, cached = rng["numpy"]
-    np.random.set_state((name, _int_array(keys, (624,), "numpy keys").astype(np.uint32), int(pos), int(has_gauss), float(cached)))
+    # numpy does not check the position against its 624 words: one past them draws garbage, far past them crashes
+    if name != "MT19937" or not 0 <= int(pos) <= MT19937_WORDS or int(has_gauss) not in (0, 1) or not math.isfinite(float(cached)):
+        raise ValueError(f"'rng.numpy' is not an MT19937 state (position in [0, {MT19937_WORDS}], a 0/1 flag, a finite float)")
+    words = _int_array(keys, (MT19937_WORDS,), "numpy keys")
+    if not ((words >= 0) & (words < 2**32)).all():
+        raise ValueError("'numpy keys' must be 32-bit words")
+    np.random.set_state((name, words.astype(np.uint32), int(pos), int(has_gauss), float(cached)))
     version, internal, gauss = rng["python"]
     random.setstate((int(version), tuple(int(x) for x in internal), None if gauss is None else float(gauss)))
     model.action_space.np_random.bit_generator.state = rng["action_space"]

@@ -147,6 +147,9 @@ def _check_forest(forest: Any, trees: int, max_depth: int | None, seed: int, n_f
     estimators = getattr(forest, "estimators_", None)
     if not isinstance(estimators, list) or len(estimators) != trees:
         raise ValueError(f"the forest holds {len(estimators) if isinstance(estimators, list) else 'no'} trees; its parameters say {trees}")
+    counts = (getattr(forest, "n_features_in_", None), getattr(forest, "n_outputs_", None))
+    if not all(isinstance(count, int | np.integer) and not isinstance(count, bool) for count in counts):  # 3.0 == 3
+        raise ValueError(f"the forest's feature and output counts are {counts!r}; expected ints")
     if forest.n_features_in_ != n_features or forest.n_outputs_ != _OUTPUTS:
         raise ValueError(f"the forest has {forest.n_features_in_} features, {forest.n_outputs_} outputs; expected {n_features}, {_OUTPUTS}")
     for index, tree in enumerate(estimators):

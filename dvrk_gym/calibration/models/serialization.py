@@ -177,7 +177,8 @@ class _ModelArchive:
     def __init__(self, path: PathLike, kind: str) -> None:
         self.path = path
         if not os.path.isfile(path):
-            raise ModelFileError(f"{path}: no such model file")
+            found = "no such model file" if not os.path.exists(path) else "a folder" if os.path.isdir(path) else "not a regular file"
+            raise ModelFileError(f"{path}: {found}" + ("" if found.startswith("no such") else ", not a model file"))
         try:
             self.archive = open_archive(path, MODEL_FILE_LIMITS)
         except ArchiveLimitError as error:
@@ -265,8 +266,10 @@ class _ModelArchive:
             raise ModelFileError(f"{self.path}: {MANIFEST} declares arrays but the file has no {ARRAYS}")
         try:
             arrays = safetensors.numpy.load(self.member(ARRAYS))
-        except SafetensorError as error:
-            raise ModelFileError(f"{self.path}: {ARRAYS} is not readable by safetensors: {error}") from None
+        except (SafetensorError, KeyError, ValueError, TypeError) as error:  # KeyError: a dtype numpy lacks (BF16, F8_*)
+            raise ModelFileError(
+                f"{self.path}: {ARRAYS} is not readable by safetensors as numpy arrays: {type(error).__name__}: {error}"
+            ) from None
         if sorted(arrays) != sorted(declared):
             raise ModelFileError(f"{self.path}: arrays {sorted(arrays)} do not match {MANIFEST}'s {sorted(declared)}")
         for name, array in arrays.items():
