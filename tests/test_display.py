@@ -355,3 +355,34 @@ def test_memory_stays_flat_over_repeated_renders_and_resets():
     result = subprocess.run([sys.executable, "-c", _MEMORY_SCRIPT], capture_output=True, text=True, timeout=600, check=True)
     grown_mb = float(result.stdout.strip().splitlines()[-1])
     assert grown_mb < 5.0, f"{grown_mb:.1f} MB over 60 resets with a frame each (0.6 MB a reset before the fixes)"
+
+
+_TWO_DISPLAYS = """
+import gymnasium as gym, numpy as np, dvrk_gym
+make = lambda: gym.make("dvrk_gym/Debridement-v0", camera_resolution=(320, 180), render_mode="rgb_array", renderer="egl")
+first = make()
+first.reset(seed=0)
+alone = first.render()
+second = make()
+second.reset(seed=1)  # other fragments: a copy of another world, built in the same process
+other = second.render()
+assert not np.array_equal(other, alone)
+assert np.array_equal(first.render(), alone), "the first display changed when a second one drew"
+second.close()
+assert np.array_equal(first.render(), alone), "the first display changed when the second closed"
+del second
+third = make()
+third.reset(seed=1)
+assert np.array_equal(third.render(), other)
+first.close()
+third.close()
+print("displays ok")
+"""
+
+
+@needs_egl
+def test_displays_of_two_envs_draw_alike_and_closing_one_leaves_the_other_drawing():
+    """The EGL plugin's state is the process's: closing one env's display crashed the next frame of
+    another (exit 139), and one display's rebuild blanked the other's frames."""
+    done = subprocess.run([sys.executable, "-c", _TWO_DISPLAYS], capture_output=True, text=True, timeout=300, check=False)
+    assert done.returncode == 0 and "displays ok" in done.stdout, (done.returncode, done.stderr[-2000:])

@@ -16,6 +16,8 @@ So :class:`EglMirror` is a second client, with the plugin loaded before any body
 a copy of each visual shape (meshes built in code, and boxes, written as OBJ files to a
 temporary folder while the copy is built), moved to the world's poses before each frame.
 The world's own client is never touched, so its images stay bit for bit what they were.
+The plugin's EGL state is the process's, so all mirrors of a process share one such client
+(:class:`_SharedEglClient`), each rebuilding its copy there when another's was built since.
 
 When the plugin cannot be loaded it calls ``exit()`` inside the process (without libEGL,
 for one), so :func:`egl_usable` first tries it in a child process.
@@ -140,19 +142,10 @@ class EglMirror:
         failure = egl_usable(path)
         if failure is not None:
             raise RendererUnavailable(f"PyBullet's EGL renderer ({path}) does not run here: {failure}")
-        with quiet_output(stderr=True):  # the server and the plugin print their start-up to the C streams
-            self._client: bullet_client.BulletClient | None = bullet_client.BulletClient(connection_mode=pybullet.DIRECT)
-            self._plugin = self._client.loadPlugin(path, "_eglRendererPlugin")
-        if self._plugin < 0:
-            self._client.disconnect()
-            self._client = None
-            raise RendererUnavailable(f"PyBullet could not load its EGL renderer from {path}")
-        # A loaded OBJ file is cached for the life of the process unless this is off, and
-        # fragments bring new meshes at every reset.
-        self._client.setPhysicsEngineParameter(enableFileCaching=0)
+        self._shared: _SharedEglClient | None = _SharedEglClient.acquire(path)
         self._folder: tempfile.TemporaryDirectory[str] | None = tempfile.TemporaryDirectory(prefix="dvrk_gym_display_")
-        # Frees the client and the folder when closed, collected, or at exit (while the streams still work).
-        self._release = weakref.finalize(self, _release, self._client, self._plugin, self._folder)
+        # Gives the client back and deletes the folder when closed, collected, or at exit (while the streams still work).
+        self._release = weakref.finalize(self, _release, self._shared, self._folder)
         self._layout: int | None = None  # the layout_version of the Physics copied
         self._copies: list[_Copy] = []
         self._written: list[str] = []  # the OBJ files written for the rebuild under way
@@ -160,10 +153,10 @@ class EglMirror:
 
     @property
     def client(self) -> bullet_client.BulletClient:
-        """The mirror's own client; raises RendererUnavailable once closed."""
-        if self._client is None:
+        """The client the mirror draws in (the process's one EGL client); raises RendererUnavailable once closed."""
+        if self._shared is None:
             raise RendererUnavailable("this EGL mirror has been closed")
-        return self._client
+        return self._shared.client
 
     @property
     def copies(self) -> tuple[tuple[int, int, int], ...]:
@@ -172,7 +165,7 @@ class EglMirror:
 
     def sync(self, physics: Physics) -> None:
         """Make the copy match ``physics``: rebuilt if bodies came or went, every shape moved to its link's pose."""
-        if self._layout != physics.layout_version:
+        if self._layout != physics.layout_version or self.client_holds_another_copy:
             self._rebuild(physics)
         source, mirror = physics.client, self.client
         for copy in self._copies:
@@ -205,10 +198,16 @@ class EglMirror:
         # (OpenCV drops the alpha channel some 25x faster than a strided numpy copy)
         return cv2.cvtColor(np.asarray(result[2], dtype=np.uint8).reshape(height, width, 4), cv2.COLOR_RGBA2RGB)
 
+    @property
+    def client_holds_another_copy(self) -> bool:
+        """Whether another mirror's copy was built in the shared client since this one's (the next sync rebuilds)."""
+        return self._shared is not None and self._shared.holder is not self._release
+
     def close(self) -> None:
-        """Unload the plugin, disconnect the client and delete the mesh files; safe to call more than once."""
+        """Give the shared client back (the last mirror to close unloads the plugin and disconnects it)
+        and delete the mesh files; safe to call more than once."""
         self._release()
-        self._client = None
+        self._shared = None
         self._folder = None
         self._copies = []
 
@@ -235,6 +234,8 @@ class EglMirror:
                     visual = self._visual_shape(entry, meshes)
                     self._copies.append(_Copy(body, link, mirror.createMultiBody(0.0, -1, visual)))
         self._layout = physics.layout_version
+        assert self._shared is not None  # self.client has checked
+        self._shared.holder = self._release
         for path in self._written:  # read by now
             Path(path).unlink()
         self._written = []
@@ -282,14 +283,58 @@ class EglMirror:
         return path
 
 
-def _release(client: bullet_client.BulletClient, plugin: int, folder: tempfile.TemporaryDirectory[str]) -> None:
-    """Unload the EGL plugin, disconnect ``client`` and delete ``folder``."""
-    with quiet_output():  # the plugin says goodbye on the C streams
-        try:
-            client.unloadPlugin(plugin)
-            client.disconnect()
-        except pybullet.error:
-            logger.debug("the EGL mirror's server was already disconnected")
+class _SharedEglClient:
+    """The process's one client with the EGL plugin loaded, shared by every :class:`EglMirror`.
+
+    The plugin's EGL state belongs to the whole process: a second client's plugin shares it,
+    so unloading it (or disconnecting its client) while another is drawing crashed the process
+    at that one's next frame, and resetting one client's world blanked the others' frames. So
+    all mirrors draw in one client: each rebuilds its copy there when another mirror's copy
+    was built since (:attr:`holder`), and the last mirror to go unloads the plugin.
+    """
+
+    _by_path: dict[str, _SharedEglClient] = {}
+
+    def __init__(self, path: str) -> None:
+        self.path = path
+        with quiet_output(stderr=True):  # the server and the plugin print their start-up to the C streams
+            self.client = bullet_client.BulletClient(connection_mode=pybullet.DIRECT)
+            self.plugin = self.client.loadPlugin(path, "_eglRendererPlugin")
+        if self.plugin < 0:
+            self.client.disconnect()
+            raise RendererUnavailable(f"PyBullet could not load its EGL renderer from {path}")
+        # A loaded OBJ file is cached for the life of the process unless this is off, and
+        # fragments bring new meshes at every reset.
+        self.client.setPhysicsEngineParameter(enableFileCaching=0)
+        self.users = 0
+        self.holder: object | None = None  # the release handle of the mirror whose copy the client holds
+
+    @classmethod
+    def acquire(cls, path: str) -> _SharedEglClient:
+        """The shared client for the plugin at ``path``, made on first use; one more user of it."""
+        shared = cls._by_path.get(path)
+        if shared is None:
+            shared = cls._by_path[path] = cls(path)
+        shared.users += 1
+        return shared
+
+    def give_back(self) -> None:
+        """One user fewer; the last unloads the plugin and disconnects the client."""
+        self.users -= 1
+        if self.users > 0:
+            return
+        self._by_path.pop(self.path, None)
+        with quiet_output():  # the plugin says goodbye on the C streams
+            try:
+                self.client.unloadPlugin(self.plugin)
+                self.client.disconnect()
+            except pybullet.error:
+                logger.debug("the EGL mirror's server was already disconnected")
+
+
+def _release(shared: _SharedEglClient, folder: tempfile.TemporaryDirectory[str]) -> None:
+    """Give a mirror's share of the EGL client back and delete its mesh folder."""
+    shared.give_back()
     folder.cleanup()
 
 
