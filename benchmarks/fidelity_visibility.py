@@ -201,7 +201,7 @@ def render_rows(joints: np.ndarray, camera_pose: np.ndarray | None = None, offse
 @contextlib.contextmanager
 def touch_pitch_offset(offset_rad: float) -> Iterator[None]:
     """The paper's touch rule with its pitch moved by ``offset_rad``, for a measurement only."""
-    from dvrk_gym.envs import grid_touch
+    from dvrk_gym.envs import tool_pose
 
     original = kin.paper_pitch_roll
 
@@ -210,12 +210,12 @@ def touch_pitch_offset(offset_rad: float) -> Iterator[None]:
         return pitch + offset_rad, roll
 
     kin.paper_pitch_roll = offset_rule  # type: ignore[assignment]
-    grid_touch._TOOL_ROTATIONS.clear()
+    tool_pose._TOOL_ROTATIONS.clear()
     try:
         yield
     finally:
         kin.paper_pitch_roll = original  # type: ignore[assignment]
-        grid_touch._TOOL_ROTATIONS.clear()
+        tool_pose._TOOL_ROTATIONS.clear()
 
 
 def dnn_against_touch_pitch(folder: str) -> None:

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from dvrk_gym.envs.grid_touch import _tool_rotation
+from dvrk_gym.envs.tool_pose import tool_rotation
 from dvrk_gym.sim.compiled import float_paths, kernels
 from dvrk_gym.sim.robot import cables, ik
 from dvrk_gym.sim.robot import kinematics as kin
@@ -44,7 +44,7 @@ def test_the_compiled_true_tip_is_the_python_float_paths_bit_for_bit(preset, set
         if i % 3 == 0:  # move, so that the plays and motors take many states
             model.true_joints(q, rng)
         position = kin.touch_point(q) + rng.normal(0.0, 0.02, 3)  # some of these need clamped joints
-        rotation = _tool_rotation(float(rng.uniform(-np.pi / 2, np.pi / 2)))
+        rotation = tool_rotation(float(rng.uniform(-np.pi / 2, np.pi / 2)))
         q_ref = rng.uniform(-4.0, 4.0, 6)
         state = model.get_state()
         r6 = (rotation @ kin.TOOL_TIP_ROTATION.T).ravel()
@@ -80,7 +80,7 @@ def test_the_compiled_squares_are_the_c_librarys_pow_not_a_product():
     values = rng.normal(0.0, 0.1, 20000).tolist()
     assert [v for v in values if kernels._square(v, 2.0) != v**2] == []
     assert float_paths.ARM[kernels.TWO] == 2.0
-    out, rotation = np.empty(6), _tool_rotation(0.3)
+    out, rotation = np.empty(6), tool_rotation(0.3)
     r6 = (rotation @ kin.TOOL_TIP_ROTATION.T).ravel()
     solved = 0
     for _ in range(20000):
@@ -107,12 +107,12 @@ def test_grid_touch_probe_is_the_python_float_paths_and_falls_back_without_histo
         probe = grid._tip_probe(yaw)
         for _ in range(5):
             position = np.array([rng.uniform(0.0, 0.08), rng.uniform(0.0, 0.085), rng.uniform(-0.18, -0.12)])
-            assert probe(position).tobytes() == grid._true_tip_floats(position, _tool_rotation(yaw)).tobytes()
+            assert probe(position).tobytes() == grid._true_tip_floats(position, tool_rotation(yaw)).tobytes()
     for history in (True, False):
         if not history:  # no history: the Python float path, which takes numpy's
             grid.world.cable.set_state(np.full_like(grid.world.cable.get_state(), np.nan))
         position = np.array([0.04, 0.04, -0.15])
-        np.testing.assert_array_equal(grid._tip_probe(0.0)(position), grid._true_tip_floats(position, _tool_rotation(0.0)))
+        np.testing.assert_array_equal(grid._tip_probe(0.0)(position), grid._true_tip_floats(position, tool_rotation(0.0)))
         for value in (np.nan, np.inf, -np.inf):  # compiled: the inverse kinematics hands over to numpy's, which says so
             with pytest.raises(ValueError, match="finite"):
                 grid._tip_probe(0.0)(np.array([value, 0.0, -0.15]))
@@ -194,7 +194,7 @@ def test_the_compiled_wrap_singular_poses_and_roll_choice_are_the_python_float_p
         assert ik.inverse_kinematics_floats(position.tolist(), eye, np.zeros(6)) is None
         assert not kernels.inverse_kinematics(position, r6, 0.0, float_paths.ARM, float_paths._OUTER_LINKS, out)
     position = np.array([0.03, 0.04, -0.15])
-    rotation = _tool_rotation(0.2)
+    rotation = tool_rotation(0.2)
     for reference in (np.nan, np.inf, 0.0, 2 * math.pi, -2 * math.pi, 1e9):  # ties and no nearest: min()'s first candidate
         q_ref = np.full(6, reference)
         expected = ik.inverse_kinematics_floats(position.tolist(), rotation, q_ref)

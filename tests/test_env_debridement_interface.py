@@ -180,7 +180,11 @@ def test_debride_command_writes_the_trial_table(tmp_path, capsys):
             rows.append([*camera.to_camera_frame(tip)[0] * PAPER_BASELINE_M / TRUE_BASELINE_M, yaw, pitch, roll])
             targets.append(tip - offset)
     RigidBodyCalibrator().fit(np.array(rows), np.array(targets)).save(tmp_path / "rbt.zip")
-    (tmp_path / "pipeline_config.json").write_text(json.dumps({"bias": "none", "bias_seed": 0}))
+    from dvrk_gym.utils.run_folder import SOURCE_KEY
+    from dvrk_gym.utils.source_fingerprint import source_fingerprint
+
+    stamp = {"bias": "none", "bias_seed": 0, SOURCE_KEY: source_fingerprint().to_json()}  # made by this dvrk_gym
+    (tmp_path / "pipeline_config.json").write_text(json.dumps(stamp))
     parser = argparse.ArgumentParser()
     add_commands(parser.add_subparsers(dest="command"))
     args = parser.parse_args(

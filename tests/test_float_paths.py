@@ -15,7 +15,8 @@ import dataclasses
 import numpy as np
 import pytest
 
-from dvrk_gym.envs.grid_touch import SURFACE_Z_M, _tool_rotation, tool_pose
+from dvrk_gym.envs.grid_touch import SURFACE_Z_M
+from dvrk_gym.envs.tool_pose import tool_pose, tool_rotation
 from dvrk_gym.sim.robot import cables, ik
 from dvrk_gym.sim.robot import kinematics as kin
 from dvrk_gym.sim.robot.bias import resolve_bias
@@ -107,7 +108,7 @@ def test_the_float_gravity_sag_matches_the_least_squares():
 
 def test_grid_touch_tool_rotation_feeds_the_float_path_the_pose_of_tool_pose():
     pose = tool_pose(np.array([0.01, 0.02, -0.1]), 0.4)
-    assert _tool_rotation(0.4).tobytes() == pose[:3, :3].tobytes()
+    assert tool_rotation(0.4).tobytes() == pose[:3, :3].tobytes()
 
 
 def _reference_contact_height(world: DvrkWorld, target: np.ndarray, yaw: float) -> float:

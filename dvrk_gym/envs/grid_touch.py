@@ -29,6 +29,7 @@ from gymnasium import spaces
 from dvrk_gym.envs.base import DvrkEnv, config_arguments, relax_option
 from dvrk_gym.envs.configs import GridTouchConfig
 from dvrk_gym.envs.exploration import CAMERA_BOX_HIGH_M, CAMERA_BOX_LOW_M, encode_reported
+from dvrk_gym.envs.tool_pose import tool_pose, tool_rotation
 from dvrk_gym.sim.compiled import float_paths
 from dvrk_gym.sim.physics.scene import GRID_COLUMNS, GRID_ROWS, WORKSPACE_CENTER_M, grid_circle_centers
 from dvrk_gym.sim.robot import ik
@@ -57,6 +58,7 @@ ACTION_HIGH = np.array([0.080, 0.085, -0.130, np.pi / 2])
 SURFACE_Z_M = float(WORKSPACE_CENTER_M[2])
 CONTACT_TOLERANCE_M = 1e-7
 """How exactly the descent finds the height where the jaws meet the paper, metres."""
+MAX_NOISE_DRAWS = 1000  # a noisy left/right pair with no positive disparity is drawn again, at most this often
 HOME_POSITION_M = np.array([0.040, 0.042, -0.130])
 """Where a fresh or relaxed episode starts: the reported point 34 mm above the middle of the grid, metres."""
 
@@ -77,35 +79,6 @@ def _check_yaw_option(yaw: Any) -> float | str:
 
 def _clip_camera(position: np.ndarray) -> np.ndarray:
     return np.clip(position, CAMERA_BOX_LOW_M, CAMERA_BOX_HIGH_M).astype(np.float32)
-
-
-_EYE4 = np.eye(4)
-_TOOL_ROTATIONS: dict[str, np.ndarray] = {}
-_MAX_CACHED_ROTATIONS = 256
-
-
-def _tool_rotation(yaw_rad: float) -> np.ndarray:
-    """The tool's rotation (3, 3) at ``yaw_rad`` with the paper's pitch and roll, made once per
-    yaw (a touch or a pick asks for the same yaw a dozen times). Keyed by the float's exact
-    value, so -0.0 and 0.0 keep their own (sines of opposite sign)."""
-    key = float(yaw_rad).hex()
-    rotation = _TOOL_ROTATIONS.get(key)
-    if rotation is None:
-        if len(_TOOL_ROTATIONS) >= _MAX_CACHED_ROTATIONS:
-            _TOOL_ROTATIONS.clear()
-        pitch, roll = kin.paper_pitch_roll(yaw_rad)
-        rotation = kin.pose_from_euler(np.zeros(3), yaw_rad, float(pitch), float(roll))[:3, :3].copy()
-        rotation.flags.writeable = False
-        _TOOL_ROTATIONS[key] = rotation
-    return rotation
-
-
-def tool_pose(position: np.ndarray, yaw_rad: float) -> np.ndarray:
-    """The tool pose at ``position`` (reported frame, m) with ``yaw`` and the paper's pitch and roll."""
-    pose = _EYE4.copy()
-    pose[:3, :3] = _tool_rotation(yaw_rad)
-    pose[:3, 3] = kin.finite_vector(position, 3, "position")
-    return pose
 
 
 _HOME_COMMAND = ik.inverse_kinematics(tool_pose(HOME_POSITION_M, 0.0))
@@ -280,7 +253,7 @@ class GridTouchEnv(DvrkEnv[GridTouchConfig]):
     def _command_floats(self, position: np.ndarray, yaw: float) -> list[float] | None:
         """The joint command (6,) rad / m for the tool at ``position`` (m) and ``yaw`` (rad), by
         the compiled inverse kinematics; None if it needs the numpy path (clamped or singular)."""
-        return float_paths.inverse_kinematics(kin.finite_vector(position, 3, "position"), _tool_rotation(yaw), self.world.q_cmd)
+        return float_paths.inverse_kinematics(kin.finite_vector(position, 3, "position"), tool_rotation(yaw), self.world.q_cmd)
 
     def _move(self, position: np.ndarray, yaw: float) -> MoveResult:
         """Move the tool to ``position`` (m) at ``yaw`` (rad), with noise; joints clamped into their
@@ -300,7 +273,7 @@ class GridTouchEnv(DvrkEnv[GridTouchConfig]):
         one search, during which the command and the cables' state stay as they are. Compiled
         (:func:`dvrk_gym.sim.compiled.float_paths.true_tip`) once the cables have a history."""
         world = self.world
-        rotation, state = _tool_rotation(yaw), world.cable.get_state()
+        rotation, state = tool_rotation(yaw), world.cable.get_state()
         if math.isnan(state[0, 0]) or math.isnan(state[-1, 0]):  # no history yet: the Python float path takes numpy's
             return lambda position: self._true_tip_floats(position, rotation)
         constants, r6, roll = world.cable_constants, float_paths.wrist_yaw_rows(rotation), float(world.q_cmd[3])
@@ -360,9 +333,12 @@ class GridTouchEnv(DvrkEnv[GridTouchConfig]):
         """The jaws' touch point as the endoscope sees it, from its exact projection ``pixels``
         (left u, v, right u; px) with pixel noise, camera frame, m."""
         noise = self.world.pixel_noise
-        left = noise.apply_floats(pixels[0], pixels[1], self.np_random)
-        right = noise.apply_floats(pixels[2], pixels[1], self.np_random)  # after left's: the draw order is part of the episode
-        return np.array(self.world.camera.triangulate_floats(left, right))
+        for _ in range(MAX_NOISE_DRAWS):  # a pair the noise crossed (no positive disparity) is no stereo match: drawn again
+            left = noise.apply_floats(pixels[0], pixels[1], self.np_random)
+            right = noise.apply_floats(pixels[2], pixels[1], self.np_random)  # after left's: the draw order is part of the episode
+            if left[0] > right[0]:
+                return np.array(self.world.camera.triangulate_floats(left, right))
+        raise ValueError(f"pixel noise of {noise} left no positive disparity in {MAX_NOISE_DRAWS} draws at pixels {pixels}")
 
     def _desired(self, index: int) -> np.ndarray:
         return self.world.observe_grid()[index].camera_position

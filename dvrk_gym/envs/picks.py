@@ -20,7 +20,7 @@ import numpy as np
 
 from dvrk_gym import paper
 from dvrk_gym.envs.debridement_config import PickTiming
-from dvrk_gym.envs.grid_touch import tool_pose
+from dvrk_gym.envs.tool_pose import tool_pose
 from dvrk_gym.sim.physics.scene import RECEPTACLE_CENTER_M
 from dvrk_gym.sim.robot import ik
 from dvrk_gym.sim.robot import kinematics as kin
