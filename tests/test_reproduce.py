@@ -237,6 +237,22 @@ def test_a_tampered_cached_result_is_a_clear_error_and_leaves_the_last_outputs(t
     assert {name: (out / name).read_bytes() for name in before} == before  # nothing half-written, no call logged
 
 
+@pytest.mark.parametrize("figure", ["/dev/zero", "fifo"])
+def test_a_cached_result_naming_a_figure_that_is_no_file_of_the_run_is_refused(tiny_reproduction, tmp_path, figure):
+    """Its bytes were read whole into the report's figures: a FIFO blocked the run, /dev/zero ate the memory."""
+    import os
+
+    out = tmp_path / "run"
+    shutil.copytree(tiny_reproduction.report.parent, out)
+    if figure == "fifo":
+        os.mkfifo(out / "maps.png")
+        figure = str(out / "maps.png")
+    calibration = out / "tasks" / "calibration.json"
+    calibration.write_text(json.dumps({**json.loads(calibration.read_text()), "figure": figure}))
+    with pytest.raises(ValueError, match="names .* as its figure: not a file of at most"):
+        run_reproduce(ReproduceConfig(out=out, profile=TINY, workers=1, progress=False))
+
+
 def test_a_cached_result_whose_files_are_gone_runs_again(tiny_reproduction, tmp_path):
     out = tmp_path / "run"
     shutil.copytree(tiny_reproduction.report.parent, out)
@@ -249,6 +265,27 @@ def test_a_cached_result_whose_files_are_gone_runs_again(tiny_reproduction, tmp_
     again = run_reproduce(ReproduceConfig(out=out, profile=TINY, workers=1, progress=False))
     assert "bias_field" not in again.data["task_cached"] and moved.exists()
     assert again.data["bias"]["rigid_by_yaw_mm"] == tiny_reproduction.data["bias"]["rigid_by_yaw_mm"]
+
+
+def test_a_calibration_folder_gone_is_made_again_with_the_runs_settings(tiny_reproduction, tmp_path):
+    """The calibration task named no files: with its folder gone it stayed cached, and a pick cell
+    run again made the calibration with the paper's defaults (57 trajectories, 1000 epochs, 1080p)."""
+    from dvrk_gym.calibration.pipeline import PipelineConfig, read_pipeline_settings
+
+    out = tmp_path / "run"
+    shutil.copytree(tiny_reproduction.report.parent, out)
+    shutil.rmtree(out / "calibration")
+    (out / "tasks" / "debridement_dnn_raisin.json").unlink()
+    again = run_reproduce(ReproduceConfig(out=out, profile=TINY, workers=1, progress=False))
+    assert "calibration" not in again.data["task_cached"]
+    made = PipelineConfig.from_settings(read_pipeline_settings(out / "calibration"))
+    assert (made.n_trajectories, made.dnn_epochs, made.camera_resolution) == (
+        TINY.n_trajectories,
+        TINY.dnn_epochs,
+        tuple(TINY.camera_resolution),
+    )
+    outcomes = lambda data: [(cell["calibrator"], cell["fragment"], cell["rows"]) for cell in data["debridement"]]  # noqa: E731
+    assert outcomes(again.data) == outcomes(tiny_reproduction.data)  # the same calibration made again: the same picks
 
 
 def test_a_copied_run_folder_links_its_own_figures(tiny_reproduction, tmp_path):

@@ -24,6 +24,7 @@ import contextlib
 import functools
 import graphlib
 import logging
+import os
 import re
 import socket
 import time
@@ -93,15 +94,17 @@ def call_task(
 
 def _read_result(path: Path, files: tuple[str, ...], root: Path) -> dict[str, Any]:
     """A cached task result; ValueError unless it is a JSON object with the task's wall time
-    and the files its ``files`` keys name are there (where they were written, or in ``root``,
-    the run folder, should it have been moved since: :func:`locate_in_folder`)."""
+    and the files its ``files`` keys name are in ``root``, the run folder (where they were
+    written, or where they lie should it have been moved or copied since: :func:`locate_in_folder`)."""
     result = read_json(path)
     if not isinstance(result, dict) or not isinstance(result.get("wall_s"), (int, float)):
         raise ValueError("not a task result (a JSON object with its wall_s)")
     for key in files:
         named = result.get(key)
-        if not isinstance(named, str) or not locate_in_folder(named, root).is_file():
-            raise ValueError(f"its {key!r} file {named!r} is gone: the task runs again")
+        located = locate_in_folder(named, root) if isinstance(named, str) else None
+        # a copied folder's results name the original's files: one gone from the copy is gone
+        if located is None or not located.is_relative_to(os.path.abspath(root)) or not located.is_file():
+            raise ValueError(f"its {key!r} file {named!r} is gone from {root}: the task runs again")
     return result
 
 

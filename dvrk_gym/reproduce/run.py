@@ -13,6 +13,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import json
+import os
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -137,6 +138,8 @@ def _calibration_tasks(config: ReproduceConfig, nested_progress: bool) -> list[T
             tasks.calibration,
             {"folder": calibration_folder, "pipeline": pipeline, "progress": config.progress and nested_progress},
             cost_s=phase1_s + 0.03 * profile.dnn_epochs + 15,
+            # a model gone runs it again (its cached stages make the rest), never the picks' load with default settings
+            files=tuple(tasks.calibration_file_key(name) for name in tasks.CALIBRATION_FILES),
         ),
     ]
     for model in tasks.search_models(profile.search):
@@ -238,11 +241,31 @@ def _reproduce(config: ReproduceConfig, folder: RunFolder, executor: Executor) -
             "one was edited or damaged: delete the files you changed there and run the same command again (only those tasks run again)"
         ) from None
     if error_maps.exists():
-        atomic_write_bytes(config.out / "figures" / "calibration_error_maps.png", error_maps.read_bytes())
+        atomic_write_bytes(config.out / "figures" / "calibration_error_maps.png", _read_figure(error_maps, config.out))
     folder.write_json("calls.json", calls)
     results_path = atomic_write_text(config.out / "results.json", results)
     report_path = atomic_write_text(config.out / "report.md", report)
     return Reproduction(report_path, results_path, data, wall)
+
+
+MAX_FIGURE_BYTES = 64 * 2**20
+"""The largest figure a cached task result may name, bytes (the error maps take about 0.3 MB)."""
+
+
+def _read_figure(path: Path, run_folder: Path) -> bytes:
+    """A figure a cached task result names: a regular file inside the run folder, of at most
+    :data:`MAX_FIGURE_BYTES` (an edited result could name a FIFO, which blocks, or a device)."""
+    inside = Path(os.path.realpath(path)).is_relative_to(os.path.realpath(run_folder))
+    if not inside or not path.is_file() or path.stat().st_size > MAX_FIGURE_BYTES:
+        raise ValueError(
+            f"the cached calibration result in {run_folder / 'tasks'} names {path} as its figure: not a file of at most "
+            f"{MAX_FIGURE_BYTES:,} bytes inside the run folder; delete tasks/calibration.json and run the same command again"
+        )
+    with path.open("rb") as file:
+        data = file.read(MAX_FIGURE_BYTES + 1)
+    if len(data) > MAX_FIGURE_BYTES:
+        raise ValueError(f"{path} grew past {MAX_FIGURE_BYTES:,} bytes while it was read")
+    return data
 
 
 def _read_calls(path: Path) -> list[dict[str, Any]]:

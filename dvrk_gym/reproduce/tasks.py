@@ -25,7 +25,7 @@ from dvrk_gym.baselines.transfer import pick_policy
 from dvrk_gym.calibration.benchmark import table_summary
 from dvrk_gym.calibration.loading import load_calibrator
 from dvrk_gym.calibration.phase1 import Phase1Data
-from dvrk_gym.calibration.pipeline import PipelineConfig, run_calibration
+from dvrk_gym.calibration.pipeline import CALIBRATOR_FILES, PipelineConfig, run_calibration
 from dvrk_gym.calibration.policy import CalibratedPolicy
 from dvrk_gym.calibration.search import paper_models, run_search
 from dvrk_gym.envs.debridement import fragment_target
@@ -69,7 +69,17 @@ def calibration(folder: str, pipeline: dict[str, Any], progress: bool = False) -
         "summary": result["summary"],
         "stage_s": result["timings_s"],
         "figure": str(Path(folder) / "calibration_error_maps.png"),
+        **{calibration_file_key(name): str(Path(folder) / file) for name, file in CALIBRATION_FILES.items()},
     }
+
+
+CALIBRATION_FILES = {"phase1": "phase1.npz", **CALIBRATOR_FILES}
+"""The files of the calibration run that later tasks read (Phase I for the search, the models for the picks)."""
+
+
+def calibration_file_key(name: str) -> str:
+    """The key of the calibration task's result naming one of :data:`CALIBRATION_FILES`."""
+    return f"{name.replace('+', '_')}_file"
 
 
 def search_model(calibration_folder: str, model: str, search: str, seed: int) -> dict[str, Any]:

@@ -189,6 +189,19 @@ def _owner_pid(text: str) -> int | None:
         return None
 
 
+def _unstamped_files(folder: Path) -> list[str]:
+    """The files in ``folder`` and the folders below it (caches such as ``tasks/``), as paths
+    relative to it, sorted; its lock and hidden files (temporary ones) left out."""
+    found = []
+    for here, folders, files in os.walk(folder):
+        folders.sort()
+        for name in files:
+            relative = (Path(here) / name).relative_to(folder)
+            if not name.startswith(".") and str(relative) != LOCK_FILE and (Path(here) / name).is_file():
+                found.append(str(relative))
+    return sorted(found)
+
+
 class RunFolder:
     """A folder of cached results made with one set of settings, owned by this process until :meth:`close`.
 
@@ -222,11 +235,13 @@ class RunFolder:
         self._held = False
         self._acquire()
         try:
-            if self._lock.lock_counter == 1:  # the first owner in this process: nobody else writes here now
+            first_owner = self._lock.lock_counter == 1  # the first owner in this process: nobody else writes here now
+            if first_owner:
                 self._claim()
-                remove_partial_files(self.path, skip_folders_with=LOCK_FILE)  # not inside another run's folder
             if settings is not None:
                 self._check_and_stamp(settings)
+            if first_owner:  # only in a folder taken as this run's: a refused one is left as it was
+                remove_partial_files(self.path, skip_folders_with=LOCK_FILE)  # not inside another run's folder
         except BaseException:
             self.close()
             raise
@@ -285,7 +300,7 @@ class RunFolder:
         here = source_fingerprint()
         found = _read_stamp(self.stamp)
         if found is None:  # files already here were made with settings no stamp recorded: never taken as these
-            unknown = sorted(p.name for p in self.path.iterdir() if p.is_file() and p.name != LOCK_FILE and not p.name.startswith("."))
+            unknown = _unstamped_files(self.path)
             if unknown:
                 raise ValueError(
                     f"{self.path} holds files but no settings stamp ({self.stamp.name}): {unknown[:5]}"

@@ -16,7 +16,7 @@ from faults import ROOT, environment
 from dvrk_gym.calibration.models.dnn import DNNCalibrator
 from dvrk_gym.calibration.phase2 import Phase2Data
 from dvrk_gym.parallel.task_graph import Task, run_tasks
-from dvrk_gym.utils.atomic import atomic_open, atomic_path, atomic_savefig, atomic_write_text, partial_path
+from dvrk_gym.utils.atomic import PARTIAL_MARK, atomic_open, atomic_path, atomic_savefig, atomic_write_text, partial_path
 from dvrk_gym.utils.run_folder import LOCK_FILE, SOURCE_KEY, RunFolder, RunFolderBusy, check_made_here, read_settings
 from dvrk_gym.utils.source_fingerprint import source_fingerprint
 
@@ -207,6 +207,29 @@ def test_results_left_without_a_stamp_are_never_taken_as_a_new_runs(tmp_path):
     (tmp_path / "model.json").unlink()
     with RunFolder(tmp_path, {"bias": "none"}) as folder:  # an empty folder (but its lock) is a new run's
         assert folder.read_json("model.json") is None
+
+
+def test_results_in_a_subfolder_without_a_stamp_are_never_taken_as_a_new_runs(tmp_path):
+    """reproduce and sweep cache their results in tasks/ and units/: with the stamp deleted, a run
+    with other settings loaded every cached task (the check looked at the folder's own files only)."""
+    with RunFolder(tmp_path, {"seed": 0}) as folder:
+        (tmp_path / "tasks").mkdir()
+        folder.write_json("tasks/calibration.json", {"seed": 0})
+    (tmp_path / "settings.json").unlink()
+    with pytest.raises(ValueError, match=r"holds files but no settings stamp \(settings.json\): \['tasks/calibration.json'\]"):
+        RunFolder(tmp_path, {"seed": 7})
+
+
+def test_a_refused_folder_keeps_its_temporary_files(tmp_path):
+    """Opening a folder removed every temporary file below it before checking the folder was the
+    run's: a refused --out lost an unrelated program's files mid-write."""
+    (tmp_path / "notes.md").write_text("mine")
+    (tmp_path / "drafts").mkdir()
+    partial = tmp_path / "drafts" / f".report{PARTIAL_MARK}.md"
+    partial.write_text("being written")
+    with pytest.raises(ValueError, match="holds files but no settings stamp"):
+        RunFolder(tmp_path, {"seed": 0})
+    assert partial.read_text() == "being written"
 
 
 def _stamped_by(folder: Path, source) -> dict[str, bytes]:
