@@ -242,15 +242,26 @@ def test_constructor_keywords_are_the_config_fields_with_the_same_defaults_and_d
 
 
 @pytest.mark.parametrize("env_id", ENV_IDS)
-def test_registered_episode_length_is_what_the_defaults_give(env_id):
-    from dvrk_gym.envs.exploration import ExplorationConfig
+def test_no_env_is_registered_with_a_time_limit(env_id):
+    # the exploration env truncates after max_steps; one touch terminates GridTouch's episode;
+    # a trial terminates after max_picks picks, and delta mode truncates after max_steps
+    assert gym.spec(env_id).max_episode_steps is None
 
-    expected = {
-        "dvrk_gym/CalibrationExploration-v0": ExplorationConfig().max_steps,
-        "dvrk_gym/GridTouch-v0": None,  # one touch terminates the episode: no time limit to truncate it
-        "dvrk_gym/Debridement-v0": None,  # a trial terminates after max_picks picks; delta mode truncates after max_steps
-    }
-    assert gym.spec(env_id).max_episode_steps == expected[env_id]
+
+@pytest.mark.parametrize("max_steps", [5, 120])
+def test_the_exploration_envs_max_steps_alone_sets_its_episode_length(max_steps):
+    """A registered limit of 93 cut max_steps=120 at 93 poses, silently."""
+    env = gym.make("dvrk_gym/CalibrationExploration-v0", camera_resolution=SMALL, max_steps=max_steps)
+    try:
+        env.reset(seed=0)
+        env.action_space.seed(0)
+        steps, truncated, terminated = 0, False, False
+        while not (truncated or terminated):
+            _, _, terminated, truncated, _ = env.step(env.action_space.sample())
+            steps += 1
+        assert (steps, terminated, truncated) == (max_steps, False, True)
+    finally:
+        env.close()
 
 
 def test_debridement_ends_its_own_episodes_in_both_modes():

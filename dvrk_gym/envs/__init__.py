@@ -7,13 +7,14 @@ keyword given to ``gym.make`` replaces its default. A keyword the env does not t
 ``TypeError`` naming the ones it takes; a bad value raises ``ValueError`` saying what is
 allowed.
 
-CalibrationExploration-v0 is registered with the episode length its defaults give as
-``max_episode_steps``: 93 poses (one of the paper's Phase I trajectories; if you raise
-``max_steps``, raise it with them). The other two end every episode themselves and have
-none: GridTouch-v0's one touch ends it (``terminated``), and Debridement-v0 terminates a
+No env is registered with a ``max_episode_steps``: each ends its episodes itself.
+CalibrationExploration-v0 truncates one after ``max_steps`` poses (93 by default, one of the
+paper's Phase I trajectories; a registered limit of 93 cut a ``max_steps=200`` at 93,
+silently), GridTouch-v0's one touch ends it (``terminated``), and Debridement-v0 terminates a
 trial after ``max_picks`` picks, or truncates it after ``max_steps`` control steps in delta
 mode. A time limit would mark the last touch or pick ``truncated`` too, which it is not
-(and one of eight steps cut a delta-mode episode at 0.8 s).
+(and one of eight steps cut a delta-mode episode at 0.8 s). Give ``gym.make`` a
+``max_episode_steps`` to cut episodes shorter.
 
 The configs are read from modules that load neither PyBullet nor SciPy
 (:mod:`~dvrk_gym.envs.configs`, :mod:`~dvrk_gym.envs.debridement_config`), so that
@@ -43,13 +44,13 @@ ENV_CONFIGS: dict[str, type[EnvConfig]] = {
     "dvrk_gym/Debridement-v0": DebridementConfig,
 }
 """Each env id and its config class (the class's ``config_class``; a test checks they agree)."""
-EPISODE_STEPS = {
-    "dvrk_gym/CalibrationExploration-v0": ExplorationConfig().max_steps,
+EPISODE_STEPS: dict[str, int | None] = {
+    "dvrk_gym/CalibrationExploration-v0": None,
     "dvrk_gym/GridTouch-v0": None,
     "dvrk_gym/Debridement-v0": None,
 }
-"""Steps of one episode with each env's defaults, for Gymnasium's TimeLimit (None: the env always
-terminates its episodes itself)."""
+"""Each env's ``max_episode_steps`` for Gymnasium's TimeLimit: None, as each ends its episodes
+itself (the exploration env truncates after its ``max_steps``)."""
 
 
 def default_kwargs(config_class: type[EnvConfig]) -> dict[str, Any]:
