@@ -1,8 +1,9 @@
 """How the real robot dropped its Phase I rows, against how the simulated one drops them.
 
-The simulated detector misses the tape in each image at random, 30.4% of the time
+The simulated detector misses the tape in each image at random, 14.9% of the time
 (:data:`dvrk_gym.sim.identified.MARKER_DETECTION_NOISE`): the rate at which a collection
-whose detector never misses keeps the real share of rows (0.37). This script asks whether
+whose detector never misses, searching the authors' boxes, keeps the real share of rows
+(0.37; 30.4% before the boxes). This script asks whether
 the real rows allow that, and what the real robot's drops depend on.
 
 1. **Kept over commanded, per orientation.** The paper's protocol commands the same
@@ -10,7 +11,7 @@ the real rows allow that, and what the real robot's drops depend on.
    5,256, are what the real robot was commanded. Per nearest paper yaw and 10-degree band
    of reported pitch: the real kept rows over those raw rows (with its standard error, from
    both counts), and the simulated kept rows over them. A detector that misses each image
-   at random with probability m keeps at most (1 - m)^2 of any cell (0.48 at 30.4%); cells
+   at random with probability m keeps at most (1 - m)^2 of any cell (0.72 at 14.9%); cells
    above it, by more than two standard errors, are counted.
 2. **What the real drops can depend on.** Each simulated raw row is weighted by the real
    ratio of its cell in a map over some variables (the real kept rows in the cell over the

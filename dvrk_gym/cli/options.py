@@ -121,7 +121,7 @@ def add_executor_options(parser: argparse.ArgumentParser, what: str) -> None:
     parser.add_argument(
         "--scheduler",
         metavar="ADDRESS",
-        help=f"run the {what} on a Dask cluster instead, e.g. tcp://host:8786 (pip install 'dvrk-gym[dask]')",
+        help=f"run the {what} on a Dask cluster instead, e.g. tcp://host:8786 (pip install -e '.[dask]' in a checkout)",
     )
     parser.add_argument(
         "--connect-timeout", type=float, default=10.0, metavar="S", help="seconds to try to reach --scheduler (default: %(default)s)"
@@ -139,7 +139,9 @@ def make_executor(args: argparse.Namespace) -> Executor:
         try:
             from dvrk_gym.parallel.dask_executor import DaskExecutor
         except ImportError as error:
-            raise ValueError(f"--scheduler needs dask.distributed ({error}); install it with: pip install 'dvrk-gym[dask]'") from None
+            raise ValueError(
+                f"--scheduler needs dask.distributed ({error}); install it with: pip install -e '.[dask]' in a checkout of dvrk-gym"
+            ) from None
         return DaskExecutor(args.scheduler, connect_timeout_s=args.connect_timeout)
     from dvrk_gym.parallel.executors import local_executor
 

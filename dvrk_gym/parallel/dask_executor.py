@@ -10,7 +10,7 @@ into the run folder, so its ``--out`` must be on a disk every worker sees at the
 path. Give each worker one thread (``--nthreads 1``): a call runs with one torch thread
 and PyBullet's own loop, so more threads per worker only make calls share a core.
 
-Install with ``pip install "dvrk-gym[dask]"``.
+Install with ``pip install -e ".[dask]"`` in a checkout (the extra ``dask``).
 """
 
 from __future__ import annotations
