@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 from reproduction_files import files_that_differ
-from workers_for_tests import die_once, record
+from workers_for_tests import die_once, record, square_or_die
 
 from dvrk_gym.cli.main import main
 from dvrk_gym.parallel.executors import InlineExecutor, LocalExecutor
@@ -44,9 +44,20 @@ def test_a_task_that_does_not_see_the_shared_folder_fails_saying_so(tmp_path):
 def test_a_local_pool_starts_again_after_a_worker_died(tmp_path):
     flag = tmp_path / "flag"
     with LocalExecutor(workers=1) as executor:
-        outcomes = list(executor.map_unordered(die_once, [str(flag)]))
-        assert type(outcomes[0].error).__name__ == "BrokenProcessPool"
+        future = executor.submit(die_once, str(flag))
+        assert type(future.exception()).__name__ == "BrokenProcessPool"
+        assert executor.submit(die_once, str(flag)).result() == "survived"
+        # in map_unordered a call broken by its worker's death runs again alone: it survives now
+        flag.unlink()
         assert [o.result for o in executor.map_unordered(die_once, [str(flag)])] == ["survived"]
+
+
+def test_one_dead_worker_fails_only_its_own_item():
+    """A worker killed (out of memory, say) broke the pool and failed every item of a sweep with it."""
+    with LocalExecutor(workers=2) as executor:
+        outcomes = {o.item: o for o in executor.map_unordered(square_or_die, [1, 2, -3, 4, 5, 6])}
+    assert {item: o.result for item, o in outcomes.items() if o.error is None} == {1: 1, 2: 4, 4: 16, 5: 25, 6: 36}
+    assert type(outcomes[-3].error).__name__ == "BrokenProcessPool"
 
 
 @pytest.mark.parametrize(

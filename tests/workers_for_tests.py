@@ -2,6 +2,7 @@
 name) and light (only the standard library), so a spawned worker starts in a moment."""
 
 import os
+import time
 from pathlib import Path
 
 
@@ -22,3 +23,11 @@ def die_once(flag: str) -> str:
         Path(flag).write_text("died once")
         os.kill(os.getpid(), 9)
     return "survived"
+
+
+def square_or_die(n: int) -> int:
+    """``n * n`` after a moment (so that calls overlap); a negative ``n`` kills its worker with SIGKILL."""
+    time.sleep(0.3)
+    if n < 0:
+        os.kill(os.getpid(), 9)
+    return n * n

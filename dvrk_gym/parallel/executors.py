@@ -174,6 +174,41 @@ class LocalExecutor(FuturesExecutor):
     def capacity(self) -> int:
         return self.workers
 
+    def map_unordered(self, function: Callable[[T], Any], items: Sequence[T]) -> Iterator[Outcome[T]]:
+        """As :meth:`Executor.map_unordered`, ``workers`` items at a time. A worker that dies (killed,
+        out of memory) breaks the pool, and every call in it fails with ``BrokenProcessPool``:
+        those items run again one at a time in a new pool, so only the one that kills its
+        worker fails, and the items not yet started go on."""
+        waiting: list[T] = list(items)
+        running: dict[cf.Future, T] = {}
+        suspects: list[T] = []  # items whose call failed with the pool's death: each runs again alone
+        try:
+            while waiting or running or suspects:
+                if suspects and not running:  # alone in a new pool: a BrokenProcessPool now is the item's own
+                    item = suspects.pop(0)
+                    running[self.submit(function, item)] = item
+                    cf.wait(running)
+                    future, item = running.popitem()  # (in ``running`` while it runs: Ctrl-C stops it)
+                    yield outcome_of(item, future.result)
+                    continue
+                while waiting and len(running) < self.workers and not suspects:
+                    item = waiting.pop(0)
+                    running[self.submit(function, item)] = item
+                done, _ = cf.wait(running, return_when=cf.FIRST_COMPLETED)
+                for future in done:
+                    item = running.pop(future)
+                    outcome = outcome_of(item, future.result)
+                    if isinstance(outcome.error, BrokenProcessPool):
+                        suspects.append(item)
+                    else:
+                        yield outcome
+        finally:
+            unfinished = [future for future in running if not future.done()]
+            for future in unfinished:
+                future.cancel()
+            if not all(future.cancelled() for future in unfinished):
+                self.stop()  # left early (an error, Ctrl-C) with items running: do not wait for them
+
     def stop(self) -> None:
         pool, self._pool = self._pool, None
         if pool is None:
