@@ -288,6 +288,20 @@ def test_a_calibration_folder_gone_is_made_again_with_the_runs_settings(tiny_rep
     assert outcomes(again.data) == outcomes(tiny_reproduction.data)  # the same calibration made again: the same picks
 
 
+def test_a_damaged_model_file_says_to_delete_it_and_then_the_rerun_makes_it_again(tiny_reproduction, tmp_path):
+    """A truncated dnn.zip failed its pick cells at every resume with 'the same command resumes'."""
+    out = tmp_path / "run"
+    shutil.copytree(tiny_reproduction.report.parent, out)
+    model = out / "calibration" / "dnn.zip"
+    model.write_bytes(model.read_bytes()[:100])
+    (out / "tasks" / "debridement_dnn_raisin.json").unlink()
+    with pytest.raises(TaskError, match="dnn.zip.*delete that file and run the same command again"):
+        run_reproduce(ReproduceConfig(out=out, profile=TINY, workers=1, progress=False))
+    model.unlink()
+    again = run_reproduce(ReproduceConfig(out=out, profile=TINY, workers=1, progress=False))
+    assert "calibration" not in again.data["task_cached"]
+
+
 def test_a_copied_run_folder_links_its_own_figures(tiny_reproduction, tmp_path):
     out = tmp_path / "copy"
     shutil.copytree(tiny_reproduction.report.parent, out)

@@ -24,6 +24,7 @@ from dvrk_gym.baselines.training import TrainConfig, train
 from dvrk_gym.baselines.transfer import pick_policy
 from dvrk_gym.calibration.benchmark import table_summary
 from dvrk_gym.calibration.loading import load_calibrator
+from dvrk_gym.calibration.models.serialization import ModelFileError
 from dvrk_gym.calibration.phase1 import Phase1Data
 from dvrk_gym.calibration.pipeline import CALIBRATOR_FILES, PipelineConfig, run_calibration
 from dvrk_gym.calibration.policy import CalibratedPolicy
@@ -102,7 +103,10 @@ def debridement(
     calibration_folder: str, calibrator: str, fragment: str, trials: int, picks: int, seed: int, resolution: tuple[int, int], out: str
 ) -> dict[str, Any]:
     """One cell of the paper's debridement table: ``trials`` trials with a calibrator."""
-    model, settings = load_calibrator(Path(calibration_folder), calibrator)
+    try:
+        model, settings = load_calibrator(Path(calibration_folder), calibrator)
+    except ModelFileError as error:  # the calibration task is cached while its file exists: rerunning alone fails again
+        raise ModelFileError(f"{error}; delete that file and run the same command again (the calibration makes it again)") from None
     env = _debridement_env(fragment, picks, settings["bias"], int(settings["bias_seed"]), resolution, DEFAULT_CONTACT)
     method = paper.METHOD_LABELS[calibrator]
     return _debridement_cell(
