@@ -295,6 +295,17 @@ def test_two_fits_with_the_same_seed_save_identical_files(name, data, tmp_path: 
     assert (tmp_path / "a.zip").read_bytes() == (tmp_path / "b.zip").read_bytes()
 
 
+@pytest.mark.parametrize("name", MODEL_NAMES)
+def test_a_loaded_model_saved_again_gives_the_same_bytes(name, data, tmp_path: Path) -> None:
+    """A tree skops had loaded kept heap garbage in its node records' padding, which numpy
+    writes: each save of a loaded forest differed, and carried heap addresses."""
+    model = _fitted_models(data)[name]()
+    model.save(tmp_path / "fitted.zip")
+    type(model).load(tmp_path / "fitted.zip").save(tmp_path / "again.zip")
+    type(model).load(tmp_path / "again.zip").save(tmp_path / "third.zip")
+    assert (tmp_path / "again.zip").read_bytes() == (tmp_path / "fitted.zip").read_bytes() == (tmp_path / "third.zip").read_bytes()
+
+
 # --- seeds ---------------------------------------------------------------------------
 
 

@@ -27,6 +27,7 @@ import zipfile
 from collections.abc import Iterator, Sequence
 from typing import Any
 
+import numpy as np
 import skops.io
 
 from dvrk_gym.utils.bounded_zip import ArchiveLimitError, ArchiveLimits, open_archive, read_member
@@ -93,11 +94,27 @@ def _canonical(data: bytes) -> bytes:
             if isinstance(node.get("file"), str):
                 node["file"] = files.setdefault(node["file"], f"{len(files)}.npy")
         members = {SCHEMA: json.dumps(schema, indent=2).encode("utf-8")}
-        members.update({new: archive.read(old) for old, new in files.items()})
+        members.update({new: _zero_padding(archive.read(old)) for old, new in files.items()})
     out = io.BytesIO()
     with zipfile.ZipFile(out, "w", compression=zipfile.ZIP_DEFLATED) as archive:
         for name, content in members.items():
             archive.writestr(zipfile.ZipInfo(name, date_time=(1980, 1, 1, 0, 0, 0)), content, compress_type=zipfile.ZIP_DEFLATED)
+    return out.getvalue()
+
+
+def _zero_padding(npy: bytes) -> bytes:
+    """An ``.npy`` member of a structured array (a tree's nodes) written again with the padding
+    between its fields zeroed. numpy writes those bytes as they lie in memory, which for a
+    tree skops has loaded is whatever the heap held: its saves differed each time and
+    carried heap addresses. Other arrays are returned as they are."""
+    array = np.load(io.BytesIO(npy), allow_pickle=False)
+    if array.dtype.names is None:
+        return npy
+    clean = np.zeros(array.shape, dtype=array.dtype)
+    for name in array.dtype.names:
+        clean[name] = array[name]
+    out = io.BytesIO()
+    np.save(out, clean, allow_pickle=False)
     return out.getvalue()
 
 
