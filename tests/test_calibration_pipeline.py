@@ -9,7 +9,9 @@ import pytest
 
 from dvrk_gym.calibration.benchmark import YAW_SETTINGS, format_table, touch_grid
 from dvrk_gym.calibration.loading import load_calibrator
+from dvrk_gym.calibration.models.dnn import DNNCalibrator
 from dvrk_gym.calibration.models.rigid import RigidBodyCalibrator
+from dvrk_gym.calibration.models.serialization import ModelFileError
 from dvrk_gym.calibration.phase2 import Phase2Data, collect_phase2
 from dvrk_gym.calibration.pipeline import SETTINGS_STAMP, PipelineConfig, read_pipeline_settings, run_calibration
 from dvrk_gym.calibration.policy import CalibratedPolicy, calibrator_input
@@ -195,6 +197,20 @@ def test_a_calibration_folders_stamp_reads_back_as_its_config_and_another_versio
     # its models were fitted on another simulator: debride, baseline evaluate and the benchmarks refuse them
     with pytest.raises(ValueError, match=r"another version of dvrk_gym's simulator .*dvrk-gym calibrate --out NEW_FOLDER"):
         load_calibrator(tmp_path, "rbt")
+
+
+def test_a_network_fitted_with_other_settings_than_its_folders_is_refused(tmp_path):
+    """A dnn.zip copied in from another run (seed 1, 3 epochs) loaded beside settings saying seed 0, 5 epochs."""
+    config = PipelineConfig(n_trajectories=3, steps_per_trajectory=30, dnn_epochs=5, bias="none", camera_resolution=SMALL)
+    with RunFolder(tmp_path, dataclasses.asdict(config), stamp=SETTINGS_STAMP):
+        pass
+    rng = np.random.default_rng(0)
+    X = np.column_stack([rng.uniform(-0.05, 0.05, (60, 3)), rng.uniform(-1.5, 1.5, (60, 3))])
+    DNNCalibrator(hidden_layers=1, units=4, epochs=3, seed=1, progress=False).fit(X, X[:, :3]).save(tmp_path / "dnn.zip")
+    with pytest.raises(ModelFileError, match="fitted with seed 1 for 3 epochs, but its folder's settings say seed 0 and 5 epochs"):
+        load_calibrator(tmp_path, "dnn")
+    DNNCalibrator(hidden_layers=1, units=4, epochs=5, seed=0, progress=False).fit(X, X[:, :3]).save(tmp_path / "dnn.zip")
+    assert load_calibrator(tmp_path, "dnn")[0].epochs == 5
 
 
 def test_cli_evaluates_any_policy_from_a_factory(tmp_path, capsys):

@@ -55,7 +55,8 @@ def load_calibrator(
             judged on this one's); or, when the pipeline has to run, a folder stamped with
             other settings (:class:`~dvrk_gym.utils.run_folder.RunFolder`).
         ModelFileError: the folder holds the calibrator only in the retired ``.npz`` format (the
-            message gives the command that makes it again), or its model file is bad.
+            message gives the command that makes it again), or its model file is bad, or holds
+            a network fitted with another seed or epoch count than the folder's settings.
     """
     if name not in CALIBRATOR_FILES:
         raise ValueError(f"unknown calibrator {name!r}; expected one of {sorted(CALIBRATOR_FILES)}")
@@ -71,4 +72,20 @@ def load_calibrator(
         logger.warning("%s has no %s: running the calibration pipeline there (cached stages)", folder, path.name)
         run_calibration(folder, PipelineConfig.from_settings(settings, source=f"the settings of {folder}"), benchmark=False)
         settings = read_pipeline_settings(folder) or settings
-    return CALIBRATOR_LOADERS[name].load(path), settings
+    model = CALIBRATOR_LOADERS[name].load(path)
+    _check_fitted_as_stamped(model, path, settings)
+    return model, settings
+
+
+def _check_fitted_as_stamped(model: Any, path: Path, settings: dict[str, Any]) -> None:
+    """Refuse a network whose file records another seed or epoch count than the folder's settings
+    (the pipeline fits it with both): a file of another run, copied in."""
+    network = model.dnn if isinstance(model, TwoPhaseCalibrator) else model
+    if not isinstance(network, DNNCalibrator) or "seed" not in settings or "dnn_epochs" not in settings:
+        return
+    fitted, stamped = (network.seed, network.epochs), (settings["seed"], settings["dnn_epochs"])
+    if fitted != stamped:
+        raise ModelFileError(
+            f"{path} holds a network fitted with seed {fitted[0]} for {fitted[1]} epochs, but its folder's settings "
+            f"say seed {stamped[0]} and {stamped[1]} epochs: a model file of another run; calibrate again in a new --out"
+        )
