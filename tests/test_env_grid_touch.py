@@ -128,6 +128,14 @@ def test_a_rigid_paper_stops_the_descent_where_the_jaws_meet_it(make_env):
     np.testing.assert_allclose(info["reported_position"], info["on_paper"], atol=1e-6)  # it reports where it stopped
 
 
+@pytest.mark.parametrize("contact", ["rigid", "compliant"])
+def test_touched_paper_tells_a_touch_from_a_hover_that_scores_as_well(make_env, contact):
+    touched = _touch_under(make_env, contact, 0.002)
+    hover = _touch_under(make_env, contact, -0.02)  # sent 20 mm over the paper
+    assert touched["touched_paper"] and not hover["touched_paper"]
+    assert hover["mm_error"] < 1.0 and hover["true_tip_position"][2] > SURFACE_Z_M + 0.015  # a hit in the plane, 2 cm up
+
+
 @pytest.mark.parametrize("bias", ["none", "paper"])
 def test_the_compliant_paper_gives_way_and_the_jaws_slide_by_the_identified_amounts(make_env, bias):
     depth = 0.004

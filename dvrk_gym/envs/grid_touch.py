@@ -58,6 +58,8 @@ ACTION_HIGH = np.array([0.080, 0.085, -0.130, np.pi / 2])
 SURFACE_Z_M = float(WORKSPACE_CENTER_M[2])
 CONTACT_TOLERANCE_M = 1e-7
 """How exactly the descent finds the height where the jaws meet the paper, metres."""
+TOUCH_HEIGHT_TOLERANCE_M = 1e-4
+"""A touch whose true tip ends at most this far over the paper touched it (a rigid paper stops it 0.06 mm under), metres."""
 MAX_NOISE_DRAWS = 1000  # a noisy left/right pair with no positive disparity is drawn again, at most this often
 HOME_POSITION_M = np.array([0.040, 0.042, -0.130])
 """Where a fresh or relaxed episode starts: the reported point 34 mm above the middle of the grid, metres."""
@@ -366,6 +368,7 @@ class GridTouchEnv(DvrkEnv[GridTouchConfig]):
             "commanded_yaw": yaw,
             "pixel_error": math.sqrt(pixel_offset.dot(pixel_offset)),
             "mm_error": 1e3 * math.sqrt(offset_m.dot(offset_m)),
+            "touched_paper": bool(tip[2] <= SURFACE_Z_M + TOUCH_HEIGHT_TOLERANCE_M),  # mm_error is in-plane: a hover scores too
             "true_tip_position": tip,
             "true_circle_position": circle.copy(),
             "reported_position": self.world.reported_pose()[:3, 3].copy(),
