@@ -359,3 +359,19 @@ def test_run_debridement_refuses_env_keywords_that_repeat_its_arguments():
 
     with pytest.raises(ValueError, match=r"repeat run_debridement's own arguments: \['contact'\]"):
         run_debridement(lambda observation: None, 1, 0, env_kwargs={"contact": "rigid"})
+
+
+def test_trials_on_an_env_without_a_trial_table_are_refused():
+    """A GridTouch env, or Debridement in delta mode, gave trials with no outcomes and NaN times."""
+    for env_id, kwargs, word in (("dvrk_gym/GridTouch-v0", {}, "GridTouchEnv"), (DEBRIDEMENT_ID, {"action_mode": "delta"}, "'delta' mode")):
+        env = gym.make(env_id, camera_resolution=TINY, **kwargs)
+        try:
+            with pytest.raises(ValueError, match=f"need a Debridement-v0 env in primitive mode, got .*{word}"):
+                run_trials(env, lambda observation: np.zeros(4, np.float32), 1, progress=False)
+        finally:
+            env.close()
+
+
+def test_n_trials_is_named_as_such(debridement_env):
+    with pytest.raises(ValueError, match="n_trials must be an int in"):
+        run_trials(debridement_env, lambda observation: debridement_env.action_space.sample(), 0, progress=False)

@@ -133,6 +133,25 @@ def test_calibrators_refuse_millimetres_and_degrees(data, column, scale, message
             model.fit(wrong, y)
 
 
+def test_calibrators_refuse_targets_in_millimetres_and_forests_a_yaw_in_degrees(data) -> None:
+    """Only the inputs were checked: y in millimetres fitted a model sending mm commands, and a
+    yaw of 30 "degrees" fell in the -90 degree forest."""
+    from dvrk_gym.calibration.models.forests import ResidualForests
+    from dvrk_gym.calibration.policy import calibrator_input
+
+    X, y = data
+    for model in (RigidBodyCalibrator(), LinearCalibrator(), DNNCalibrator(epochs=1, progress=False)):
+        with pytest.raises(ValueError, match="y's positions reach .*expected metres"):
+            model.fit(X, y * 1e3)
+    with pytest.raises(ValueError, match="yaw's angles reach .*expected radians"):
+        ResidualForests(trees=2).fit(y, np.degrees(X[:, 3]), np.zeros_like(y))
+    with pytest.raises(ValueError, match="residual's positions reach"):
+        ResidualForests(trees=2).fit(y, X[:, 3], np.full_like(y, 5.0))
+    with pytest.raises(ValueError, match="radians"):
+        calibrator_input(np.array([0.0, 0.0, 0.15]), 30.0)
+    assert calibrator_input(np.array([0.0, 0.0, 0.15]), 0.5)[0, 3] == pytest.approx(np.pi / 4)
+
+
 def test_the_dnn_is_float32_whatever_torchs_default_dtype(data) -> None:
     X, y = data
     reference = DNNCalibrator(epochs=2, seed=0, progress=False).fit(X, y).predict(X)

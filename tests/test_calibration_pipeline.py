@@ -213,6 +213,16 @@ def test_a_network_fitted_with_other_settings_than_its_folders_is_refused(tmp_pa
     assert load_calibrator(tmp_path, "dnn")[0].epochs == 5
 
 
+def test_a_folder_without_the_model_is_refused_unless_asked_to_calibrate(tmp_path):
+    """A mistyped folder started the paper's calibration there (57 trajectories, 1,000 epochs) with one log line."""
+    with pytest.raises(FileNotFoundError, match="calibratoin does not exist: .*dvrk-gym calibrate --out"):
+        load_calibrator(tmp_path / "calibratoin", "rbt")
+    assert not (tmp_path / "calibratoin").exists()
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(FileNotFoundError, match="empty has no rbt.zip"):
+        load_calibrator(tmp_path / "empty", "rbt")
+
+
 def test_cli_evaluates_any_policy_from_a_factory(tmp_path, capsys):
     code = main(
         [

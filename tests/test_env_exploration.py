@@ -2,6 +2,7 @@
 
 import dataclasses
 
+import gymnasium as gym
 import numpy as np
 import pytest
 
@@ -136,3 +137,22 @@ def test_collect_phase1_loses_samples_to_the_wrist_like_the_paper(make_env, tmp_
     loaded = Phase1Data.load(tmp_path / "phase1.npz")
     np.testing.assert_array_equal(loaded.kept, data.kept)
     np.testing.assert_array_equal(loaded.camera_position, data.camera_position)
+
+
+@pytest.mark.parametrize(
+    ("n_trajectories", "seed", "message"),
+    [(2.0, 0, "n_trajectories must be an int"), (True, 0, "n_trajectories must be an int"), (1, -1, "seed must be an int")],
+)
+def test_phase1_refuses_counts_and_seeds_that_are_not_ints_before_it_runs(n_trajectories, seed, message):
+    env = gym.make("dvrk_gym/CalibrationExploration-v0", camera_resolution=(640, 360))
+    try:
+        with pytest.raises(ValueError, match=message):
+            collect_phase1(env, PaperExplorationPolicy(seed=0), n_trajectories, seed=seed, progress=False)
+    finally:
+        env.close()
+    grid = gym.make("dvrk_gym/GridTouch-v0", camera_resolution=(640, 360))
+    try:
+        with pytest.raises(ValueError, match="Phase I runs on CalibrationExploration-v0, got GridTouchEnv"):
+            collect_phase1(grid, PaperExplorationPolicy(seed=0), 1, progress=False)
+    finally:
+        grid.close()

@@ -34,26 +34,35 @@ CALIBRATOR_LOADERS: dict[str, Any] = {"rbt": RigidBodyCalibrator, "dnn": DNNCali
 
 
 def load_calibrator(
-    folder: str | os.PathLike, name: str, bias: str = "paper", bias_seed: int = 0, camera_resolution: tuple[int, int] | None = None
+    folder: str | os.PathLike,
+    name: str,
+    bias: str = "paper",
+    bias_seed: int = 0,
+    camera_resolution: tuple[int, int] | None = None,
+    calibrate_if_missing: bool = False,
 ) -> tuple[Any, dict[str, Any]]:
     """A calibrator from a calibration run folder, and the run's settings.
 
-    Runs the calibration pipeline in ``folder`` first if the model file is missing (its
-    stages are cached, so an interrupted run resumes). The settings come from the
-    folder's stamp when it has one, else from ``bias``/``bias_seed`` and ``camera_resolution``
-    (None: the paper's).
+    With ``calibrate_if_missing``, runs the calibration pipeline in ``folder`` first if the
+    model file is missing (its stages are cached, so an interrupted run resumes); without
+    it, a missing model is an error (a mistyped folder would start a calibration of an hour
+    at the paper's budget). The settings come from the folder's stamp when it has one, else
+    from ``bias``/``bias_seed`` and ``camera_resolution`` (None: the paper's).
 
     Args:
         folder: a folder written by ``dvrk-gym calibrate`` or ``evaluate``.
         name: "rbt", "dnn" or "dnn+rf".
         bias: the cable bias preset, for a folder without settings.
         bias_seed: which instrument, for a folder without settings.
+        camera_resolution: (width, height) px, for a folder without settings.
+        calibrate_if_missing: run the pipeline when the folder has no such model.
 
     Raises:
         ValueError: an unknown calibrator name; a folder stamped by another dvrk_gym (its
             calibrators were fitted on that version's simulated instrument, and would be
             judged on this one's); or, when the pipeline has to run, a folder stamped with
             other settings (:class:`~dvrk_gym.utils.run_folder.RunFolder`).
+        FileNotFoundError: the folder has no such model, and ``calibrate_if_missing`` is False.
         ModelFileError: the folder holds the calibrator only in the retired ``.npz`` format (the
             message gives the command that makes it again), or its model file is bad, or holds
             a network fitted with another seed or epoch count than the folder's settings.
@@ -68,6 +77,12 @@ def load_calibrator(
     if not path.exists() and retired.exists():
         raise ModelFileError(retired_format_message(retired))
     check_made_here(folder, SETTINGS_STAMP, remedy="calibrate again with this version: dvrk-gym calibrate --out NEW_FOLDER")
+    if not path.exists() and not calibrate_if_missing:
+        found = "has no " + path.name if folder.is_dir() else "does not exist"
+        raise FileNotFoundError(
+            f"{folder} {found}: give a calibration run folder ('dvrk-gym calibrate --out {folder}' makes one), "
+            "or calibrate_if_missing=True to run the calibration there"
+        )
     if not path.exists():
         logger.warning("%s has no %s: running the calibration pipeline there (cached stages)", folder, path.name)
         run_calibration(folder, PipelineConfig.from_settings(settings, source=f"the settings of {folder}"), benchmark=False)

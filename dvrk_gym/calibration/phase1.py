@@ -32,6 +32,7 @@ from dvrk_gym.envs.exploration import (
     SAFE_Y_M,
     TARGET_Z_M,
     YAW_RANGE_RAD,
+    CalibrationExplorationEnv,
     workspace_corners,
 )
 from dvrk_gym.sim.robot.bias import BiasConfig
@@ -269,8 +270,10 @@ def collect_phase1(env: gym.Env, policy: PaperExplorationPolicy, n_trajectories:
     Returns:
         Every commanded pose as a raw row, with the cleaning rule's verdict in ``kept``.
     """
-    if n_trajectories < 1:
-        raise ValueError(f"n_trajectories must be >= 1, got {n_trajectories}")
+    check_int("n_trajectories", n_trajectories, 1, MAX_TRAJECTORIES)
+    check_int("seed", seed, 0)  # episode k is reset with seed + k
+    if not isinstance(env.unwrapped, CalibrationExplorationEnv):
+        raise ValueError(f"Phase I runs on CalibrationExploration-v0, got {type(env.unwrapped).__name__}")
     rows: dict[str, list] = {
         name: [] for name in ("reported_position", "orientation", "left_px", "right_px", "areas_px", "camera_position", "trajectory")
     }
@@ -316,6 +319,7 @@ def run_paper_phase1(
         camera_resolution: the endoscope's image size (width, height), pixels.
         progress: show a progress bar.
     """
+    check_int("n_trajectories", n_trajectories, 1, MAX_TRAJECTORIES)  # before an env is built
     world: dict[str, Any] = {"bias": bias, "bias_seed": bias_seed, "camera_resolution": tuple(camera_resolution)}
     env = gym.make("dvrk_gym/CalibrationExploration-v0", max_steps=steps_per_trajectory, **world)
     try:

@@ -13,6 +13,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from dvrk_gym.calibration.models.features import MAX_ANGLE_RAD
 from dvrk_gym.sim.robot import kinematics as kin
 
 Target = tuple[np.ndarray, float]
@@ -52,8 +53,12 @@ def calibrator_input(camera_position: np.ndarray, yaw_rad: float, round_yaw: boo
     point = np.asarray(camera_position)
     if point.shape != (3,) or point.dtype.kind not in "fiu" or not np.isfinite(point).all():
         raise ValueError(f"the camera-frame target must be 3 finite real numbers (m), got {camera_position!r}")
-    if isinstance(yaw_rad, (bool, np.bool_)) or not isinstance(yaw_rad, (int, float, np.integer, np.floating)) or not np.isfinite(yaw_rad):
-        raise ValueError(f"the target's yaw must be a finite real number (rad), got {yaw_rad!r}")
+    if (
+        isinstance(yaw_rad, (bool, np.bool_))
+        or not isinstance(yaw_rad, (int, float, np.integer, np.floating))
+        or not abs(float(yaw_rad)) <= MAX_ANGLE_RAD  # NaN too; degrees (30) would round to a paper yaw silently
+    ):
+        raise ValueError(f"the target's yaw must be a finite real number of radians (within 2 pi), got {yaw_rad!r}")
     yaw = float(kin.nearest_paper_yaw(yaw_rad)) if round_yaw else float(yaw_rad)
     pitch, roll = kin.paper_pitch_roll(yaw)
     return np.array([[*point.astype(float), yaw, float(pitch), float(roll)]])

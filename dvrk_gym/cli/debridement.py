@@ -41,7 +41,9 @@ def _run_debride(args: argparse.Namespace) -> int:
             "or add --calibrate to run the calibration there first"
         )
     writable_folder(args.out)
-    calibrator, settings = load_calibrator(args.calibration, args.calibrator, args.bias, args.bias_seed, tuple(args.resolution))
+    calibrator, settings = load_calibrator(
+        args.calibration, args.calibrator, args.bias, args.bias_seed, tuple(args.resolution), calibrate_if_missing=args.calibrate
+    )
     bias = settings.get("bias", args.bias)
     # the picks see through the endoscope the calibration was made with, as its instrument
     resolution = check_resolution(

@@ -20,11 +20,13 @@ import gymnasium as gym
 import numpy as np
 
 from dvrk_gym import paper
+from dvrk_gym.envs.debridement import DebridementEnv
 from dvrk_gym.envs.picks import PHASES
 from dvrk_gym.evaluation.episodes import run_episodes
 from dvrk_gym.sim.table.contact import DEFAULT_CONTACT
 from dvrk_gym.sim.table.judge import outcome_counts
 from dvrk_gym.utils.atomic import atomic_savefig, atomic_write_json, atomic_write_text
+from dvrk_gym.utils.checks import check_int
 
 OUTCOME_COLOURS = {"-": "#4caf50", "A": "#e53935", "B": "#fb8c00", "C": "#8e24aa", "": "#bdbdbd"}
 """Colour of each outcome in the outcome grid ("" marks no pick)."""
@@ -69,6 +71,11 @@ def run_trials(env: gym.Env, policy: Any, n_trials: int, seed: int = 0, progress
         seed: the first trial's reset seed; the rest continue its stream.
         progress: show a progress bar.
     """
+    base = env.unwrapped
+    if not isinstance(base, DebridementEnv) or base.config.action_mode != "primitive":
+        mode = f" in {base.config.action_mode!r} mode" if isinstance(base, DebridementEnv) else ""
+        raise ValueError(f"debridement trials need a Debridement-v0 env in primitive mode, got {type(base).__name__}{mode}")
+    check_int("n_trials", n_trials, 1, 10**6)
     results = run_episodes(env, policy, n_trials, seed=seed, progress=progress, description="debridement trials")
     trials = []
     for result in results:

@@ -67,9 +67,9 @@ def check_inputs(X: object, name: str = "X", columns: int = 6) -> np.ndarray:
 
     Raises:
         ValueError: If it does not hold real numbers (complex, bool, text, objects), is not
-            2-D with ``columns`` columns, is empty or not finite, or (a calibrator's inputs:
-            six columns) its positions or angles are not in metres and radians
-            (``MAX_POSITION_M``, ``MAX_ANGLE_RAD``).
+            2-D with ``columns`` columns, is empty or not finite, or its positions or angles
+            are not in metres and radians (``MAX_POSITION_M``, ``MAX_ANGLE_RAD``; six
+            columns: a calibrator's inputs, three: base positions, one: angles).
     """
     try:
         raw = np.asarray(X)
@@ -85,19 +85,18 @@ def check_inputs(X: object, name: str = "X", columns: int = 6) -> np.ndarray:
     if not np.all(np.isfinite(array)):
         row = int(np.argwhere(~np.isfinite(array))[0, 0])
         raise ValueError(f"{name} row {row} is not finite ({array[row]}); expected finite values")
-    if columns == 6:  # a calibrator's inputs
-        _check_si_units(array, name)
+    _check_si_units(array, name)
     return array
 
 
 def _check_si_units(array: np.ndarray, name: str) -> None:
-    """Positions (the first three columns) within ``MAX_POSITION_M`` and angles (the others)
-    within ``MAX_ANGLE_RAD``: millimetres or degrees would fit a model that is silently wrong."""
-    position = np.abs(array[:, :3]).max()
-    if position > MAX_POSITION_M:
+    """Positions within ``MAX_POSITION_M`` and angles within ``MAX_ANGLE_RAD``: millimetres or
+    degrees would fit a model that is silently wrong. Six columns are a calibrator's inputs
+    (position, then yaw, pitch, roll), three a base position, one an angle (a yaw)."""
+    positions, angles = {6: (array[:, :3], array[:, 3:]), 3: (array, None), 1: (None, array)}.get(array.shape[1], (None, None))
+    if positions is not None and (position := np.abs(positions).max()) > MAX_POSITION_M:
         raise ValueError(f"{name}'s positions reach {position:.4g}; expected metres (within {MAX_POSITION_M:g} m of the origin)")
-    angle = np.abs(array[:, 3:]).max()
-    if angle > MAX_ANGLE_RAD:
+    if angles is not None and (angle := np.abs(angles).max()) > MAX_ANGLE_RAD:
         raise ValueError(f"{name}'s angles reach {angle:.4g}; expected radians (within 2 pi)")
 
 
