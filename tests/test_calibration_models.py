@@ -425,3 +425,13 @@ def test_residual_forests_reject_mismatched_yaw(data) -> None:
     _, y = data
     with pytest.raises(ValueError, match="yaw has 3 values"):
         ResidualForests(trees=2).fit(y, np.zeros(3), y)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [({"dnn": "foo"}, "dnn must be a regressor"), ({"forests": "foo"}, "forests must be ResidualForests"), ({"seed": 1.5}, "seed must be")],
+)
+def test_the_two_phase_calibrator_refuses_parts_that_are_not(kwargs, message) -> None:
+    """They failed later, in vars() or on a missing attribute, far from the argument."""
+    with pytest.raises(ValueError, match=message):
+        TwoPhaseCalibrator(**kwargs)

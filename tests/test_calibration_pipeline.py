@@ -223,6 +223,12 @@ def test_a_folder_without_the_model_is_refused_unless_asked_to_calibrate(tmp_pat
         load_calibrator(tmp_path / "empty", "rbt")
 
 
+def test_run_calibration_refuses_a_dict_for_its_config(tmp_path):
+    with pytest.raises(ValueError, match="config must be a PipelineConfig"):
+        run_calibration(tmp_path, {"n_trajectories": 2})
+    assert not any(tmp_path.iterdir())
+
+
 def test_cli_evaluates_any_policy_from_a_factory(tmp_path, capsys):
     code = main(
         [

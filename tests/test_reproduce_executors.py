@@ -95,3 +95,15 @@ def test_reproduce_on_a_dask_cluster_gives_what_a_local_process_gives(tmp_path, 
     assert seeded_results(json.loads(on_dask.results.read_text())) == seeded_results(json.loads(local.results.read_text()))
     assert files_that_differ(local.report.parent, tmp_path / "dask") == []
     assert len(list((tmp_path / "dask" / "debridement").glob("*.json"))) == 6
+
+
+@pytest.mark.parametrize("workers", [0, 10**6, True, 2.0])
+def test_a_local_pool_refuses_worker_counts_out_of_bounds(workers):
+    with pytest.raises(ValueError, match=r"expected an int in \[1, 1024\]"):
+        LocalExecutor(workers=workers)
+
+
+def test_a_local_pool_takes_a_numpy_int():
+    import numpy as np
+
+    assert LocalExecutor(workers=np.int64(2)).workers == 2

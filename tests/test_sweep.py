@@ -70,6 +70,7 @@ def test_settings_refuse_an_empty_or_bad_grid_and_a_bad_budget():
         ({"seeds": (True,)}, "non-negative integers"),
         ({"calibrators": ()}, "calibrators is empty"),
         ({"calibrators": ("rbt", "svm")}, "unknown calibrators"),
+        ({"calibrators": "rbt"}, "got the string 'rbt'"),  # not the calibrators 'r', 'b' and 't'
         ({"pipeline": {"bias": "paper"}}, "pipeline must be a PipelineConfig"),
         ({"bias_seeds": (2**31,)}, "up to 2147483647"),  # refused here, not after the folder is stamped
     ):
@@ -303,7 +304,7 @@ def test_a_unit_gives_the_calibration_table_of_the_pipeline(tmp_path):
         (["--seeds", ""], "not a non-negative number"),
         (["--scheduler", "localhost"], "the scheduler address 'localhost' is malformed (missing port"),
         (["--scheduler", "tcp://127.0.0.1:9", "--connect-timeout", "0.5"], "cannot reach a Dask scheduler at 'tcp://127.0.0.1:9'"),
-        (["--workers", "0"], "workers is 0; expected at least 1"),
+        (["--workers", "0"], "workers is 0; expected an int in [1, 1024]"),
     ],
 )
 def test_the_command_refuses_bad_input_in_one_line_with_status_2(tmp_path, capsys, arguments, message):

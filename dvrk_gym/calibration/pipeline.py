@@ -136,6 +136,8 @@ def run_calibration(
     """
     check_choice("protocol", protocol, PROTOCOLS)
     out = Path(out)
+    if not isinstance(config, PipelineConfig):
+        raise ValueError(f"config must be a PipelineConfig (PipelineConfig.from_settings reads a dict), got {type(config).__name__}")
     with RunFolder(out, dataclasses.asdict(config), stamp=SETTINGS_STAMP) as folder:
         return _run_stages(out, folder, config, progress, protocol if benchmark else None)
 

@@ -16,6 +16,7 @@ from __future__ import annotations
 import concurrent.futures as cf
 import functools
 import multiprocessing
+import numbers
 import os
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures.process import BrokenProcessPool
@@ -25,6 +26,9 @@ from typing import Any, Generic, Protocol, TypeVar
 from dvrk_gym.utils.parent_watch import end_with_parent
 
 T = TypeVar("T")
+
+MAX_LOCAL_WORKERS = 1024
+"""The most processes a local pool starts (each imports torch and PyBullet: some 300 MB)."""
 
 
 @dataclass(frozen=True)
@@ -147,9 +151,9 @@ class LocalExecutor(FuturesExecutor):
     """
 
     def __init__(self, workers: int = 2) -> None:
-        if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
-            raise ValueError(f"workers is {workers!r}; expected at least 1 (an int)")
-        self.workers = workers
+        if isinstance(workers, bool) or not isinstance(workers, numbers.Integral) or not 1 <= workers <= MAX_LOCAL_WORKERS:
+            raise ValueError(f"workers is {workers!r}; expected an int in [1, {MAX_LOCAL_WORKERS}]")
+        self.workers: int = int(workers)
         self.description = f"{workers} local process{'es' if workers > 1 else ''}"
         self._pool: cf.ProcessPoolExecutor | None = None
 

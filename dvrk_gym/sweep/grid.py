@@ -71,6 +71,8 @@ class SweepSettings:
     pipeline: PipelineConfig = PipelineConfig()
 
     def __post_init__(self) -> None:
+        if isinstance(self.calibrators, str):  # its letters would be taken as names
+            raise ValueError(f"calibrators must be a sequence of names of {list(CALIBRATORS)}, got the string {self.calibrators!r}")
         object.__setattr__(self, "calibrators", tuple(self.calibrators))
         for field in ("bias_seeds", "seeds"):
             object.__setattr__(self, field, _as_ints(getattr(self, field), field))

@@ -25,6 +25,7 @@ from dvrk_gym.calibration.models.dnn import DNNCalibrator
 from dvrk_gym.calibration.models.features import calibrator_layout, check_inputs, check_targets
 from dvrk_gym.calibration.models.forests import FOREST_TYPES, ResidualForests
 from dvrk_gym.calibration.models.serialization import ModelParts, SavableModel
+from dvrk_gym.utils.checks import check_int
 
 __all__ = ["TwoPhaseCalibrator"]
 
@@ -80,6 +81,11 @@ class TwoPhaseCalibrator(SavableModel):
     TRUSTED_TYPES = FOREST_TYPES
 
     def __init__(self, dnn: Regressor | None = None, forests: ResidualForests | None = None, seed: int = 0) -> None:
+        check_int("seed", seed, 0, 2**63 - 1)
+        if dnn is not None and not (callable(getattr(dnn, "fit", None)) and callable(getattr(dnn, "predict", None))):
+            raise ValueError(f"dnn must be a regressor with fit and predict (or None for the paper's network), got {type(dnn).__name__}")
+        if forests is not None and not isinstance(forests, ResidualForests):
+            raise ValueError(f"forests must be ResidualForests (or None for the paper's), got {type(forests).__name__}")
         self.dnn: Regressor = dnn if dnn is not None else DNNCalibrator(seed=seed)
         self.forests = forests if forests is not None else ResidualForests(seed=seed)
         self.phase1_fitted_ = dnn is not None and _looks_fitted(dnn)
