@@ -47,9 +47,6 @@ def test_a_local_pool_starts_again_after_a_worker_died(tmp_path):
         future = executor.submit(die_once, str(flag))
         assert type(future.exception()).__name__ == "BrokenProcessPool"
         assert executor.submit(die_once, str(flag)).result() == "survived"
-        # in map_unordered a call broken by its worker's death runs again alone: it survives now
-        flag.unlink()
-        assert [o.result for o in executor.map_unordered(die_once, [str(flag)])] == ["survived"]
 
 
 def test_one_dead_worker_fails_only_its_own_item():
@@ -107,3 +104,10 @@ def test_a_local_pool_takes_a_numpy_int():
     import numpy as np
 
     assert LocalExecutor(workers=np.int64(2)).workers == 2
+
+
+def test_an_item_alone_in_the_pool_that_kills_its_worker_runs_once(tmp_path):
+    flag = tmp_path / "flag"
+    with LocalExecutor(workers=1) as executor:  # one worker: each item runs alone
+        (outcome,) = executor.map_unordered(die_once, [str(flag)])
+    assert type(outcome.error).__name__ == "BrokenProcessPool" and flag.exists()

@@ -181,8 +181,9 @@ class LocalExecutor(FuturesExecutor):
     def map_unordered(self, function: Callable[[T], Any], items: Sequence[T]) -> Iterator[Outcome[T]]:
         """As :meth:`Executor.map_unordered`, ``workers`` items at a time. A worker that dies (killed,
         out of memory) breaks the pool, and every call in it fails with ``BrokenProcessPool``:
-        those items run again one at a time in a new pool, so only the one that kills its
-        worker fails, and the items not yet started go on."""
+        those items run again one at a time in a new pool (one that was running alone is not
+        run again), so only the one that kills its worker fails, and the items not yet
+        started go on once they are done."""
         waiting: list[T] = list(items)
         running: dict[cf.Future, T] = {}
         suspects: list[T] = []  # items whose call failed with the pool's death: each runs again alone
@@ -199,10 +200,11 @@ class LocalExecutor(FuturesExecutor):
                     item = waiting.pop(0)
                     running[self.submit(function, item)] = item
                 done, _ = cf.wait(running, return_when=cf.FIRST_COMPLETED)
+                alone = len(running) == 1  # a pool broken under one item alone: that item killed its worker
                 for future in done:
                     item = running.pop(future)
                     outcome = outcome_of(item, future.result)
-                    if isinstance(outcome.error, BrokenProcessPool):
+                    if isinstance(outcome.error, BrokenProcessPool) and not alone:
                         suspects.append(item)
                     else:
                         yield outcome

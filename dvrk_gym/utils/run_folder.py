@@ -189,16 +189,34 @@ def _owner_pid(text: str) -> int | None:
         return None
 
 
+MAX_STAMP_BYTES = 2**20
+"""The largest JSON file read as a possible stamp of a run folder below another, bytes (stamps take about 1 kB)."""
+
+
+def _is_stamped_run_folder(folder: Path) -> bool:
+    """Whether ``folder`` is a run folder with a stamp of its own (a lock, and a JSON object
+    beside it recording a source fingerprint): its results are checked against its own
+    settings whenever a run opens it."""
+    if not (folder / LOCK_FILE).exists():
+        return False
+    for path in folder.glob("*.json"):
+        with contextlib.suppress(ValueError, OSError):
+            stamp = read_json(path, max_bytes=MAX_STAMP_BYTES)
+            if isinstance(stamp, dict) and SOURCE_KEY in stamp:
+                return True
+    return False
+
+
 def _unstamped_files(folder: Path) -> list[str]:
     """The files in ``folder`` and the folders below it (caches such as ``tasks/``), as paths
-    relative to it, sorted; its lock and hidden files (temporary ones) left out."""
+    relative to it, sorted; locks and hidden files (temporary ones) left out, and so are the
+    folders below that are stamped run folders of their own (a calibration's ``runs/cal``)."""
     found = []
     for here, folders, files in os.walk(folder):
-        folders.sort()
+        folders[:] = sorted(name for name in folders if not _is_stamped_run_folder(Path(here) / name))
         for name in files:
-            relative = (Path(here) / name).relative_to(folder)
-            if not name.startswith(".") and str(relative) != LOCK_FILE and (Path(here) / name).is_file():
-                found.append(str(relative))
+            if not name.startswith(".") and name != LOCK_FILE and (Path(here) / name).is_file():
+                found.append(str((Path(here) / name).relative_to(folder)))
     return sorted(found)
 
 

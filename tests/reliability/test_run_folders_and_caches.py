@@ -220,6 +220,21 @@ def test_results_in_a_subfolder_without_a_stamp_are_never_taken_as_a_new_runs(tm
         RunFolder(tmp_path, {"seed": 7})
 
 
+def test_a_folder_holding_other_stamped_runs_and_locks_only_is_a_new_runs(tmp_path):
+    """Stamped run folders below (runs/cal) check their own settings, and a lock is no result."""
+    with RunFolder(tmp_path / "cal", {"seed": 0}) as cal:
+        cal.write_json("model.json", {"seed": 0})
+    (tmp_path / "tasks").mkdir()
+    (tmp_path / "tasks" / "run.lock").write_text("")
+    with RunFolder(tmp_path, {"seed": 7}):
+        pass
+    with RunFolder(tmp_path / "unstamped") as cache:  # a cache of another run, with no stamp: its files are unknown
+        cache.write_json("result.json", {"seed": 0})
+    (tmp_path / "settings.json").unlink()
+    with pytest.raises(ValueError, match=r"\['unstamped/result.json'\]"):
+        RunFolder(tmp_path, {"seed": 8})
+
+
 def test_a_refused_folder_keeps_its_temporary_files(tmp_path):
     """Opening a folder removed every temporary file below it before checking the folder was the
     run's: a refused --out lost an unrelated program's files mid-write."""

@@ -16,8 +16,9 @@ So :class:`EglMirror` is a second client, with the plugin loaded before any body
 a copy of each visual shape (meshes built in code, and boxes, written as OBJ files to a
 temporary folder while the copy is built), moved to the world's poses before each frame.
 The world's own client is never touched, so its images stay bit for bit what they were.
-The plugin's EGL state is the process's, so all mirrors of a process share one such client
-(:class:`_SharedEglClient`), each rebuilding its copy there when another's was built since.
+The plugin's EGL state is shared beyond its client, so all mirrors of a thread share one
+such client (:class:`_SharedEglClient`), each rebuilding its copy there when another's was
+built since.
 
 When the plugin cannot be loaded it calls ``exit()`` inside the process (without libEGL,
 for one), so :func:`egl_usable` first tries it in a child process.
@@ -31,6 +32,7 @@ import logging
 import subprocess
 import sys
 import tempfile
+import threading
 import weakref
 from dataclasses import dataclass
 from pathlib import Path
@@ -153,7 +155,7 @@ class EglMirror:
 
     @property
     def client(self) -> bullet_client.BulletClient:
-        """The client the mirror draws in (the process's one EGL client); raises RendererUnavailable once closed."""
+        """The client the mirror draws in (its thread's one EGL client); raises RendererUnavailable once closed."""
         if self._shared is None:
             raise RendererUnavailable("this EGL mirror has been closed")
         return self._shared.client
@@ -214,6 +216,8 @@ class EglMirror:
     # ------------------------------------------------------------------ building the copy
     def _rebuild(self, physics: Physics) -> None:
         mirror = self.client
+        assert self._shared is not None  # self.client has checked
+        self._shared.holder = None  # the copy there is gone: should this rebuild fail, every mirror rebuilds
         with quiet_output():
             mirror.resetSimulation()
         self._copies = []
@@ -234,7 +238,6 @@ class EglMirror:
                     visual = self._visual_shape(entry, meshes)
                     self._copies.append(_Copy(body, link, mirror.createMultiBody(0.0, -1, visual)))
         self._layout = physics.layout_version
-        assert self._shared is not None  # self.client has checked
         self._shared.holder = self._release
         for path in self._written:  # read by now
             Path(path).unlink()
@@ -284,19 +287,24 @@ class EglMirror:
 
 
 class _SharedEglClient:
-    """The process's one client with the EGL plugin loaded, shared by every :class:`EglMirror`.
+    """A thread's one client with the EGL plugin loaded, shared by the thread's :class:`EglMirror` s.
 
-    The plugin's EGL state belongs to the whole process: a second client's plugin shares it,
-    so unloading it (or disconnecting its client) while another is drawing crashed the process
-    at that one's next frame, and resetting one client's world blanked the others' frames. So
-    all mirrors draw in one client: each rebuilds its copy there when another mirror's copy
-    was built since (:attr:`holder`), and the last mirror to go unloads the plugin.
+    The plugin's EGL state is shared beyond its client: a second client's plugin in the same
+    thread shares it, so unloading it (or disconnecting its client) while another was drawing
+    crashed the process at that one's next frame, and resetting one client's world blanked
+    the others' frames. So a thread's mirrors draw in one client: each rebuilds its copy
+    there when another mirror's copy was built since (:attr:`holder`; two envs drawn in turn
+    rebuild at every frame, about 2.5 times a frame's time), and the last mirror to go
+    unloads the plugin. The EGL context is current in the thread that loaded the plugin
+    only, so each thread has its own client.
     """
 
-    _by_path: dict[str, _SharedEglClient] = {}
+    _by_key: dict[tuple[str, int], _SharedEglClient] = {}
+    _lock = threading.Lock()
 
     def __init__(self, path: str) -> None:
         self.path = path
+        self.key = (path, threading.get_ident())
         with quiet_output(stderr=True):  # the server and the plugin print their start-up to the C streams
             self.client = bullet_client.BulletClient(connection_mode=pybullet.DIRECT)
             self.plugin = self.client.loadPlugin(path, "_eglRendererPlugin")
@@ -311,19 +319,22 @@ class _SharedEglClient:
 
     @classmethod
     def acquire(cls, path: str) -> _SharedEglClient:
-        """The shared client for the plugin at ``path``, made on first use; one more user of it."""
-        shared = cls._by_path.get(path)
-        if shared is None:
-            shared = cls._by_path[path] = cls(path)
-        shared.users += 1
-        return shared
+        """This thread's shared client for the plugin at ``path``, made on first use; one more user of it."""
+        with cls._lock:
+            shared = cls._by_key.get((path, threading.get_ident()))
+            if shared is None:
+                shared = cls(path)
+                cls._by_key[shared.key] = shared
+            shared.users += 1
+            return shared
 
     def give_back(self) -> None:
         """One user fewer; the last unloads the plugin and disconnects the client."""
-        self.users -= 1
-        if self.users > 0:
-            return
-        self._by_path.pop(self.path, None)
+        with self._lock:
+            self.users -= 1
+            if self.users > 0:
+                return
+            self._by_key.pop(self.key, None)
         with quiet_output():  # the plugin says goodbye on the C streams
             try:
                 self.client.unloadPlugin(self.plugin)
