@@ -386,3 +386,31 @@ def test_displays_of_two_envs_draw_alike_and_closing_one_leaves_the_other_drawin
     another (exit 139), and one display's rebuild blanked the other's frames."""
     done = subprocess.run([sys.executable, "-c", _TWO_DISPLAYS], capture_output=True, text=True, timeout=300, check=False)
     assert done.returncode == 0 and "displays ok" in done.stdout, (done.returncode, done.stderr[-2000:])
+
+
+_DISPLAY_IN_A_THREAD = """
+import threading, gymnasium as gym, numpy as np, dvrk_gym
+make = lambda: gym.make("dvrk_gym/Debridement-v0", camera_resolution=(320, 180), render_mode="rgb_array", renderer="egl")
+first = make()
+first.reset(seed=1)
+alone = first.render()
+drawn = {}
+def draw_in_a_thread():
+    env = make()
+    env.reset(seed=1)
+    drawn["frame"] = env.render()
+    env.close()
+thread = threading.Thread(target=draw_in_a_thread)
+thread.start()
+thread.join()
+assert np.array_equal(drawn["frame"], alone) and np.array_equal(first.render(), alone)
+first.close()
+print("threads ok")
+"""
+
+
+@needs_egl
+def test_an_env_drawn_in_another_thread_draws_as_one_in_the_main_thread():
+    """The EGL context is the loading thread's: sharing one client across threads crashed (exit 139)."""
+    done = subprocess.run([sys.executable, "-c", _DISPLAY_IN_A_THREAD], capture_output=True, text=True, timeout=300, check=False)
+    assert done.returncode == 0 and "threads ok" in done.stdout, (done.returncode, done.stderr[-2000:])
