@@ -24,7 +24,7 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from dvrk_gym import paper
-from dvrk_gym.calibration.records import ArrayRecord
+from dvrk_gym.calibration.records import ArrayRecord, non_finite_rows
 from dvrk_gym.envs.exploration import (
     PITCH_RANGE_RAD,
     ROLL_RANGE_RAD,
@@ -168,15 +168,12 @@ class Phase1Data(ArrayRecord):
         finite camera position (what the calibrators fit on)."""
         if len(data["kept"]) == 0:
             return "it holds no rows"
-        for name, rows in (
-            ("reported_position", data["reported_position"]),
-            ("orientation", data["orientation"]),
-            ("camera_position of a kept row", data["camera_position"][data["kept"]]),
-        ):
-            bad = np.flatnonzero(~np.isfinite(rows).all(axis=1))
-            if bad.size:
-                return f"{name} is not finite in {bad.size} rows (the first: {rows[bad[0]].tolist()})"
-        return None
+        problems = (
+            non_finite_rows("reported_position", data["reported_position"]),
+            non_finite_rows("orientation", data["orientation"]),
+            non_finite_rows("camera_position of a kept row", data["camera_position"][data["kept"]]),
+        )
+        return next((problem for problem in problems if problem is not None), None)
 
     @property
     def n_raw(self) -> int:

@@ -15,7 +15,7 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from dvrk_gym.calibration.policy import CalibratedPolicy, Calibrator, calibrator_input
-from dvrk_gym.calibration.records import ArrayRecord
+from dvrk_gym.calibration.records import ArrayRecord, non_finite_rows
 from dvrk_gym.envs.grid_touch import N_CIRCLES, TOUR
 from dvrk_gym.sim.robot.kinematics import PAPER_YAWS_RAD
 
@@ -48,11 +48,8 @@ class Phase2Data(ArrayRecord):
     @classmethod
     def value_problem(cls, data: dict[str, np.ndarray]) -> str | None:
         """A position or orientation that is not finite (every touch saw its circle and was corrected)."""
-        for name in ("camera_position", "orientation", "commanded", "corrected"):
-            bad = np.flatnonzero(~np.isfinite(data[name]).all(axis=1))
-            if bad.size:
-                return f"{name} is not finite in {bad.size} rows (the first: {data[name][bad[0]].tolist()})"
-        return None
+        problems = (non_finite_rows(name, data[name]) for name in ("camera_position", "orientation", "commanded", "corrected"))
+        return next((problem for problem in problems if problem is not None), None)
 
     @property
     def X(self) -> np.ndarray:

@@ -18,7 +18,7 @@ import numpy as np
 from dvrk_gym.utils.atomic import atomic_open
 from dvrk_gym.utils.bounded_zip import ArchiveLimitError, ArchiveLimits, open_archive, read_member
 
-__all__ = ["DATA_FILE_LIMITS", "ArrayRecord", "read_npz_arrays"]
+__all__ = ["DATA_FILE_LIMITS", "ArrayRecord", "non_finite_rows", "read_npz_arrays"]
 
 DATA_FILE_LIMITS = ArchiveLimits(max_file_bytes=512 * 2**20, max_members=10_000, max_member_bytes=256 * 2**20, max_total_bytes=512 * 2**20)
 """What a data file may hold: 512 MiB on disk and inflated, 256 MiB an array, 10,000 arrays
@@ -69,6 +69,13 @@ def read_npz_arrays(path: str | PathLike) -> dict[str, np.ndarray]:
         raise ValueError(f"{path}: no such file") from None
     except ArchiveLimitError as error:
         raise ValueError(f"not an .npz file within the size limits: {error}") from None
+
+
+def non_finite_rows(name: str, rows: np.ndarray) -> str | None:
+    """What :meth:`ArrayRecord.value_problem` says of an (N, k) array with rows that are not
+    all finite (how many, and the first), or None."""
+    bad = np.flatnonzero(~np.isfinite(rows).all(axis=1))
+    return f"{name} is not finite in {bad.size} rows (the first: {rows[bad[0]].tolist()})" if bad.size else None
 
 
 class ArrayRecord:

@@ -18,7 +18,7 @@ import functools
 import multiprocessing
 import numbers
 import os
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 from typing import Any, Generic, Protocol, TypeVar
@@ -121,11 +121,16 @@ class FuturesExecutor:
             for future in cf.as_completed(futures):
                 yield outcome_of(futures[future], future.result)
         finally:
-            unfinished = [future for future in futures if not future.done()]
-            for future in unfinished:
-                future.cancel()
-            if not all(future.cancelled() for future in unfinished):
-                self.stop()  # left early (an error, Ctrl-C) with items running: do not wait for them
+            self._abandon(futures)
+
+    def _abandon(self, futures: Iterable[cf.Future]) -> None:
+        """Cancel the calls not finished when :meth:`map_unordered` is left; if some are
+        running (left early: an error, Ctrl-C), :meth:`stop`, rather than wait for them."""
+        unfinished = [future for future in futures if not future.done()]
+        for future in unfinished:
+            future.cancel()
+        if not all(future.cancelled() for future in unfinished):
+            self.stop()
 
     def __enter__(self) -> FuturesExecutor:
         return self
@@ -209,11 +214,7 @@ class LocalExecutor(FuturesExecutor):
                     else:
                         yield outcome
         finally:
-            unfinished = [future for future in running if not future.done()]
-            for future in unfinished:
-                future.cancel()
-            if not all(future.cancelled() for future in unfinished):
-                self.stop()  # left early (an error, Ctrl-C) with items running: do not wait for them
+            self._abandon(running)
 
     def stop(self) -> None:
         pool, self._pool = self._pool, None

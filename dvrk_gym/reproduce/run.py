@@ -31,7 +31,7 @@ from dvrk_gym.reproduce import tasks
 from dvrk_gym.reproduce.profiles import QUICK, Profile
 from dvrk_gym.reproduce.report import collect_results, relative_to_run, render_report, write_figures
 from dvrk_gym.sim.robot.bias import resolve_bias
-from dvrk_gym.utils.atomic import atomic_write_bytes, atomic_write_text, read_json
+from dvrk_gym.utils.atomic import atomic_write_bytes, atomic_write_text, read_bounded, read_json
 from dvrk_gym.utils.checks import check_bool, check_int
 from dvrk_gym.utils.run_folder import RunFolder
 
@@ -255,17 +255,15 @@ MAX_FIGURE_BYTES = 64 * 2**20
 def _read_figure(path: Path, run_folder: Path) -> bytes:
     """A figure a cached task result names: a regular file inside the run folder, of at most
     :data:`MAX_FIGURE_BYTES` (an edited result could name a FIFO, which blocks, or a device)."""
-    inside = Path(os.path.realpath(path)).is_relative_to(os.path.realpath(run_folder))
-    if not inside or not path.is_file() or path.stat().st_size > MAX_FIGURE_BYTES:
+    try:
+        if not Path(os.path.realpath(path)).is_relative_to(os.path.realpath(run_folder)):
+            raise ValueError(f"{path} lies outside {run_folder}")
+        return read_bounded(path, MAX_FIGURE_BYTES, "a figure")
+    except ValueError as error:
         raise ValueError(
             f"the cached calibration result in {run_folder / 'tasks'} names {path} as its figure: not a file of at most "
-            f"{MAX_FIGURE_BYTES:,} bytes inside the run folder; delete tasks/calibration.json and run the same command again"
-        )
-    with path.open("rb") as file:
-        data = file.read(MAX_FIGURE_BYTES + 1)
-    if len(data) > MAX_FIGURE_BYTES:
-        raise ValueError(f"{path} grew past {MAX_FIGURE_BYTES:,} bytes while it was read")
-    return data
+            f"{MAX_FIGURE_BYTES:,} bytes inside the run folder ({error}); delete tasks/calibration.json and run the same command again"
+        ) from None
 
 
 def _read_calls(path: Path) -> list[dict[str, Any]]:

@@ -107,6 +107,30 @@ MAX_JSON_BYTES = 16 * 2**20
 stamps, tables and results are kilobytes to a few megabytes)."""
 
 
+def read_bounded(path: str | os.PathLike, max_bytes: int, what: str) -> bytes:
+    """The bytes of ``path``, read only if it is a regular file of at most ``max_bytes`` (a
+    FIFO there would block the read, a device never end it), and no more than that should it
+    grow while it is read.
+
+    Raises:
+        FileNotFoundError: there is no such file.
+        PermissionError: it may not be read.
+        ValueError: not a regular file, or larger than ``max_bytes``; the message names the
+            file and says ``what`` has at most that many bytes.
+    """
+    path = Path(path)
+    status = path.stat()  # FileNotFoundError names the file
+    if not path.is_file():
+        raise ValueError(f"{path} is not a regular file")
+    if status.st_size > max_bytes:
+        raise ValueError(f"{path}: {status.st_size:,} bytes; {what} has at most {max_bytes:,}")
+    with path.open("rb") as file:
+        data = file.read(max_bytes + 1)  # the size again: the file may have grown since
+    if len(data) > max_bytes:
+        raise ValueError(f"{path}: more than {max_bytes:,} bytes; {what} has at most {max_bytes:,}")
+    return data
+
+
 def read_json(path: str | os.PathLike, max_bytes: int = MAX_JSON_BYTES) -> Any:
     """The JSON value in ``path``, read only if it is a regular file of at most ``max_bytes``.
 
@@ -116,16 +140,7 @@ def read_json(path: str | os.PathLike, max_bytes: int = MAX_JSON_BYTES) -> Any:
         ValueError: not a regular file, too large, not UTF-8, not JSON, or nested too deeply;
             the message names the file.
     """
-    path = Path(path)
-    status = path.stat()  # FileNotFoundError names the file
-    if not path.is_file():
-        raise ValueError(f"{path} is not a regular file")
-    if status.st_size > max_bytes:
-        raise ValueError(f"{path}: {status.st_size:,} bytes; a JSON file read here has at most {max_bytes:,}")
-    with path.open("rb") as file:
-        data = file.read(max_bytes + 1)  # the size again: the file may have grown since
-    if len(data) > max_bytes:
-        raise ValueError(f"{path}: more than {max_bytes:,} bytes; a JSON file read here has at most {max_bytes:,}")
+    data = read_bounded(path, max_bytes, "a JSON file read here")
     try:
         return json.loads(data.decode("utf-8"))
     except (ValueError, RecursionError) as error:  # UnicodeDecodeError and JSONDecodeError are ValueErrors
