@@ -1,8 +1,8 @@
 """How much of the calibration table is the network's training seed: one Phase I, several networks.
 
 The network's training is chaotic: its seed (the weights' initialisation and the epochs'
-shuffles) moves its touch errors as much as a different machine's arithmetic does (README,
-*The network's figures depend on the machine's arithmetic*). For a calibration run, this
+shuffles) moves its touch errors as much as a different machine's arithmetic does
+(``docs/calibration.md``, *The network's figures depend on the machine's arithmetic*). For a calibration run, this
 script trains the network again on the run's Phase I rows with each of ``--seeds``, collects
 a Phase II with each (the pushes depend on the network), fits its residual forests (with
 the run's forest seed: only the network's differs), and touches the table as ``dvrk-gym

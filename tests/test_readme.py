@@ -1,5 +1,9 @@
 """The README is the front door: its code runs, its commands parse, its paths exist, its figures name their command.
 
+The same holds for the deep dives it links to (``docs/*.md``): each is checked as the README
+is, and every relative link of the README and the docs points at a file that exists (and at
+a heading there, when it names one).
+
 Every Python block runs as a script in a fresh interpreter, in a temporary folder, as a
 reader who pastes it would run it; the import lines of the blocks above it in its section
 come first (a reader reading the section top to bottom has them). Blocks that run the
@@ -26,7 +30,10 @@ from benchmark_scripts import run_script
 from dvrk_gym.cli.main import build_parser
 
 ROOT = Path(__file__).resolve().parents[1]
-README = (ROOT / "README.md").read_text()
+DOCUMENTS = {path.relative_to(ROOT).as_posix(): path.read_text() for path in [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]}
+"""The README and its deep dives, by path from the checkout's root. ``docs/reproduce/`` is a
+run's output (``report.md``), checked against its own ``results.json`` by the reproduce tests."""
+README = DOCUMENTS["README.md"]
 CONTRIBUTING = (ROOT / "CONTRIBUTING.md").read_text()
 COMMANDS = {"--version", "reproduce", "demo", "collect", "calibrate", "evaluate", "search", "debride", "baseline", "fidelity", "sweep"}
 SLOW_CALLS = ("run_reproduce(", "run_calibration(", "run_paper_phase1(", "n_trajectories=57", ".learn(", "dvrk_gym_out/reproduce-quick")
@@ -44,8 +51,9 @@ FIGURE_WINDOW_LINES = 25
 
 @dataclass(frozen=True)
 class Block:
-    """A fenced code block: its language, code, ``##`` section and first line (1-based)."""
+    """A fenced code block: its document, language, code, ``##`` section and first line (1-based)."""
 
+    document: str
     language: str
     code: str
     section: str
@@ -53,18 +61,19 @@ class Block:
 
     @property
     def id(self) -> str:
-        """The section's first words and the block's place among its section's blocks of its language."""
-        same = [b for b in BLOCKS if b.section == self.section and b.language == self.language]
-        return f"{re.sub(r'[^a-z]+', '-', self.section.lower()).strip('-')[:24]}-{same.index(self) + 1}"
+        """The document (if not the README), the section's first words and the block's place among its section's blocks of its language."""
+        same = [b for b in BLOCKS if (b.document, b.section, b.language) == (self.document, self.section, self.language)]
+        prefix = "" if self.document == "README.md" else f"{Path(self.document).stem}-"
+        return f"{prefix}{re.sub(r'[^a-z]+', '-', self.section.lower()).strip('-')[:24]}-{same.index(self) + 1}"
 
 
-def _blocks() -> list[Block]:
+def _blocks(document: str) -> list[Block]:
     blocks, section, fence = [], "", None
-    for number, line in enumerate(README.splitlines(), start=1):
+    for number, line in enumerate(DOCUMENTS[document].splitlines(), start=1):
         if fence is None and line.startswith("```"):
             fence = (line[3:].strip(), number + 1, [])
         elif fence is not None and line.startswith("```"):
-            blocks.append(Block(fence[0], "\n".join(fence[2]) + "\n", section, fence[1]))
+            blocks.append(Block(document, fence[0], "\n".join(fence[2]) + "\n", section, fence[1]))
             fence = None
         elif fence is not None:
             fence[2].append(line)
@@ -73,20 +82,20 @@ def _blocks() -> list[Block]:
     return blocks
 
 
-BLOCKS = _blocks()
+BLOCKS = [block for document in DOCUMENTS for block in _blocks(document)]
 PYTHON_BLOCKS = [b for b in BLOCKS if b.language == "python"]
 SHELL_BLOCKS = [b for b in BLOCKS if b.language == "bash"]
 
 
 def _code() -> list[str]:
-    """The README's code: each line of its fenced blocks, and each inline code span (joined across lines)."""
-    prose = re.sub(r"```[a-z]*\n.*?```", "", README, flags=re.S)
+    """The documents' code: each line of their fenced blocks, and each inline code span (joined across lines)."""
+    prose = "\n".join(re.sub(r"```[a-z]*\n.*?```", "", text, flags=re.S) for text in DOCUMENTS.values())
     lines = [line for block in BLOCKS for line in block.code.splitlines()]
     return lines + [span.replace("\n", " ") for span in re.findall(r"`([^`]+)`", prose)]
 
 
 def _commands(prefix: str) -> list[str]:
-    """Every ``prefix ...`` the README shows, without comments or [optional] parts."""
+    """Every ``prefix ...`` the documents show, without comments or [optional] parts."""
     found = set()
     for code in _code():
         for match in re.finditer(rf"(?<![\w/-]){re.escape(prefix)} ([^#|]*)", code):
@@ -120,7 +129,7 @@ def test_every_dvrk_gym_command_in_the_readme_parses(command):
 @pytest.mark.parametrize("command", [c for c in _commands("python") if c.startswith("benchmarks/")])
 def test_every_benchmark_the_readme_names_exists_and_takes_its_arguments(command):
     script, *arguments = shlex.split(command)
-    assert (ROOT / script).is_file(), f"README names {script}, which does not exist"
+    assert (ROOT / script).is_file(), f"the README or docs name {script}, which does not exist"
     result = run_script(ROOT / script, *arguments, parse_only=True)  # the script's parser takes them, then it stops
     assert result.returncode == 0, f"`python {command}`: {result.stderr[-1500:]}"
 
@@ -150,8 +159,9 @@ def test_every_benchmark_script_imports_in_a_fresh_python_with_only_its_own_fold
 
 def test_every_benchmark_script_is_listed_and_every_listed_one_exists():
     scripts = sorted(path.name for path in (ROOT / "benchmarks").glob("*.py"))
-    unlisted = [name for name in scripts if f"`{name}`" not in CONTRIBUTING and f"benchmarks/{name}" not in README]
-    assert not unlisted, f"benchmarks not in CONTRIBUTING's table of benchmarks nor in the README: {unlisted}"
+    documents = "\n".join(DOCUMENTS.values())
+    unlisted = [name for name in scripts if f"`{name}`" not in CONTRIBUTING and f"benchmarks/{name}" not in documents]
+    assert not unlisted, f"benchmarks not in CONTRIBUTING's table of benchmarks nor in the README or docs: {unlisted}"
     listed = re.findall(r"^\| `(\w+\.py)` \|", CONTRIBUTING, flags=re.M)
     assert listed, "CONTRIBUTING.md has no table of benchmarks"
     assert not [name for name in listed if name not in scripts], f"CONTRIBUTING lists benchmarks that do not exist: {listed}"
@@ -160,7 +170,7 @@ def test_every_benchmark_script_is_listed_and_every_listed_one_exists():
 @pytest.mark.parametrize("block", SHELL_BLOCKS, ids=lambda b: b.id)
 def test_every_shell_block_of_the_readme_is_valid_bash(block):
     result = subprocess.run(["bash", "-n"], input=block.code, capture_output=True, text=True, timeout=30)
-    assert result.returncode == 0, f"README line {block.line}: {result.stderr}"
+    assert result.returncode == 0, f"{block.document} line {block.line}: {result.stderr}"
 
 
 def _other_command_params() -> list:
@@ -180,7 +190,7 @@ def test_every_other_command_of_the_readme_exists_and_takes_its_arguments(comman
     assert result.returncode == 0, f"`{command}`: {result.stderr[-1500:]}"
 
 
-@pytest.mark.parametrize("name", sorted(set(re.findall(r"`(dvrk_gym(?:\.\w+)+)", README))))
+@pytest.mark.parametrize("name", sorted({name for text in DOCUMENTS.values() for name in re.findall(r"`(dvrk_gym(?:\.\w+)+)", text)}))
 def test_every_module_path_in_the_readme_resolves(name):
     parts = name.split(".")
     for split in range(len(parts), 0, -1):  # the longest importable module, then attributes
@@ -228,12 +238,12 @@ def test_every_python_block_of_the_readme_runs(block, tmp_path):
     script = tmp_path / "readme_block.py"
     script.write_text(_imports_above(block) + block.code)
     result = _run([sys.executable, script.name], tmp_path, timeout=3600)
-    assert result.returncode == 0, f"README line {block.line}:\n{result.stderr[-3000:]}"
+    assert result.returncode == 0, f"{block.document} line {block.line}:\n{result.stderr[-3000:]}"
 
 
-def _figures() -> list[tuple[int, str]]:
+def _figures(document: str = "README.md") -> list[tuple[int, str]]:
     """(line, first line) of each image and each table with a measured number in its body, outside code blocks."""
-    lines = re.sub(r"```.*?```", lambda m: "\n" * m.group(0).count("\n"), README, flags=re.S).splitlines()
+    lines = re.sub(r"```.*?```", lambda m: "\n" * m.group(0).count("\n"), DOCUMENTS[document], flags=re.S).splitlines()
     figures, table_start = [], None
     for number, line in enumerate(lines, start=1):
         if line.startswith("|") and table_start is None:
@@ -248,9 +258,9 @@ def _figures() -> list[tuple[int, str]]:
     return figures
 
 
-def _section_window(line: int) -> str:
-    """The README's text within FIGURE_WINDOW_LINES of ``line`` (1-based), cut at the headings around it."""
-    lines = README.splitlines()
+def _section_window(document: str, line: int) -> str:
+    """The document's text within FIGURE_WINDOW_LINES of ``line`` (1-based), cut at the headings around it."""
+    lines = DOCUMENTS[document].splitlines()
     start, end = max(line - 1 - FIGURE_WINDOW_LINES, 0), min(line + FIGURE_WINDOW_LINES, len(lines))
     for index in range(line - 2, start - 1, -1):
         if lines[index].startswith("#"):
@@ -270,7 +280,54 @@ def test_the_figure_finder_finds_images_and_tables_of_numbers_but_not_reference_
     assert not any("CalibrationExploration-v0" in text for text in starts), "the env reference table holds no measurement"
 
 
-@pytest.mark.parametrize("figure", _figures(), ids=lambda f: f"line{f[0]}")
-def test_every_figure_in_the_readme_names_the_command_that_printed_it(figure):
-    line, text = figure
-    assert COMMAND.search(_section_window(line)), f"README line {line} ({text[:60]}...) names no command near it that printed it"
+def _figure_params() -> list:
+    return [
+        pytest.param(document, line, text, id=f"{'' if document == 'README.md' else Path(document).stem + '-'}line{line}")
+        for document in DOCUMENTS
+        for line, text in _figures(document)
+    ]
+
+
+@pytest.mark.parametrize(("document", "line", "text"), _figure_params())
+def test_every_figure_in_the_readme_names_the_command_that_printed_it(document, line, text):
+    assert COMMAND.search(_section_window(document, line)), (
+        f"{document} line {line} ({text[:60]}...) names no command near it that printed it"
+    )
+
+
+def _anchor(heading: str) -> str:
+    """GitHub's anchor for a Markdown heading: lower case, punctuation but ``-`` and ``_`` dropped, spaces as ``-``."""
+    return re.sub(r"[^\w\- ]", "", heading.strip().lower()).replace(" ", "-")
+
+
+def _anchors(text: str) -> set[str]:
+    prose = re.sub(r"```.*?```", "", text, flags=re.S)
+    return {_anchor(heading) for heading in re.findall(r"^#+ (.+)$", prose, flags=re.M)}
+
+
+def _link_params() -> list:
+    links = []
+    for document, text in DOCUMENTS.items():
+        prose = re.sub(r"```.*?```", "", text, flags=re.S)
+        for target in dict.fromkeys(re.findall(r"\]\(([^)\s]+)\)", prose)):
+            if not re.match(r"[a-z]+:", target):  # http(s), mailto: not checked offline
+                links.append(pytest.param(document, target, id=f"{document}->{target}"))
+    return links
+
+
+@pytest.mark.parametrize(("document", "target"), _link_params())
+def test_every_relative_link_points_at_a_file_and_heading_that_exist(document, target):
+    path, _, anchor = target.partition("#")
+    linked = (ROOT / document).parent / path if path else ROOT / document
+    assert linked.exists(), f"{document} links to {target}: {linked} does not exist"
+    if anchor:
+        assert linked.suffix == ".md", f"{document} links to a heading of {linked}, which is not Markdown"
+        assert anchor in _anchors(linked.read_text()), f"{document} links to #{anchor}, which is no heading of {path or document}"
+
+
+def test_the_link_checker_reads_github_anchors():
+    assert _anchor("The DNN at yaw 90: 3.06 mm") == "the-dnn-at-yaw-90-306-mm"
+    assert _anchor("Performance against panda-gym") == "performance-against-panda-gym"
+    assert (
+        _anchor("Fidelity: how close the simulated robot is to the real one") == "fidelity-how-close-the-simulated-robot-is-to-the-real-one"
+    )

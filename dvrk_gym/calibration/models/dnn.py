@@ -12,7 +12,7 @@ so ``dvrk-gym calibrate``, ``reproduce`` and ``sweep`` would otherwise train dif
 networks from the same data and seed. One thread costs nothing here (30 s either way for
 the paper's 3 x 300 net on 2 cores). The same seed and data then give bit-identical weights
 on one CPU; another CPU may still differ (MKL picks its kernels by instruction set, and
-``MKL_CBWR=COMPATIBLE``, which would pin them, trains 3.8 times slower: README, *The
+``MKL_CBWR=COMPATIBLE``, which would pin them, trains 3.8 times slower: ``docs/calibration.md``, *The
 network's figures depend on the machine's arithmetic*).
 """
 
