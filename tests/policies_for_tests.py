@@ -14,3 +14,13 @@ NOT_CALLABLE = 42
 def no_policy(env):
     """A factory that makes no policy (a number): refused in one line."""
     return 42
+
+
+def takes_nothing():
+    """A factory that does not take the env: refused before the env is made."""
+    return middle_of_the_grid(None)
+
+
+def raises_type_error(env):
+    """A factory with a bug of its own: its TypeError comes through as it is."""
+    return len(42)

@@ -2,6 +2,7 @@
 
 import dataclasses
 import json
+from unittest import mock
 
 import gymnasium as gym
 import numpy as np
@@ -16,7 +17,7 @@ from dvrk_gym.calibration.phase2 import Phase2Data, collect_phase2
 from dvrk_gym.calibration.pipeline import SETTINGS_STAMP, PipelineConfig, read_pipeline_settings, run_calibration
 from dvrk_gym.calibration.policy import CalibratedPolicy, calibrator_input
 from dvrk_gym.cli.main import main
-from dvrk_gym.evaluation.episodes import as_policy, load_policy_factory, run_episodes, summarize
+from dvrk_gym.evaluation.episodes import as_policy, evaluate_policy, load_policy_factory, run_episodes, summarize
 from dvrk_gym.sim.robot import kinematics as kin
 from dvrk_gym.sim.robot.bias import BIAS_PRESETS
 from dvrk_gym.utils.run_folder import SOURCE_KEY, RunFolder
@@ -146,6 +147,15 @@ def test_policies_of_every_kind_are_accepted_and_bad_specs_are_clear_errors():
     ):
         with pytest.raises(ValueError, match=message):
             load_policy_factory(spec)
+
+
+def test_a_factory_that_does_not_take_the_env_is_refused_and_a_factorys_own_type_error_comes_through():
+    with mock.patch("gymnasium.make") as make:
+        with pytest.raises(ValueError, match="must take the env as its one argument"):
+            evaluate_policy("policies_for_tests:takes_nothing", "dvrk_gym/GridTouch-v0", n_episodes=1)
+        make.assert_not_called()  # refused before the env is made
+    with pytest.raises(TypeError, match="has no len"):  # the factory's own bug, not a misleading "must take the env"
+        evaluate_policy("policies_for_tests:raises_type_error", "dvrk_gym/GridTouch-v0", n_episodes=1, camera_resolution=SMALL)
 
 
 @pytest.mark.slow

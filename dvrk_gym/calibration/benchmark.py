@@ -105,7 +105,8 @@ def calibration_table(
     Setting k (of YAW_SETTINGS) is reset with seed ``seed + k``, so any method meets the same
     episodes. ``rules`` gives, for the methods it names, the height rule of each setting
     (:mod:`dvrk_gym.evaluation.table_protocol`; the paper's: :func:`paper_table_rules`); the
-    other methods' predictions are sent as they are.
+    other methods' predictions are sent as they are. ``progress`` shows a bar per method and
+    setting.
     """
     rules = {} if rules is None else rules
     for method, method_rules in rules.items():
@@ -117,7 +118,9 @@ def calibration_table(
         policy = CalibratedPolicy(calibrator)
         method_rules = rules.get(method, (RAW,) * len(YAW_SETTINGS))
         table[method] = {
-            label: touch_grid(env, policy if method_rules[k] == RAW else RuledPolicy(policy, method_rules[k]), yaw, seed=seed + k)
+            label: touch_grid(
+                env, policy if method_rules[k] == RAW else RuledPolicy(policy, method_rules[k]), yaw, seed=seed + k, progress=progress
+            )
             for k, (label, yaw) in enumerate(YAW_SETTINGS)
         }
         mean_mm = np.nanmean([e.mm.mean() for e in table[method].values()])

@@ -40,6 +40,7 @@ from dvrk_gym.calibration.models.features import check_inputs, check_targets
 from dvrk_gym.calibration.models.forests import ForestCalibrator
 from dvrk_gym.calibration.models.linear import LinearCalibrator
 from dvrk_gym.calibration.models.two_phase import Regressor
+from dvrk_gym.utils.atomic import atomic_savefig
 from dvrk_gym.utils.checks import check_int
 
 __all__ = [
@@ -332,7 +333,7 @@ def plot_search(results: Iterable[SearchResult], path: str, caption: str | None 
 
     Args:
         results: Search results (one bar each, in order).
-        path: Output PNG path.
+        path: Output PNG path, written whole or not at all.
         caption: Title; default :func:`search_caption`.
     """
     results = list(results)
@@ -360,4 +361,4 @@ def plot_search(results: Iterable[SearchResult], path: str, caption: str | None 
     title = search_caption(results) if caption is None else caption
     axes.set_title(textwrap.fill(title, width=int(width_in * _TITLE_CHARS_PER_INCH)), fontsize=9)
     axes.grid(axis="y", alpha=0.3)
-    figure.savefig(path, dpi=150)
+    atomic_savefig(figure, path, dpi=150)

@@ -10,7 +10,7 @@ from typing import Any
 from dvrk_gym import paper
 from dvrk_gym.cli.options import add_instrument_options, add_progress_option, writable_folder
 from dvrk_gym.evaluation.table_protocol import PROTOCOL_LINES, PROTOCOLS
-from dvrk_gym.utils.atomic import atomic_path, atomic_write_json
+from dvrk_gym.utils.atomic import atomic_write_json
 from dvrk_gym.utils.checks import check_int
 
 DEFAULT_POLICY_ENV = "dvrk_gym/GridTouch-v0"
@@ -173,8 +173,7 @@ def _run_search(args: argparse.Namespace) -> int:
     results = run_search(X, y, folds=args.folds, seed=args.seed, quick=args.quick, shuffle=shuffle, progress=progress)
     caption = f"{search_caption(results)} Data: {source}, {len(X)} rows."
     print(format_table(results, caption))
-    with atomic_path(args.out / "model_search.png") as temporary:
-        plot_search(results, str(temporary), caption)
+    plot_search(results, str(args.out / "model_search.png"), caption)
     rows = [
         {
             "name": r.name,

@@ -74,8 +74,8 @@ IMAGE_YAW_OFFSET_RAD = math.radians(7.0)
 endoscope looks down with image u along base -x, turned about 7 degrees. The jaws close
 across a fragment whose length lies along the tool's yaw (measured here: mean 1.3, max
 4.6 degrees off over the workspace, before the rounding to 45 degree steps)."""
-NOTHING_SEEN_TARGET_M = np.array([0.0, 0.0, 0.19])
-"""Camera-frame target when no fragment is seen: the middle of the view, 19 cm away."""
+NOTHING_SEEN_TARGET_M = np.array([0.0, 0.0, paper.ENDOSCOPE_HEIGHT_M])
+"""Camera-frame target when no fragment is seen: the middle of the view, the endoscope's height away."""
 
 
 def image_angle_to_yaw(angle_rad: float) -> float:

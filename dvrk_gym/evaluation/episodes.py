@@ -11,6 +11,7 @@ error, median, minimum and maximum.
 from __future__ import annotations
 
 import importlib
+import inspect
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from typing import Any
@@ -140,20 +141,28 @@ def evaluate_policy(
         **env_kwargs: ``gym.make`` keywords (``bias``, ``bias_seed``, ``camera_resolution``...).
 
     Raises:
-        ValueError: the factory cannot be imported, or raises a TypeError on the env.
+        ValueError: the factory cannot be imported, or cannot be called with the env alone.
     """
     make_policy = load_policy_factory(factory) if isinstance(factory, str) else factory
+    _check_takes_env(make_policy, factory)
     env = gym.make(env_id, **env_kwargs)
     try:
-        try:
-            policy = make_policy(env)
-        except TypeError as error:  # most often a factory that does not take the env
-            raise ValueError(
-                f"the policy factory {factory!r} failed on the env ({error}); it must take the env and return a policy"
-            ) from None
+        policy = make_policy(env)  # an error inside the factory is the factory's, raised as it is
         return run_episodes(env, policy, n_episodes, seed=seed, options=options, progress=progress)
     finally:
         env.close()
+
+
+def _check_takes_env(make_policy: Callable[..., Any], factory: Any) -> None:
+    """ValueError unless ``make_policy`` can be called with one positional argument (the env)."""
+    try:
+        signature = inspect.signature(make_policy)
+    except (TypeError, ValueError):  # no signature to read (some builtins): the call will tell
+        return
+    try:
+        signature.bind(None)
+    except TypeError as error:
+        raise ValueError(f"the policy factory {factory!r} must take the env as its one argument and return a policy ({error})") from None
 
 
 def _is_scalar(value: Any) -> bool:

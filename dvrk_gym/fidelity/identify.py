@@ -84,7 +84,7 @@ HUBER_SCALE = 2.0
 """Residuals beyond this many of their scale count linearly (the detector's outliers)."""
 CAMERA_AND_TAPE = tuple(range(10))
 """Indices of the camera and tape parameters: the first fit, and the baseline model."""
-START_HEIGHT_M = 0.19
+START_HEIGHT_M = paper.ENDOSCOPE_HEIGHT_M
 """The fit starts from a camera this far straight above the workspace centre, metres (the paper: 7.5 in)."""
 
 

@@ -17,7 +17,6 @@ from dvrk_gym.baselines.curves import plot_curves
 from dvrk_gym.baselines.training import CurvePoint
 from dvrk_gym.calibration.benchmark import YAW_SETTINGS
 from dvrk_gym.calibration.search import SearchResult, plot_search
-from dvrk_gym.utils.atomic import atomic_path
 from dvrk_gym.utils.run_folder import locate_in_folder
 
 PAPER_PHASE1 = {"raw": paper.PHASE1_RAW_SAMPLES, "kept": paper.PHASE1_KEPT_SAMPLES}
@@ -110,8 +109,7 @@ def write_figures(folder: Path, data: dict[str, Any]) -> dict[str, str]:
     figures = {"bias_field": "figures/bias_field.png", "calibration_error_maps": "figures/calibration_error_maps.png"}
     if data["search"]:
         results = [SearchResult(**{**row, "fold_mm2": tuple(row["fold_mm2"])}) for row in data["search"]]
-        with atomic_path(folder / "model_search.png") as temporary:
-            plot_search(results, str(temporary))
+        plot_search(results, str(folder / "model_search.png"))
         figures["model_search"] = "figures/model_search.png"
     if data["rl"]:
         curves = {agent["label"]: [CurvePoint.from_json(point) for point in agent["curve"]] for agent in data["rl"]}

@@ -210,10 +210,14 @@ class DvrkWorld:
         clamp_to_limits: bool = False,
         limits: MotionLimits | None = None,
     ) -> MoveResult:
-        """Move the tool frame in a straight line to ``pose`` and let it settle.
+        """Put the tool frame at ``pose`` and let it settle, timed as a straight-line move.
 
         The nominal inverse kinematics gives the joint command (what the encoders will
-        report); the cable model turns it into the true joints.
+        report); the cable model turns it into the true joints, and the arm is placed there
+        at once: no physics is stepped along the way, and the clock advances by the
+        straight move's duration (trapezoidal profile) plus the settle time. A move that
+        must meet what lies in its path is :meth:`DebridementTable.move_stepped
+        <dvrk_gym.sim.table.table.DebridementTable.move_stepped>`.
 
         Args:
             pose: the commanded tool pose (4x4, base frame, metres).

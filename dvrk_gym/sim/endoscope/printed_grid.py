@@ -28,6 +28,7 @@ from collections.abc import Callable, Hashable
 
 import numpy as np
 
+from dvrk_gym import paper
 from dvrk_gym.sim.endoscope.camera import StereoCamera
 from dvrk_gym.sim.endoscope.detection import Blob, detect_circles, match_to_expected
 from dvrk_gym.sim.endoscope.stereo import StereoDetection, stereo_detection
@@ -37,8 +38,8 @@ __all__ = ["CACHE_SIZE", "clear_cache", "detect_printed_grid", "observe_printed_
 
 CACHE_SIZE = 64
 """Scenes whose detections are kept (least recently used dropped first); 35 detections each."""
-NOMINAL_DEPTH_M = 0.19
-"""The depth at which a circle's expected radius in pixels is taken, metres."""
+NOMINAL_DEPTH_M = paper.ENDOSCOPE_HEIGHT_M
+"""The depth at which a circle's expected radius in pixels is taken, metres: the endoscope's height."""
 
 _CACHE: OrderedDict[Hashable, tuple[StereoDetection, ...]] = OrderedDict()
 _LOCK = threading.Lock()  # worlds in several threads: the cache's reads and writes, not the renders

@@ -143,7 +143,9 @@ class BiasConfig:
     def scaled(self, factor: float) -> BiasConfig:
         """This configuration with every magnitude multiplied by factor (>= 0); ValueError
         for one that takes a magnitude past ``MAX_MAGNITUDE`` (the ``paper`` instrument's
-        wrist stretch passes at 11 times)."""
+        wrist stretch passes at 11 times). With ``around_identified``, the instrument's homing
+        offsets are not magnitudes and stay: ``paper`` scaled by 0 still reports its joints
+        off by them (``none`` is the robot that goes where told)."""
         return dataclasses.replace(self, **{name: getattr(self, name) * factor for name in self.magnitude_names()})
 
 
@@ -171,8 +173,9 @@ BIAS_PRESETS: dict[str, BiasConfig] = {
     "severe": _PAPER.scaled(2.0),
 }
 """``none``: the robot goes where told. ``paper``: the identified instrument (bias_seed 0)
-and instruments drawn around it (bias_seed >= 1). ``severe``: ``paper`` with every
-magnitude doubled (the settle lag, a fraction, kept)."""
+and instruments drawn around it (bias_seed >= 1). ``severe``: ``paper`` with every cable
+magnitude doubled (the settle lag, a fraction, and the instrument's homing offsets, the
+encoders' zeros, kept)."""
 
 
 def resolve_bias(bias: str | BiasConfig) -> BiasConfig:
@@ -277,7 +280,9 @@ def identified_instrument(config: BiasConfig, bias_seed: int) -> Instrument:
     The identified values (:data:`dvrk_gym.sim.identified.INSTRUMENT`) are its homing
     offsets, its signed outer-stretch amplitudes (as gains on config.outer_stretch_rad) and
     its signed wrist stretch (as the sign and size of the coupling on config.wrist_stretch);
-    its DH table is the nominal one. A config scaled from ``paper`` scales them with it. Instrument k >= 1 adds to each identified value a
+    its DH table is the nominal one. A config scaled from ``paper`` scales the two stretches with
+    it; the homing offsets are the encoders' zeros, not a cable magnitude, so no config scales
+    them (``config`` is not read for them). Instrument k >= 1 adds to each identified value a
     normal draw with that value's sd over the identification's block bootstrap
     (:data:`dvrk_gym.sim.identified.INSTRUMENT_SD`), in this order: homing offsets (6),
     outer amplitudes (2), wrist stretch (1): an instrument the real rows could not tell

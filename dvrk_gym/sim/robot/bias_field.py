@@ -21,7 +21,9 @@ from dvrk_gym.sim.robot.cables import CableModel
 from dvrk_gym.utils.atomic import atomic_savefig
 
 GRID_SHAPE = (7, 5)
-"""Points along base x and y: the paper's 35 circles."""
+"""Points along base x and y: 35, as many as the paper's circles, spread evenly over the
+whole workspace (``WORKSPACE_X_M`` by ``WORKSPACE_Y_M``), which reaches a little past the
+printed circles (``dvrk_gym.sim.physics.scene.grid_circle_centers``)."""
 GRID_Z_M = -0.159
 """Height of the grid: the middle of the paper's workspace, metres (base frame)."""
 FIELDS = ("rigid", "raw")
@@ -56,7 +58,8 @@ def grid_field(model: CableModel, yaw_rad: float, field: str = "rigid") -> tuple
 
 
 def grid_rigid_means(model: CableModel) -> list[float]:
-    """Per-yaw mean residual (m) of a rigid fit on the grid: the paper's RBT row, noiseless."""
+    """Per-yaw mean residual (m) of a rigid fit on the grid: the cables' share of an RBT row,
+    noiseless (no camera, tape or touch; the grid is the workspace's, not the printed circles)."""
     return [float(np.linalg.norm(grid_field(model, yaw)[1], axis=1).mean()) for yaw in kin.PAPER_YAWS_RAD]
 
 
