@@ -37,7 +37,7 @@ from dvrk_gym.baselines.training import TrainConfig, TrainResult, make_agent_env
 from dvrk_gym.baselines.wrappers import GOAL_CENTER_M, GOAL_HALF_RANGE_M
 from dvrk_gym.envs import ENV_CONFIGS
 from dvrk_gym.sim.robot.bias import resolve_bias
-from dvrk_gym.utils.atomic import atomic_path, atomic_write_json, read_json
+from dvrk_gym.utils.atomic import atomic_path, atomic_write_json, check_regular_file, read_json
 from dvrk_gym.utils.bounded_zip import ArchiveLimits, open_archive, read_member
 from dvrk_gym.utils.checks import check_bool, check_int
 from dvrk_gym.utils.run_folder import flatten_settings
@@ -149,12 +149,8 @@ def _zip_sha256(path: Path) -> str:
     """The SHA-256 of an agent's zip, read in chunks after checking it is a regular file of a
     bounded size (a FIFO or a link to a device there would block or never end), reading no
     more than that bound should it grow meanwhile."""
-    if path.exists() and not path.is_file():
-        raise ValueError(f"{path} is {'a folder' if path.is_dir() else 'not a regular file'}, not an agent's zip")
     limit = AGENT_FILE_LIMITS.max_file_bytes
-    size = path.stat().st_size
-    if size > limit:
-        raise ValueError(f"{path}: {size:,} bytes; an agent's zip has at most {limit:,}")
+    check_regular_file(path, limit, "an agent's zip")
     digest, read = hashlib.sha256(), 0
     with open(path, "rb") as file:
         for chunk in iter(lambda: file.read(2**20), b""):

@@ -107,6 +107,27 @@ MAX_JSON_BYTES = 16 * 2**20
 stamps, tables and results are kilobytes to a few megabytes)."""
 
 
+def check_regular_file(path: str | os.PathLike, max_bytes: int, what: str, error: type[ValueError] = ValueError) -> int:
+    """The size of ``path`` in bytes, once it is known to be a regular file of at most
+    ``max_bytes``: a FIFO there would block a read, a device never end it, a folder cannot be
+    read as one.
+
+    Raises:
+        FileNotFoundError: there is no such file.
+        error: a folder or another file that is not a regular one ("PATH is a folder, not
+            WHAT"), or larger than ``max_bytes`` ("PATH: N bytes; WHAT has at most M").
+    """
+    path = Path(path)
+    if path.exists() and not path.is_file():
+        raise error(f"{path} is {'a folder' if path.is_dir() else 'not a regular file'}, not {what}")
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: no such file")
+    size = path.stat().st_size
+    if size > max_bytes:
+        raise error(f"{path}: {size:,} bytes; {what} has at most {max_bytes:,}")
+    return size
+
+
 def read_bounded(path: str | os.PathLike, max_bytes: int, what: str) -> bytes:
     """The bytes of ``path``, read only if it is a regular file of at most ``max_bytes`` (a
     FIFO there would block the read, a device never end it), and no more than that should it
@@ -115,15 +136,10 @@ def read_bounded(path: str | os.PathLike, max_bytes: int, what: str) -> bytes:
     Raises:
         FileNotFoundError: there is no such file.
         PermissionError: it may not be read.
-        ValueError: not a regular file, or larger than ``max_bytes``; the message names the
-            file and says ``what`` has at most that many bytes.
+        ValueError: not a regular file, or larger than ``max_bytes`` (:func:`check_regular_file`).
     """
     path = Path(path)
-    status = path.stat()  # FileNotFoundError names the file
-    if not path.is_file():
-        raise ValueError(f"{path} is not a regular file")
-    if status.st_size > max_bytes:
-        raise ValueError(f"{path}: {status.st_size:,} bytes; {what} has at most {max_bytes:,}")
+    check_regular_file(path, max_bytes, what)
     with path.open("rb") as file:
         data = file.read(max_bytes + 1)  # the size again: the file may have grown since
     if len(data) > max_bytes:

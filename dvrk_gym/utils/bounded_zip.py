@@ -16,6 +16,8 @@ import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 
+from dvrk_gym.utils.atomic import check_regular_file
+
 MIB = 2**20
 _CHUNK_BYTES = MIB
 
@@ -54,13 +56,9 @@ def open_archive(source: str | os.PathLike | bytes, limits: ArchiveLimits = Arch
         name, size, opened = "archive in memory", len(source), io.BytesIO(source)
     else:
         path = Path(source)
-        if path.exists() and not path.is_file():
-            raise ArchiveLimitError(f"{path} is {'a folder' if path.is_dir() else 'not a regular file'}, not a zip archive")
-        if not path.is_file():
-            raise FileNotFoundError(f"{path}: no such file")
-        name, size, opened = str(path), path.stat().st_size, path
+        name, size, opened = str(path), check_regular_file(path, limits.max_file_bytes, "a zip archive", ArchiveLimitError), path
     if size > limits.max_file_bytes:
-        raise ArchiveLimitError(f"{name}: {size:,} bytes; at most {limits.max_file_bytes:,} are read")
+        raise ArchiveLimitError(f"{name}: {size:,} bytes; a zip archive has at most {limits.max_file_bytes:,}")
     try:
         archive = zipfile.ZipFile(opened)
     except PermissionError:  # the file may be whole: the caller must not take it for a damaged one
