@@ -14,6 +14,7 @@ from conftest import SMALL, json_from_fresh_process, tool_to_tip_m
 from dvrk_gym.envs.debridement import fragment_target
 from dvrk_gym.envs.grid_touch import tool_pose
 from dvrk_gym.envs.picks import PHASES
+from dvrk_gym.evaluation.trials import Trial, totals, unpicked_note
 from dvrk_gym.paper import DEBRIDEMENT_PHASE_S as PAPER_PHASE_S
 from dvrk_gym.sim.physics.scene import WORKSPACE_CENTER_M
 from dvrk_gym.sim.robot import ik
@@ -140,6 +141,31 @@ def test_perfectly_calibrated_pick_delivers_the_fragment(make, kind):
     assert info["true_grip_offset_ratio"] < 0.05
     assert info["true_tip_at_grip"][2] >= SURFACE_Z_M + GRASP_TIP_CLEARANCE_M - 3e-4  # the jaws did not dig in
     assert info["fragments_on_paper"] == 7
+
+
+def test_fragments_no_pick_went_for_are_counted_by_where_they_went(make):
+    """A fragment carried off the paper by another's pick has no outcome of its own: the
+    trial's info says where each such fragment went, so a cell's picks can be read against
+    its fragments (here the carrying is staged: one fragment put in the receptacle, one
+    off the paper, as another's pick could leave them)."""
+    env = make(fragment="raisin", contact="rigid")
+    env.reset(seed=0)
+    _, _, _, _, info = env.step(oracle_action(_first_on_paper(env)))
+    assert (info["unpicked_delivered"], info["unpicked_lost"], info["unpicked_on_paper"]) == (0, 0, 7)
+    base = env.unwrapped
+    carried, lost = (base.table.fragments[i] for i in base._on_paper()[:2])
+    client = base.world.physics.client
+    client.resetBasePositionAndOrientation(carried.body_id, judge.RECEPTACLE_CENTER_M + [0.0, 0.0, 0.004], [0, 0, 0, 1])
+    client.resetBasePositionAndOrientation(lost.body_id, [0.05, -0.05, -0.15], [0, 0, 0, 1])
+    _, _, _, _, info = env.step(oracle_action(_first_on_paper(env)))
+    assert info["picks"] == 2 and info["fragments_on_paper"] == 4
+    assert (info["unpicked_delivered"], info["unpicked_lost"], info["unpicked_on_paper"]) == (1, 1, 4)
+    trial = Trial(["-", "-"], 1.0, {}, None, info["unpicked_delivered"], info["unpicked_lost"])
+    assert totals([trial])["unpicked_lost"] == 1
+    assert (
+        unpicked_note(totals([trial]))
+        == "1 fragment lost with another's pick and 1 fragment delivered with another's pick, not counted in the picks"
+    )
 
 
 def test_a_pick_sent_under_the_paper_slides_its_jaws_as_a_grid_touch_does(make):

@@ -270,6 +270,7 @@ class DebridementEnv(DvrkEnv[DebridementConfig]):
             outcome, ratio, index = judge.MISSED, math.inf, -1
         else:
             index, ratio = record.fragment, record.ratio
+            episode.picked.add(index)
             delivered = index not in stuck and judge.in_receptacle(table.fragments[index].position())
             outcome = judge.judge(delivered, index in run.pierced, ratio, record.above_top_m)
             if outcome != judge.SUCCESS and self.config.remove_failed and index not in episode.set_aside:
@@ -325,6 +326,18 @@ class DebridementEnv(DvrkEnv[DebridementConfig]):
             i for i, f in enumerate(fragments) if i not in self._episode.set_aside and i not in held and judge.in_receptacle(f.position())
         }
 
+    def _unpicked(self) -> dict[str, int]:
+        """The fragments no pick went for, by where they are now (truth): ``delivered`` (carried
+        into the receptacle with another), ``lost`` (taken off the jaws with another, or moved
+        off the paper by another's pick) and ``on_paper`` (left for later picks)."""
+        unpicked = set(range(len(self.table.fragments))) - self._episode.picked
+        on_paper, delivered = set(self._on_paper()), self._delivered()
+        return {
+            "delivered": len(unpicked & delivered),
+            "lost": len(unpicked - delivered - on_paper),
+            "on_paper": len(unpicked & on_paper),
+        }
+
     def _physics_failure(self) -> str | None:
         world = self.world
         if not (np.isfinite(world.q_true).all() and np.isfinite(world.jaw_angle)):
@@ -343,9 +356,11 @@ class DebridementEnv(DvrkEnv[DebridementConfig]):
             picks = len(episode.outcomes)
             counts = judge.outcome_counts(episode.outcomes)
             phases = np.mean(episode.phase_s, axis=0) if picks else np.zeros(len(PHASES))
+            unpicked = self._unpicked()
             info.update(
                 outcomes=judge.outcome_row(episode.outcomes),
                 picks=picks,
+                **{f"unpicked_{where}": count for where, count in unpicked.items()},
                 successes=counts["success"],
                 n_A=counts["A"],
                 n_B=counts["B"],
@@ -373,6 +388,7 @@ class _Episode:
     outcomes: list[str] = field(default_factory=list)
     phase_s: list[np.ndarray] = field(default_factory=list)
     set_aside: set[int] = field(default_factory=set)
+    picked: set[int] = field(default_factory=set)  # primitive mode: fragments a pick went for
     rewarded: set[int] = field(default_factory=set)  # delta mode: fragments whose delivery was rewarded
     steps: int = 0
 

@@ -43,12 +43,19 @@ class Trial:
         time_per_fragment_s: simulated seconds per pick.
         phase_s: mean seconds of each phase (to seed ... drop and rotate).
         sim_error: what went wrong in the physics, or None.
+        unpicked_delivered: fragments no pick went for that ended in the receptacle (carried
+            there with another).
+        unpicked_lost: fragments no pick went for that left the paper otherwise (taken off the
+            jaws with another, or moved off the paper by another's pick); they have no
+            outcome, so the trial has fewer picks than fragments.
     """
 
     outcomes: list[str]
     time_per_fragment_s: float
     phase_s: dict[str, float]
     sim_error: str | None = None
+    unpicked_delivered: int = 0
+    unpicked_lost: int = 0
 
 
 def cell_name(method: str, fragment: str) -> str:
@@ -82,7 +89,16 @@ def run_trials(env: gym.Env, policy: Any, n_trials: int, seed: int = 0, progress
         info = result.final_info
         outcomes = [o for o in str(info.get("outcomes", "")).split(",") if o]
         phases = {name: float(info.get(f"time_{name}_s", float("nan"))) for name in PHASES}
-        trials.append(Trial(outcomes, float(info.get("time_per_fragment", float("nan"))), phases, info.get("sim_error")))
+        trials.append(
+            Trial(
+                outcomes,
+                float(info.get("time_per_fragment", float("nan"))),
+                phases,
+                info.get("sim_error"),
+                int(info.get("unpicked_delivered", 0)),
+                int(info.get("unpicked_lost", 0)),
+            )
+        )
     return trials
 
 
@@ -141,7 +157,8 @@ def _weighted_mean(values: list[float], weights: np.ndarray) -> float:
 
 
 def totals(trials: list[Trial]) -> dict[str, Any]:
-    """Counts over all trials: picks, success, A, B, C; mean time per fragment and phases (s)."""
+    """Counts over all trials: picks, success, A, B, C, the fragments no pick went for
+    (``unpicked_delivered``, ``unpicked_lost``); mean time per fragment and phases (s)."""
     every = [o for t in trials for o in t.outcomes]
     weights = np.array([len(t.outcomes) for t in trials], dtype=float)
     phases = {name: _weighted_mean([t.phase_s[name] for t in trials], weights) for name in (trials[0].phase_s if trials else {})}
@@ -151,7 +168,20 @@ def totals(trials: list[Trial]) -> dict[str, Any]:
         "time_per_fragment_s": _weighted_mean([t.time_per_fragment_s for t in trials], weights),
         "phase_s": phases,
         "sim_errors": sum(t.sim_error is not None for t in trials),
+        "unpicked_delivered": sum(t.unpicked_delivered for t in trials),
+        "unpicked_lost": sum(t.unpicked_lost for t in trials),
     }
+
+
+def unpicked_note(total: Mapping[str, Any]) -> str:
+    """What became of the fragments no pick went for, in words (empty when there were none):
+    "1 fragment lost with another's pick, not counted in the picks"."""
+    parts = []
+    for key, what in (("unpicked_lost", "lost with another's pick"), ("unpicked_delivered", "delivered with another's pick")):
+        count = int(total.get(key, 0))
+        if count:
+            parts.append(f"{count} fragment{'s' if count > 1 else ''} {what}")
+    return f"{' and '.join(parts)}, not counted in the picks" if parts else ""
 
 
 def format_trial_table(trials: list[Trial], calibrator: str, fragment: str, seed: int = 0) -> str:
@@ -161,6 +191,8 @@ def format_trial_table(trials: list[Trial], calibrator: str, fragment: str, seed
     lines.append(f"{'trial':>5}  {'outcomes':<17}{'successes':>10}{'s/fragment':>12}")
     for i, trial in enumerate(trials, start=1):
         note = f"  sim error: {trial.sim_error}" if trial.sim_error else ""
+        if trial.unpicked_lost or trial.unpicked_delivered:
+            note += f"  ({unpicked_note({'unpicked_lost': trial.unpicked_lost, 'unpicked_delivered': trial.unpicked_delivered})})"
         successes = sum(o == "-" for o in trial.outcomes)
         lines.append(
             f"{i:>5}  {','.join(trial.outcomes):<17}{f'{successes}/{len(trial.outcomes)}':>10}{trial.time_per_fragment_s:>12.2f}{note}"
@@ -171,6 +203,8 @@ def format_trial_table(trials: list[Trial], calibrator: str, fragment: str, seed
         f"total  success {total['success']}/{total['picks']} ({100 * total['success'] / picks:.1f}%), "
         f"A {total['A']}, B {total['B']}, C {total['C']}; {total['time_per_fragment_s']:.2f} s per fragment"
     )
+    if unpicked_note(total):
+        lines.append(f"       {unpicked_note(total)}")
     reference = paper.DEBRIDEMENT_RESULTS.get((calibrator, fragment))
     if reference:
         n, (low, high) = paper.DEBRIDEMENT_PICKS_PER_CELL, paper.TIME_PER_FRAGMENT_S
@@ -192,7 +226,14 @@ def save_trials(trials: list[Trial], path: str | Path, meta: dict[str, Any]) -> 
     data = {
         **meta,
         "trials": [
-            {"outcomes": ",".join(t.outcomes), "time_per_fragment_s": t.time_per_fragment_s, "phase_s": t.phase_s, "sim_error": t.sim_error}
+            {
+                "outcomes": ",".join(t.outcomes),
+                "time_per_fragment_s": t.time_per_fragment_s,
+                "phase_s": t.phase_s,
+                "sim_error": t.sim_error,
+                "unpicked_delivered": t.unpicked_delivered,
+                "unpicked_lost": t.unpicked_lost,
+            }
             for t in trials
         ],
         "totals": totals(trials),

@@ -17,6 +17,7 @@ from dvrk_gym.baselines.curves import plot_curves
 from dvrk_gym.baselines.training import CurvePoint
 from dvrk_gym.calibration.benchmark import YAW_SETTINGS
 from dvrk_gym.calibration.search import SearchResult, plot_search
+from dvrk_gym.evaluation.trials import unpicked_note
 from dvrk_gym.utils.run_folder import locate_in_folder
 
 PAPER_PHASE1 = {"raw": paper.PHASE1_RAW_SAMPLES, "kept": paper.PHASE1_KEPT_SAMPLES}
@@ -301,6 +302,8 @@ def _debridement_section(data: dict[str, Any]) -> list[str]:
         reference = cell["paper"]
         picks = max(cell["picks"], 1)
         sim = f"{cell['success']}/{cell['picks']} ({100 * cell['success'] / picks:.0f}%)"
+        if unpicked_note(cell):  # cells of runs before the count have neither key
+            sim += f"; {unpicked_note(cell)}"
         paper_text = f"{reference['success']}/{n} ({100 * reference['success'] / n:.0f}%)" if reference else "-"
         difference = f"{100 * (cell['success'] / picks - reference['success'] / n):+.0f} points" if reference else "-"
         outcomes = f"A {cell['A']}, B {cell['B']}, C {cell['C']}"
@@ -324,6 +327,7 @@ def _debridement_section(data: dict[str, Any]) -> list[str]:
         f"Each cell: {cells[0]['trials']} trials x {data['settings']['profile']['debridement_picks']} fragments "
         f"(the paper: {paper.DEBRIDEMENT_TRIALS} x {paper.FRAGMENTS_PER_TRIAL}). "
         "Outcomes: A missed (calibration), B slipped though the grip was placed well, C a raisin pulled out by one tip. "
+        "A fragment carried off the paper by another's pick has no pick of its own, so a cell can count fewer picks than fragments. "
         f"Seconds per fragment are simulated time (the paper: {low}-{high} s). Rows marked (RL) aim the picks with "
         "the RL agent trained on GridTouch-v0 below, fed the same target as the calibrators (the paper has no such row).",
         "",
