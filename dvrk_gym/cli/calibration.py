@@ -171,7 +171,7 @@ def _run_search(args: argparse.Namespace) -> int:
     split = args.split or ("contiguous" if args.data == "paper" else "shuffled")
     shuffle, progress = split == "shuffled", not args.no_progress
     results = run_search(X, y, folds=args.folds, seed=args.seed, quick=args.quick, shuffle=shuffle, progress=progress)
-    caption = f"{search_caption(results)} Data: {source}, {len(X)} rows."
+    caption = f"{search_caption(results)}. Data: {source}, {len(X)} rows."
     print(format_table(results, caption))
     plot_search(results, str(args.out / "model_search.png"), caption)
     rows = [
@@ -193,7 +193,13 @@ def _run_search(args: argparse.Namespace) -> int:
 
 def add_commands(subparsers: argparse._SubParsersAction) -> None:
     """Register collect, calibrate, evaluate and search."""
-    collect = subparsers.add_parser("collect", help="Phase I: run the paper's random exploration and save the data")
+    collect = subparsers.add_parser(
+        "collect",
+        help="Phase I: run the paper's random exploration and save the data",
+        description="Collect the paper's Phase I in --out (phase1.npz: the raw rows and the kept ones), as the authors' "
+        "collector ran it: trajectories from the four corners, a pause every 2 mm, random rotations at each pause. The "
+        "folder is stamped as calibrate stamps it, so `dvrk-gym calibrate --out` with the same options resumes from it.",
+    )
     collect.add_argument("--out", type=Path, default=Path("dvrk_gym_out/calibration"), help="output folder (default: %(default)s)")
     collect.add_argument("--trajectories", type=int, default=paper.PHASE1_TRAJECTORIES, help="trajectories (the paper: %(default)s)")
     collect.add_argument("--force", action="store_true", help="replace a phase1.npz already in --out")
@@ -201,7 +207,14 @@ def add_commands(subparsers: argparse._SubParsersAction) -> None:
     add_progress_option(collect)
     collect.set_defaults(func=_run_collect, epochs=paper.DNN_EPOCHS)  # no --epochs: its stamp holds calibrate's default
 
-    calibrate = subparsers.add_parser("calibrate", help="Phase I and II: fit the rigid body, DNN and DNN+RF calibrators (cached stages)")
+    calibrate = subparsers.add_parser(
+        "calibrate",
+        help="Phase I and II: fit the rigid body, DNN and DNN+RF calibrators (cached stages)",
+        description="Run the paper's two-phase calibration in --out: Phase I (collect, or the folder's cached phase1.npz), "
+        "the rigid body and the DNN fitted to it, Phase II (a simulated person's corrections at 5 yaws x 35 circles) and "
+        "the residual forests. Every stage is cached in --out, so the same command resumes; a folder made with other "
+        "settings or by another dvrk_gym is refused.",
+    )
     calibrate.add_argument("--out", type=Path, default=Path("dvrk_gym_out/calibration"), help="output folder (default: %(default)s)")
     _add_budget_options(calibrate)
     _add_world_options(calibrate)
@@ -232,7 +245,14 @@ def add_commands(subparsers: argparse._SubParsersAction) -> None:
     add_progress_option(evaluate)
     evaluate.set_defaults(func=_run_evaluate)
 
-    search = subparsers.add_parser("search", help="the paper's model search: 10-fold CV of 24 nets, linear and forests, with its bar chart")
+    search = subparsers.add_parser(
+        "search",
+        help="the paper's model search: 24 nets, linear and forests by cross-validation, with its bar chart",
+        description="Cross-validate the paper's candidate models (24 nets, linear regressions, random forests) on the "
+        "authors' real Phase I rows or a phase1.npz, and draw the paper's bar chart. The chosen net, the linear models "
+        "and the forests are scored on every fold; to keep the search near half an hour of CPU, the 23 other nets on the "
+        "first 3 folds (the caption says so; the Python API's sweep_folds=None scores them all).",
+    )
     search.add_argument(
         "--data", default="paper", help="'paper' (the authors' real data) or a phase1.npz from collect (default: %(default)s)"
     )

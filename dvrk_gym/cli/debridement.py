@@ -34,6 +34,8 @@ def _run_debride(args: argparse.Namespace) -> int:
     if not args.calibrate and not model_file.exists() and not retired.exists():
         if args.calibration.is_dir():
             found = "has no " + model_file.name
+            if (args.calibration / "calibration" / model_file.name).exists():  # a reproduce run's folder
+                found += f" (its calibration is in {args.calibration / 'calibration'})"
         else:
             found = "is a file, not a folder" if args.calibration.exists() else "does not exist"
         raise FileNotFoundError(

@@ -3,7 +3,8 @@
 Goal-conditioned: the desired goal is a circle's centre as the endoscope sees it
 (triangulated, left camera frame, metres); the achieved goal is the touch point of the
 closed jaws as the endoscope sees it. The action is the base-frame command
-``(bx, by, bz, yaw)`` of the closed gripper (metres, radians; pitch and roll follow from
+``(bx, by, bz, yaw)`` of the tool frame (metres, radians): the wrist pivot, which the robot
+reports, with the closed jaw tip 10 mm beyond it along the jaws (pitch and roll follow from
 yaw by the paper's rule). A step goes above the target, moves down to the command, and
 records the touch. A command under the paper ends as the ``contact`` option says
 (:mod:`dvrk_gym.sim.table.contact`): by default the arm goes on down, stopping short of its

@@ -107,6 +107,16 @@ def test_debride_refuses_a_calibration_folder_without_a_model(capsys, tmp_path, 
     assert files_in(calibration) == set()  # no calibration was started in it
 
 
+def test_debride_given_a_reproduce_run_folder_points_at_its_calibration(capsys, tmp_path):
+    (tmp_path / "calibration").mkdir()
+    (tmp_path / "calibration" / "two_phase.zip").write_bytes(b"")  # only its presence is looked at before the refusal
+    _fails_in_one_line(
+        capsys,
+        ["debride", "--calibration", str(tmp_path), "--out", str(tmp_path / "out")],
+        f"its calibration is in {tmp_path / 'calibration'}",
+    )
+
+
 @pytest.mark.parametrize(
     ("profile", "words"),
     [
