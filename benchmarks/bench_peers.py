@@ -1,11 +1,12 @@
 """Our three envs beside panda-gym's, stepped in one process with seeded random actions.
 
-Run: python benchmarks/bench_peers.py  [--steps 1000] [--picks 16] [--rounds 3] [--resolution 1920 1080]
+Run: python benchmarks/bench_peers.py  [--steps 1000] [--picks 16] [--delta-steps 100] [--rounds 3] [--resolution 1920 1080]
      python benchmarks/bench_peers.py --profile dvrk_gym/Debridement-v0 [--picks 24]  (cProfile of one env's steps)
 Needs panda-gym (the ``bench`` extra): pip install -e ".[bench]", or pip install panda-gym==3.0.7.
 With --steps 500 --picks 8 it took 4 minutes on the shared 2-core machine (load average 13-18).
 
-Prints, for GridTouch-v0, CalibrationExploration-v0, Debridement-v0 (one step is one pick),
+Prints, for GridTouch-v0, CalibrationExploration-v0, Debridement-v0 (one step is one pick;
+and in delta mode, one step a 0.1 s motion of the arm and jaws, the RL interface),
 PandaReach-v3 and PandaPickAndPlace-v3: steps per wall second, the ratio to PandaReach-v3's,
 and the real-time factor (simulated seconds per wall second). Each env is made with
 ``gym.make`` (so with Gymnasium's wrappers, as a user has it), reset with the seed, and
@@ -184,6 +185,7 @@ class Subject:
     env_id: str
     kwargs: dict = field(default_factory=dict)
     steps: int = 1000
+    label: str = ""
     sim_seconds: Callable[[gym.Env, dict], float] | None = None
     rates: list[float] = field(default_factory=list)
     real_time_factors: list[float] = field(default_factory=list)
@@ -244,13 +246,25 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--steps", type=int, default=1000, help="steps per round of each env but Debridement (default: %(default)s)")
     parser.add_argument("--picks", type=int, default=16, help="Debridement-v0 picks per round (default: %(default)s)")
+    parser.add_argument(
+        "--delta-steps", type=int, default=100, help="Debridement-v0 steps per round in delta mode, 10 Hz (default: %(default)s)"
+    )
     parser.add_argument("--rounds", type=int, default=3, help="turns of every env; figures are medians (default: %(default)s)")
     parser.add_argument("--seed", type=int, default=0, help="seeds every env and its actions (default: %(default)s)")
     parser.add_argument("--resolution", type=int, nargs=2, default=(1920, 1080), metavar=("W", "H"), help="our endoscope images")
     parser.add_argument("--profile", metavar="ENV_ID", default=None, help="instead: cProfile one of our envs' steps")
     args = parser.parse_args()
     check_flag_bounds(
-        parser, args, {"steps": (1, 10**7), "picks": (1, 10**5), "rounds": (1, 1000), "seed": (0, 2**31 - 1), "resolution": (None, None)}
+        parser,
+        args,
+        {
+            "steps": (1, 10**7),
+            "picks": (1, 10**5),
+            "delta_steps": (1, 10**6),
+            "rounds": (1, 1000),
+            "seed": (0, 2**31 - 1),
+            "resolution": (None, None),
+        },
     )
     if args.profile is not None:
         return profile_env(args.profile, args.steps, args.picks, tuple(args.resolution), args.seed)
@@ -266,6 +280,7 @@ def main() -> int:
         Subject("dvrk_gym/GridTouch-v0", resolution, args.steps),
         Subject("dvrk_gym/CalibrationExploration-v0", resolution, args.steps),
         Subject("dvrk_gym/Debridement-v0", resolution, args.picks),
+        Subject("dvrk_gym/Debridement-v0", {**resolution, "action_mode": "delta"}, args.delta_steps, "Debridement-v0 (delta)"),
         Subject(REFERENCE, steps=args.steps),
         Subject("PandaPickAndPlace-v3", steps=args.steps),
     ]
@@ -277,8 +292,12 @@ def main() -> int:
     for subject in subjects:
         rate = statistics.median(subject.rates)
         factor = statistics.median(subject.real_time_factors)
-        print(f"{subject.env_id.removeprefix('dvrk_gym/'):<36} {rate:>9.1f} {ratio_text(rate / reference):>17} {factor:>15.2f}")
-    print(f"medians of {args.rounds} rounds; Debridement-v0: one step is one pick ({args.picks} a round); resolution {resolution}")
+        name = subject.label or subject.env_id.removeprefix("dvrk_gym/")
+        print(f"{name:<36} {rate:>9.1f} {ratio_text(rate / reference):>17} {factor:>15.2f}")
+    print(
+        f"medians of {args.rounds} rounds; Debridement-v0: one step is one pick ({args.picks} a round), in delta mode "
+        f"a 0.1 s motion ({args.delta_steps} a round); resolution {resolution}"
+    )
     return 0
 
 
