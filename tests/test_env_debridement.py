@@ -8,6 +8,7 @@ import json
 import math
 
 import numpy as np
+import pybullet
 import pytest
 from conftest import SMALL, json_from_fresh_process, tool_to_tip_m
 
@@ -166,6 +167,23 @@ def test_fragments_no_pick_went_for_are_counted_by_where_they_went(make):
         unpicked_note(totals([trial]))
         == "1 fragment lost with another's pick and 1 fragment delivered with another's pick, not counted in the picks"
     )
+
+
+def test_a_pick_aborted_by_a_physics_failure_counts_no_fragment_as_taken_by_another(make, monkeypatch):
+    """The aborted pick is in no outcome, so where its fragment lies says nothing of other picks."""
+    env = make(fragment="raisin", contact="rigid")
+    env.reset(seed=0)
+    base = env.unwrapped
+    run = base.picker.run
+
+    def deliver_then_fail(*arguments, **keywords):  # type: ignore[no-untyped-def]
+        run(*arguments, **keywords)  # the fragment reaches the receptacle, then the physics fails
+        raise pybullet.error("simulated failure")
+
+    monkeypatch.setattr(base.picker, "run", deliver_then_fail)
+    _, _, terminated, _, info = env.step(oracle_action(_first_on_paper(env)))
+    assert terminated and info["sim_error"] and info["picks"] == 0
+    assert (info["unpicked_delivered"], info["unpicked_lost"], info["unpicked_on_paper"]) == (0, 0, 0)
 
 
 def test_a_pick_sent_under_the_paper_slides_its_jaws_as_a_grid_touch_does(make):

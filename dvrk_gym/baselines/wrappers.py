@@ -21,12 +21,13 @@ from gymnasium import spaces
 from gymnasium.wrappers import RescaleAction
 from numpy.typing import ArrayLike
 
+from dvrk_gym import paper
 from dvrk_gym.envs.grid_touch import N_CIRCLES
 from dvrk_gym.sim.robot.kinematics import PAPER_YAWS_RAD
 from dvrk_gym.utils.checks import check_int
 
-GOAL_CENTER_M = (0.0, 0.0, 0.19)
-"""Camera-frame point mapped to 0 by :class:`GoalScaling`: about the phantom's centre, metres."""
+GOAL_CENTER_M = (0.0, 0.0, paper.ENDOSCOPE_HEIGHT_M)
+"""Camera-frame point mapped to 0 by :class:`GoalScaling`: about the phantom's centre, the endoscope's height away, metres."""
 GOAL_HALF_RANGE_M = 0.05
 """Camera-frame distance mapped to 1 by :class:`GoalScaling`, metres (the phantom is 75 mm wide)."""
 TRAINING_YAWS = ("paper", "random")

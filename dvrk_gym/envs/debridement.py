@@ -222,6 +222,8 @@ class DebridementEnv(DvrkEnv[DebridementConfig]):
             reward, info, error, observation = 0.0, {}, f"{type(failure).__name__}: {failure}", self._last_observation
         episode.steps += 1
         info.update(self._episode_info())
+        if error is not None:  # an aborted pick is in no outcome: where fragments lie says nothing of other picks
+            info.update({key: 0 for key in info if key.startswith("unpicked_")})
         info["clamped"] = self._clamped_names(clamped) + info.pop("clamped_joints", [])
         info["sim_error"] = error
         on_paper = len(self._on_paper()) if error is None else 0

@@ -73,6 +73,7 @@ def load_policy_factory(spec: str) -> Callable[[gym.Env], Any]:
         raise ValueError(f"module {module_name!r} has no attribute {attribute!r}") from None
     if not callable(factory):
         raise ValueError(f"{spec!r} is not callable")
+    _check_takes_env(factory, spec)
     return factory
 
 
@@ -155,8 +156,10 @@ def evaluate_policy(
 
 def _check_takes_env(make_policy: Callable[..., Any], factory: Any) -> None:
     """ValueError unless ``make_policy`` can be called with one positional argument (the env)."""
+    if not callable(make_policy):
+        raise ValueError(f"the policy factory {factory!r} is not callable")
     try:
-        signature = inspect.signature(make_policy)
+        signature = inspect.signature(make_policy, follow_wrapped=False)
     except (TypeError, ValueError):  # no signature to read (some builtins): the call will tell
         return
     try:

@@ -215,7 +215,8 @@ class DvrkWorld:
         The nominal inverse kinematics gives the joint command (what the encoders will
         report); the cable model turns it into the true joints, and the arm is placed there
         at once: no physics is stepped along the way, and the clock advances by the
-        straight move's duration (trapezoidal profile) plus the settle time. A move that
+        straight move's duration (trapezoidal profile) or the jaws' motion, whichever is
+        longer, plus the settle time. A move that
         must meet what lies in its path is :meth:`DebridementTable.move_stepped
         <dvrk_gym.sim.table.table.DebridementTable.move_stepped>`.
 

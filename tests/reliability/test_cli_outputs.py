@@ -107,6 +107,14 @@ def test_debride_refuses_a_calibration_folder_without_a_model(capsys, tmp_path, 
     assert files_in(calibration) == set()  # no calibration was started in it
 
 
+def test_evaluate_refuses_a_policy_factory_that_does_not_take_the_env_in_one_line(capsys, tmp_path):
+    _fails_in_one_line(
+        capsys,
+        ["evaluate", "--policy", "policies_for_tests:takes_nothing", "--episodes", "1", "--out", str(tmp_path), "--no-progress"],
+        "must take the env as its one argument",
+    )
+
+
 def test_debride_given_a_reproduce_run_folder_points_at_its_calibration(capsys, tmp_path):
     (tmp_path / "calibration").mkdir()
     (tmp_path / "calibration" / "two_phase.zip").write_bytes(b"")  # only its presence is looked at before the refusal
