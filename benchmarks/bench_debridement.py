@@ -33,7 +33,7 @@ from dvrk_gym.calibration.policy import CalibratedPolicy
 from dvrk_gym.envs.debridement import fragment_target
 from dvrk_gym.envs.debridement_config import DEFAULT_PICK_TIMING
 from dvrk_gym.envs.picks import PHASES
-from dvrk_gym.evaluation.trials import run_debridement, totals
+from dvrk_gym.evaluation.trials import run_debridement, totals, unpicked_note
 from dvrk_gym.paper import DEBRIDEMENT_PHASE_S as PAPER_PHASE_S
 from dvrk_gym.sim.table.contact import CONTACTS, DEFAULT_CONTACT
 
@@ -120,6 +120,8 @@ def main() -> None:
                 print("    " + " | ".join(cell["rows"]))
             if cell["sim_errors"]:
                 print(f"    {cell['sim_errors']} trial(s) ended with a physics failure")
+            if unpicked_note(cell):
+                print(f"    {unpicked_note(cell)}")
             phase_lines.append(f"{fragment:<14}{paper.METHOD_LABELS[name]:<10}" + "".join(f"{cell['phase_s'][p]:>16.2f}" for p in PHASES))
     print()
     print(f"{'phases, s':<24}" + "".join(f"{p:>16}" for p in PHASES))
