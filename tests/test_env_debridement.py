@@ -169,6 +169,11 @@ def test_fragments_no_pick_went_for_are_counted_by_where_they_went(make):
     )
 
 
+def test_unpicked_counts_split_the_fragments_no_pick_went_for_by_where_they_are():
+    counts = judge.unpicked_counts(8, picked={0, 1}, on_paper={2, 3, 4}, delivered={0, 5})  # 0 was picked: not counted
+    assert counts == {"delivered": 1, "lost": 2, "on_paper": 3}  # 6 and 7 are neither on the paper nor delivered
+
+
 def test_a_pick_aborted_by_a_physics_failure_counts_no_fragment_as_taken_by_another(make, monkeypatch):
     """The aborted pick is in no outcome, so where its fragment lies says nothing of other picks."""
     env = make(fragment="raisin", contact="rigid")

@@ -329,16 +329,8 @@ class DebridementEnv(DvrkEnv[DebridementConfig]):
         }
 
     def _unpicked(self) -> dict[str, int]:
-        """The fragments no pick went for, by where they are now (truth): ``delivered`` (carried
-        into the receptacle with another), ``lost`` (taken off the jaws with another, or moved
-        off the paper by another's pick) and ``on_paper`` (left for later picks)."""
-        unpicked = set(range(len(self.table.fragments))) - self._episode.picked
-        on_paper, delivered = set(self._on_paper()), self._delivered()
-        return {
-            "delivered": len(unpicked & delivered),
-            "lost": len(unpicked - delivered - on_paper),
-            "on_paper": len(unpicked & on_paper),
-        }
+        """The fragments no pick went for, by where they are now (truth: :func:`judge.unpicked_counts`)."""
+        return judge.unpicked_counts(len(self.table.fragments), self._episode.picked, set(self._on_paper()), self._delivered())
 
     def _physics_failure(self) -> str | None:
         world = self.world

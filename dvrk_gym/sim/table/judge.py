@@ -162,3 +162,14 @@ def physics_failure(positions: np.ndarray) -> str | None:
     if outside.size:
         return f"fragment(s) {outside.tolist()} left the scene (e.g. at {np.round(positions[outside[0]] * 1e3, 1).tolist()} mm)"
     return None
+
+
+def unpicked_counts(n_fragments: int, picked: set[int], on_paper: set[int], delivered: set[int]) -> dict[str, int]:
+    """The fragments of a trial that no pick went for (indices 0 .. n_fragments - 1 not in
+    ``picked``), by where they are now: ``delivered`` (carried into the receptacle with
+    another's pick), ``lost`` (taken off the jaws with another, or moved off the paper by
+    another's pick: neither ``on_paper`` nor ``delivered``) and ``on_paper`` (left for later
+    picks). Such a fragment has no outcome, so a trial's picks fall short of its fragments
+    by the first two."""
+    unpicked = set(range(n_fragments)) - picked
+    return {"delivered": len(unpicked & delivered), "lost": len(unpicked - delivered - on_paper), "on_paper": len(unpicked & on_paper)}
