@@ -221,9 +221,7 @@ class DebridementEnv(DvrkEnv[DebridementConfig]):
             logger.warning("the simulation failed during a step: %s", failure, exc_info=logger.isEnabledFor(logging.DEBUG))
             reward, info, error, observation = 0.0, {}, f"{type(failure).__name__}: {failure}", self._last_observation
         episode.steps += 1
-        info.update(self._episode_info())
-        if error is not None:  # an aborted pick is in no outcome: where fragments lie says nothing of other picks
-            info.update({key: 0 for key in info if key.startswith("unpicked_")})
+        info.update(self._episode_info(failed=error is not None))
         info["clamped"] = self._clamped_names(clamped) + info.pop("clamped_joints", [])
         info["sim_error"] = error
         on_paper = len(self._on_paper()) if error is None else 0
@@ -328,10 +326,6 @@ class DebridementEnv(DvrkEnv[DebridementConfig]):
             i for i, f in enumerate(fragments) if i not in self._episode.set_aside and i not in held and judge.in_receptacle(f.position())
         }
 
-    def _unpicked(self) -> dict[str, int]:
-        """The fragments no pick went for, by where they are now (truth: :func:`judge.unpicked_counts`)."""
-        return judge.unpicked_counts(len(self.table.fragments), self._episode.picked, set(self._on_paper()), self._delivered())
-
     def _physics_failure(self) -> str | None:
         world = self.world
         if not (np.isfinite(world.q_true).all() and np.isfinite(world.jaw_angle)):
@@ -339,7 +333,9 @@ class DebridementEnv(DvrkEnv[DebridementConfig]):
         live = [i for i in range(len(self.table.fragments)) if i not in self._episode.set_aside]
         return judge.physics_failure(self.table.true_fragment_positions()[live])
 
-    def _episode_info(self) -> dict[str, Any]:
+    def _episode_info(self, failed: bool) -> dict[str, Any]:
+        """The trial's running record; ``failed``: the step ended in a physics failure, whose
+        aborted pick is in no outcome, so no fragment counts as taken by another's pick."""
         episode, world = self._episode, self.world
         info: dict[str, Any] = {
             "sim_time_s": world.clock.time_s,
@@ -350,7 +346,9 @@ class DebridementEnv(DvrkEnv[DebridementConfig]):
             picks = len(episode.outcomes)
             counts = judge.outcome_counts(episode.outcomes)
             phases = np.mean(episode.phase_s, axis=0) if picks else np.zeros(len(PHASES))
-            unpicked = self._unpicked()
+            unpicked = judge.unpicked_counts(len(self.table.fragments), episode.picked, set(self._on_paper()), self._delivered())
+            if failed:
+                unpicked = dict.fromkeys(unpicked, 0)
             info.update(
                 outcomes=judge.outcome_row(episode.outcomes),
                 picks=picks,

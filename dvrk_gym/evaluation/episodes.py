@@ -144,8 +144,11 @@ def evaluate_policy(
     Raises:
         ValueError: the factory cannot be imported, or cannot be called with the env alone.
     """
-    make_policy = load_policy_factory(factory) if isinstance(factory, str) else factory
-    _check_takes_env(make_policy, factory)
+    if isinstance(factory, str):
+        make_policy = load_policy_factory(factory)  # checks it takes the env
+    else:
+        _check_takes_env(factory, factory)
+        make_policy = factory
     env = gym.make(env_id, **env_kwargs)
     try:
         policy = make_policy(env)  # an error inside the factory is the factory's, raised as it is

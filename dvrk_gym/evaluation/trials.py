@@ -191,8 +191,8 @@ def format_trial_table(trials: list[Trial], calibrator: str, fragment: str, seed
     lines.append(f"{'trial':>5}  {'outcomes':<17}{'successes':>10}{'s/fragment':>12}")
     for i, trial in enumerate(trials, start=1):
         note = f"  sim error: {trial.sim_error}" if trial.sim_error else ""
-        if trial.unpicked_lost or trial.unpicked_delivered:
-            note += f"  ({unpicked_note({'unpicked_lost': trial.unpicked_lost, 'unpicked_delivered': trial.unpicked_delivered})})"
+        if unpicked := unpicked_note(vars(trial)):
+            note += f"  ({unpicked})"
         successes = sum(o == "-" for o in trial.outcomes)
         lines.append(
             f"{i:>5}  {','.join(trial.outcomes):<17}{f'{successes}/{len(trial.outcomes)}':>10}{trial.time_per_fragment_s:>12.2f}{note}"
@@ -203,8 +203,8 @@ def format_trial_table(trials: list[Trial], calibrator: str, fragment: str, seed
         f"total  success {total['success']}/{total['picks']} ({100 * total['success'] / picks:.1f}%), "
         f"A {total['A']}, B {total['B']}, C {total['C']}; {total['time_per_fragment_s']:.2f} s per fragment"
     )
-    if unpicked_note(total):
-        lines.append(f"       {unpicked_note(total)}")
+    if unpicked := unpicked_note(total):
+        lines.append(f"       {unpicked}")
     reference = paper.DEBRIDEMENT_RESULTS.get((calibrator, fragment))
     if reference:
         n, (low, high) = paper.DEBRIDEMENT_PICKS_PER_CELL, paper.TIME_PER_FRAGMENT_S

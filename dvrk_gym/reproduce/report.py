@@ -302,8 +302,8 @@ def _debridement_section(data: dict[str, Any]) -> list[str]:
         reference = cell["paper"]
         picks = max(cell["picks"], 1)
         sim = f"{cell['success']}/{cell['picks']} ({100 * cell['success'] / picks:.0f}%)"
-        if unpicked_note(cell):  # cells of runs before the count have neither key
-            sim += f"; {unpicked_note(cell)}"
+        if unpicked := unpicked_note(cell):  # cells of runs before the count have neither key
+            sim += f"; {unpicked}"
         paper_text = f"{reference['success']}/{n} ({100 * reference['success'] / n:.0f}%)" if reference else "-"
         difference = f"{100 * (cell['success'] / picks - reference['success'] / n):+.0f} points" if reference else "-"
         outcomes = f"A {cell['A']}, B {cell['B']}, C {cell['C']}"

@@ -53,12 +53,13 @@ def open_archive(source: str | os.PathLike | bytes, limits: ArchiveLimits = Arch
     """
     opened: io.BytesIO | Path
     if isinstance(source, bytes):
-        name, size, opened = "archive in memory", len(source), io.BytesIO(source)
+        name, opened = "archive in memory", io.BytesIO(source)
+        if len(source) > limits.max_file_bytes:
+            raise ArchiveLimitError(f"{name}: {len(source):,} bytes; a zip archive has at most {limits.max_file_bytes:,}")
     else:
         path = Path(source)
-        name, size, opened = str(path), check_regular_file(path, limits.max_file_bytes, "a zip archive", ArchiveLimitError), path
-    if size > limits.max_file_bytes:
-        raise ArchiveLimitError(f"{name}: {size:,} bytes; a zip archive has at most {limits.max_file_bytes:,}")
+        check_regular_file(path, limits.max_file_bytes, "a zip archive", ArchiveLimitError)
+        name, opened = str(path), path
     try:
         archive = zipfile.ZipFile(opened)
     except PermissionError:  # the file may be whole: the caller must not take it for a damaged one
