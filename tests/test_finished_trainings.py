@@ -43,6 +43,16 @@ def test_a_finished_training_is_not_trained_again_without_force(finished):
     assert (finished / "model.zip").read_bytes() == model and (finished / "model.zip").stat().st_mtime_ns == written
 
 
+def test_a_saved_state_that_cannot_be_resumed_is_refused_naming_the_way_out(tmp_path):
+    out = tmp_path / "run"
+    out.mkdir()
+    (out / TRAINING_STATE).write_bytes(b"not a state")
+    args = _parse("--out", str(out))
+    with pytest.raises(ValueError, match=f"{TRAINING_STATE}.*; give --force to train from the start"):
+        args.func(args)
+    assert (out / TRAINING_STATE).read_bytes() == b"not a state"
+
+
 def test_force_trains_again_from_the_start_even_over_a_saved_state(finished, tmp_path):
     out = tmp_path / "copy"
     out.mkdir()

@@ -41,7 +41,7 @@ from dvrk_gym.envs.debridement import fragment_target
 from dvrk_gym.evaluation.trials import Trial, run_debridement, totals
 from dvrk_gym.sim.table.contact import DEFAULT_CONTACT
 from dvrk_gym.utils.atomic import read_json
-from dvrk_gym.utils.checks import check_resolution
+from dvrk_gym.utils.checks import check_endoscope_resolution, check_float
 
 logger = logging.getLogger(__name__)
 
@@ -124,11 +124,10 @@ def calibration_rows(folder: Path) -> tuple[list[ComparisonRow], PipelineConfig]
         protocol = table.get("protocol") or "raw"  # a table written before the protocol was recorded sent its predictions raw
         for method, stats in table["summary"].items():
             every = stats["all settings"]
-            mm, px = every["mm"]["mean"], every["pixel"]["mean"]
-            if not all(isinstance(value, (int, float)) and not isinstance(value, bool) for value in (mm, px)):
-                raise TypeError(f"{method}'s means are {mm!r} mm and {px!r} px")
-            rows.append(ComparisonRow(str(method), moves.get(method, -1), float(mm), float(px), f"{table_path} (protocol {protocol})"))
-    except (KeyError, TypeError, AttributeError) as error:
+            mm = check_float(f"{method}'s mean error (mm)", every["mm"]["mean"], 0.0)
+            px = check_float(f"{method}'s mean error (px)", every["pixel"]["mean"], 0.0)
+            rows.append(ComparisonRow(str(method), moves.get(method, -1), mm, px, f"{table_path} (protocol {protocol})"))
+    except (KeyError, TypeError, AttributeError, ValueError) as error:
         raise ValueError(f"{table_path} is not a calibration table 'dvrk-gym evaluate' writes ({type(error).__name__}: {error})") from None
     return rows, config
 
@@ -304,7 +303,7 @@ def calibration_debridement_rows(
         raise ValueError(f"unknown calibrator(s) {unknown}; valid: {list(CALIBRATORS)}")
     config = _pipeline_config(folder)
     moves = calibrator_moves(config)
-    resolution = check_resolution("camera_resolution", camera_resolution or config.camera_resolution)
+    resolution = check_endoscope_resolution("camera_resolution", camera_resolution or config.camera_resolution)
     rows = []
     for name in calibrators:
         path = folder / CALIBRATOR_FILES[name]

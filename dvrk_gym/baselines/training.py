@@ -36,7 +36,7 @@ from dvrk_gym.calibration.benchmark import YAW_SETTINGS
 from dvrk_gym.envs.grid_touch import N_CIRCLES, TOUR
 from dvrk_gym.evaluation.episodes import run_episodes
 from dvrk_gym.evaluation.trials import run_trials, totals
-from dvrk_gym.utils.checks import check_choice, check_float, check_int, check_int_fields, check_resolution
+from dvrk_gym.utils.checks import check_choice, check_endoscope_resolution, check_float, check_int, check_int_fields
 from dvrk_gym.utils.torch_threads import torch_threads
 
 logger = logging.getLogger(__name__)
@@ -92,7 +92,7 @@ class TrainConfig:
     overrides: dict[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "camera_resolution", check_resolution("camera_resolution", self.camera_resolution))
+        object.__setattr__(self, "camera_resolution", check_endoscope_resolution("camera_resolution", self.camera_resolution))
         if not isinstance(self.agent, str):
             raise ValueError(f"agent must be an agent's name, got {self.agent!r}")
         get_agent(self.agent)

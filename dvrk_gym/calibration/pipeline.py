@@ -37,7 +37,7 @@ from dvrk_gym.calibration.phase2 import Phase2Data, collect_phase2
 from dvrk_gym.evaluation.table_protocol import PROTOCOL_LINES, PROTOCOLS
 from dvrk_gym.sim.robot.bias import BIAS_PRESETS
 from dvrk_gym.utils.atomic import atomic_write_text
-from dvrk_gym.utils.checks import check_choice, check_int_fields, check_resolution
+from dvrk_gym.utils.checks import check_choice, check_endoscope_resolution, check_int_fields
 from dvrk_gym.utils.run_folder import RunFolder, read_settings
 
 logger = logging.getLogger(__name__)
@@ -85,7 +85,9 @@ class PipelineConfig:
         }
         check_int_fields("PipelineConfig", self, bounds)
         check_choice("PipelineConfig.bias", self.bias, sorted(BIAS_PRESETS))
-        object.__setattr__(self, "camera_resolution", check_resolution("PipelineConfig.camera_resolution", self.camera_resolution))
+        object.__setattr__(
+            self, "camera_resolution", check_endoscope_resolution("PipelineConfig.camera_resolution", self.camera_resolution)
+        )
 
     def env_kwargs(self) -> dict[str, Any]:
         return {"bias": self.bias, "bias_seed": self.bias_seed, "camera_resolution": tuple(self.camera_resolution)}

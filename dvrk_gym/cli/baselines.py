@@ -35,6 +35,7 @@ def _run_train(args: argparse.Namespace) -> int:
     from dvrk_gym.baselines.budgets import AGENT_ENVS, DEBRIDEMENT_ID, resolve_budget
     from dvrk_gym.baselines.checkpoints import save_agent
     from dvrk_gym.baselines.curves import plot_curves, save_curve
+    from dvrk_gym.baselines.resume import TrainingStateError
     from dvrk_gym.baselines.training import TrainConfig, train
 
     if args.steps is not None:
@@ -80,7 +81,10 @@ def _run_train(args: argparse.Namespace) -> int:
             )
         elif (out / "model.zip").exists():  # killed between its outputs before any save: the same training writes the same ones
             print(f"{out} holds a model but not all of {', '.join(OUTPUTS)}, and no saved state: training again from the start")
-        result = train(config, progress=not args.no_progress, state_path=state_path, save_every=save_every)
+        try:
+            result = train(config, progress=not args.no_progress, state_path=state_path, save_every=save_every)
+        except TrainingStateError as error:
+            raise TrainingStateError(f"{error}; give --force to train from the start (replacing it), or another --out") from None
         model_path = save_agent(result, out / "model.zip")  # the model first: nothing after it can lose it
         label = f"{args.algo}, seed {args.seed}"
         meta = {"agent": args.algo, "seed": args.seed, "env_steps": result.env_steps, "steps_per_second": result.steps_per_second}

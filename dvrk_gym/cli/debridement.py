@@ -17,7 +17,7 @@ from pathlib import Path
 from dvrk_gym import paper
 from dvrk_gym.cli.options import add_instrument_options, add_progress_option, writable_folder
 from dvrk_gym.sim.table.contact import CONTACTS, DEFAULT_CONTACT
-from dvrk_gym.utils.checks import check_int, check_resolution
+from dvrk_gym.utils.checks import check_endoscope_resolution, check_int
 
 
 def _run_debride(args: argparse.Namespace) -> int:
@@ -48,7 +48,7 @@ def _run_debride(args: argparse.Namespace) -> int:
     )
     bias = settings.get("bias", args.bias)
     # the picks see through the endoscope the calibration was made with, as its instrument
-    resolution = check_resolution(
+    resolution = check_endoscope_resolution(
         f"the camera_resolution in {args.calibration}'s settings", settings.get("camera_resolution", args.resolution)
     )
     bias_seed = check_int(f"the bias_seed in {args.calibration}'s settings", settings.get("bias_seed", args.bias_seed), 0, 2**31 - 1)

@@ -11,7 +11,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from dvrk_gym.utils.checks import check_float, check_int, check_resolution
+from dvrk_gym.utils.checks import check_endoscope_resolution, check_float, check_int
 
 if TYPE_CHECKING:
     from dvrk_gym.parallel.executors import Executor
@@ -44,7 +44,7 @@ def check_common_options(args: argparse.Namespace) -> None:
 
         check_int("--epochs", args.epochs, 1, MAX_EPOCHS)
     if getattr(args, "resolution", None) is not None:
-        check_resolution("--resolution", args.resolution)
+        check_endoscope_resolution("--resolution", args.resolution)
     if getattr(args, "connect_timeout", None) is not None:
         check_float("--connect-timeout", args.connect_timeout, 0.0, MAX_CONNECT_TIMEOUT_S, low_open=True, unit="s")
     if getattr(args, "trials", None) is not None:
@@ -64,7 +64,7 @@ def check_flag_bounds(
         flag = "--" + name.replace("_", "-")
         try:
             if name == "resolution":
-                check_resolution(flag, value)
+                check_endoscope_resolution(flag, value)
             elif value is not None:
                 for item in value if isinstance(value, (list, tuple)) else (value,):
                     check_float(flag, item, low, high)

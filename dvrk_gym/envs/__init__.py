@@ -7,6 +7,13 @@ keyword given to ``gym.make`` replaces its default. A keyword the env does not t
 ``TypeError`` naming the ones it takes; a bad value raises ``ValueError`` saying what is
 allowed.
 
+Each id is registered with ``disable_env_checker=True``: the envs check their own actions,
+options and keywords (and the tests run Gymnasium's ``check_env`` on each), while Gymnasium's
+passive checker, ``gym.make``'s default, marks its first ``reset`` as checked before running
+it, so after a refused first reset (a mistyped option) its first ``step`` fails with
+``TypeError: cannot unpack non-iterable NoneType`` (Gymnasium 1.4.0).
+``gym.make(id, disable_env_checker=False)`` puts it back.
+
 No env is registered with a ``max_episode_steps``: each ends its episodes itself.
 CalibrationExploration-v0 truncates one after ``max_steps`` poses (93 by default, one of the
 paper's Phase I trajectories; a registered limit of 93 cut a ``max_steps=200`` at 93,
@@ -72,4 +79,5 @@ def register_envs() -> None:
                 entry_point=entry_point,
                 max_episode_steps=EPISODE_STEPS[env_id],
                 kwargs=default_kwargs(ENV_CONFIGS[env_id]),
+                disable_env_checker=True,  # Gymnasium's passive checker breaks after a refused first reset (above)
             )

@@ -17,7 +17,7 @@ from dvrk_gym.sim.endoscope.noise import MAX_PIXEL_NOISE_PX
 from dvrk_gym.sim.endoscope.renderers import DISPLAY_RENDERERS
 from dvrk_gym.sim.robot.bias import BIAS_PRESETS, BiasConfig
 from dvrk_gym.sim.table.contact import CONTACTS, DEFAULT_CONTACT
-from dvrk_gym.utils.checks import check_choice, check_float_fields, check_int_fields, check_resolution
+from dvrk_gym.utils.checks import check_choice, check_endoscope_resolution, check_float_fields, check_int_fields, check_resolution
 
 REWARD_TYPES = ("dense", "sparse")
 """GridTouch-v0's rewards: "dense" (minus the goal distance in millimetres) or "sparse"."""
@@ -53,7 +53,7 @@ class EnvConfig:
 
     def __post_init__(self) -> None:
         # gym.make passes lists from JSON-like specs; the world wants a tuple.
-        object.__setattr__(self, "camera_resolution", check_resolution("camera_resolution", self.camera_resolution))
+        object.__setattr__(self, "camera_resolution", check_endoscope_resolution("camera_resolution", self.camera_resolution))
         if isinstance(self.bias, Mapping):  # a BiasConfig's fields, as dataclasses.asdict or a JSON file gives them
             try:
                 object.__setattr__(self, "bias", BiasConfig(**self.bias))

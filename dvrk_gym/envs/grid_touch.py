@@ -74,7 +74,10 @@ def _check_yaw_option(yaw: Any) -> float | str:
         return yaw
     if isinstance(yaw, (bool, np.bool_)) or not isinstance(yaw, numbers.Real):  # no bools, complex numbers or text
         raise ValueError(message)
-    value = float(yaw)
+    try:
+        value = float(yaw)
+    except OverflowError:  # an int beyond any float (10**400)
+        raise ValueError("option 'yaw' must be a number in [-pi/2, pi/2] or 'random', got a number too large for a float") from None
     if not (np.isfinite(value) and abs(value) <= np.pi / 2 + 1e-6):  # the env's own float32 yaw of +-pi/2 is 4e-8 beyond
         raise ValueError(message)
     return min(max(value, -np.pi / 2), np.pi / 2)

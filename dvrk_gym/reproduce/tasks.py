@@ -36,7 +36,7 @@ from dvrk_gym.sim.robot.bias_field import grid_rigid_means, plot_field
 from dvrk_gym.sim.robot.bias_statistics import bias_statistics
 from dvrk_gym.sim.robot.cables import CableModel
 from dvrk_gym.sim.table.contact import DEFAULT_CONTACT
-from dvrk_gym.utils.checks import check_resolution
+from dvrk_gym.utils.checks import check_endoscope_resolution
 
 MM_PER_M = 1e3
 
@@ -128,7 +128,7 @@ def _debridement_env(fragment: str, picks: int, bias: str, bias_seed: int, resol
         max_picks=picks,
         bias=bias,
         bias_seed=bias_seed,
-        camera_resolution=check_resolution("resolution", resolution),
+        camera_resolution=check_endoscope_resolution("resolution", resolution),
         contact=contact,
     )
 
@@ -191,7 +191,7 @@ def rl_agent(
         seed=seed,
         bias=bias,
         bias_seed=bias_seed,
-        camera_resolution=check_resolution("resolution", resolution),
+        camera_resolution=check_endoscope_resolution("resolution", resolution),
         eval_points=eval_points,
     )
     folder = Path(out)

@@ -18,7 +18,7 @@ from dvrk_gym.sim.robot import ik
 from dvrk_gym.sim.robot import kinematics as kin
 from dvrk_gym.sim.robot.bias import BiasConfig
 from dvrk_gym.sim.robot.motion_limits import MotionLimits
-from dvrk_gym.utils.checks import check_bool, check_float, check_float_fields, check_int_fields, check_resolution
+from dvrk_gym.utils.checks import check_bool, check_endoscope_resolution, check_float, check_float_fields, check_int_fields
 
 __all__ = ["JawDriver", "MoveResult", "WorldConfig", "check_jaw_angle", "check_joints"]
 
@@ -83,14 +83,7 @@ class WorldConfig:
 
     def __post_init__(self) -> None:
         check_float_fields("WorldConfig", self, {"pixel_noise_px": (0.0, MAX_PIXEL_NOISE_PX, False)})
-        width, height = check_resolution("camera_resolution", self.camera_resolution)
-        matching = width * PAPER_INTRINSICS.height / PAPER_INTRINSICS.width  # the height of the paper's aspect
-        if abs(matching - height) > 1.0:
-            raise ValueError(  # the detector's noise, search boxes and whole pixels scale with the width alone
-                f"camera_resolution must keep the endoscope's {PAPER_INTRINSICS.width} x {PAPER_INTRINSICS.height} aspect "
-                f"(16:9, to a pixel), got {width} x {height}; e.g. {width} x {round(matching)}"
-            )
-        object.__setattr__(self, "camera_resolution", (width, height))
+        object.__setattr__(self, "camera_resolution", check_endoscope_resolution("camera_resolution", self.camera_resolution))
         check_int_fields("WorldConfig", self, {"bias_seed": (0, 2**31 - 1)})
         if not isinstance(self.bias, (str, BiasConfig)):
             raise ValueError(f"bias must be a preset name or a BiasConfig, got {self.bias!r}")

@@ -14,6 +14,8 @@ from typing import Any
 
 import numpy as np
 
+from dvrk_gym import paper
+
 
 def _shown(value: Any) -> str:
     return f"{value!r} ({type(value).__name__})"
@@ -85,6 +87,27 @@ def check_resolution(name: str, value: Any, low: tuple[int, int] = (16, 16), hig
         height = check_int(f"{name}[1] (height)", value[1], low[1], high[1])
     except ValueError as error:
         raise ValueError(f"{error}; {name} must be {allowed}") from None
+    return width, height
+
+
+def check_endoscope_resolution(name: str, value: Any) -> tuple[int, int]:
+    """An endoscope image size ``(width, height)`` in pixels: two ints in :func:`check_resolution`'s
+    range, in the authors' 1920 x 1080 aspect (16:9, to a pixel; the detector's noise, search
+    boxes and whole pixels scale with the width alone). Configs that stamp a run folder check
+    it before making the folder.
+
+    Raises:
+        ValueError: naming ``name``, and for another aspect a size that keeps it.
+    """
+    width, height = check_resolution(name, value)
+    paper_width, paper_height = paper.ENDOSCOPE_RESOLUTION_PX
+    matching = width * paper_height / paper_width  # the height of the paper's aspect
+    if abs(matching - height) > 1.0:
+        example = f"{width} x {round(matching)}" if matching >= 16 else "320 x 180"
+        raise ValueError(
+            f"{name} must keep the endoscope's {paper_width} x {paper_height} aspect (16:9, to a pixel), "
+            f"got {width} x {height}; e.g. {example}"
+        )
     return width, height
 
 

@@ -2,24 +2,24 @@
 
 A folder opened with settings is stamped with them (a JSON file in the folder); opening it
 again with other settings is refused with an error that names what differs, so results
-made with one set of settings are never mixed with another's. The stamp also records which
-dvrk_gym made the results (:func:`~dvrk_gym.utils.source_fingerprint.source_fingerprint`: the
-version and a digest of the package's files, under the reserved key :data:`SOURCE_KEY`): a
-folder stamped by another version of the simulator, or by one from before stamps had it, is
-refused too, since the simulator's code (its identified instrument, its collector...) changes
-between versions and its cached results would be mixed with this one's; and so is a folder
-that holds files but no stamp (one deleted, say): their settings are unknown. Each result is a file in the
-folder: :meth:`RunFolder.cached` loads it when it is there, else makes and saves it, and a
-result that cannot be read back (cut short by a full disk, edited by hand) is named in a
-warning, moved aside as ``<name>.corrupt`` and made again.
+made with one set of settings are never mixed with another's (a folder holding nothing but
+its stamp, from a run refused or stopped before it made anything, takes the new settings).
+The stamp also records which dvrk_gym made the results (:func:`~dvrk_gym.utils.source_fingerprint.source_fingerprint`,
+under the reserved key :data:`SOURCE_KEY`): a folder stamped by another version of the
+simulator, whose code (its identified instrument, its collector...) changes between
+versions, or by one from before stamps had it, is refused too; and so is a folder that
+holds files but no stamp (one deleted, say): their settings are unknown. Each result is a
+file: :meth:`RunFolder.cached` loads it when it is there, else makes and saves it, and one
+that cannot be read back (cut short by a full disk, edited by hand) is named in a warning,
+moved aside as ``<name>.corrupt`` and made again.
 
 One run owns a folder at a time: opening it takes a lock (``run.lock``, a
 :class:`filelock.FileLock` holding the owner's process id), and a second process that
-opens it gets :class:`RunFolderBusy`, which names the folder and the owner. The kernel
-drops the lock when its owner dies, however it dies; the next run takes the folder over
-with a logged message naming the dead owner. Within one process the lock is re-entrant.
-Every file is written atomically (:mod:`dvrk_gym.utils.atomic`), and the temporary files
-an interrupted write left behind are removed when the folder is opened.
+opens it gets :class:`RunFolderBusy`, naming the folder and the owner. The kernel drops
+the lock when its owner dies, however it dies; the next run takes the folder over with a
+logged message naming the dead owner. Within one process the lock is re-entrant. Every
+file is written atomically (:mod:`dvrk_gym.utils.atomic`), and the temporary files an
+interrupted write left behind are removed when the folder is opened.
 """
 
 from __future__ import annotations
@@ -137,10 +137,8 @@ def check_made_here(folder: str | os.PathLike, stamp: str, remedy: str) -> None:
         remedy: what the message tells the user to do instead.
 
     Raises:
-        ValueError: the stamp records another dvrk_gym's source fingerprint, or none (the
-            message names the folder, this version's fingerprint and the stamp's when it
-            has one, and ``remedy``); or the stamp is unreadable or not a JSON object (the
-            message names it and says to delete it).
+        ValueError: the stamp records another dvrk_gym's source fingerprint or none (the
+            message names both fingerprints and ``remedy``), or is no readable JSON object.
     """
     found = _read_stamp(Path(folder) / stamp)
     if found is not None:
@@ -220,6 +218,11 @@ def _unstamped_files(folder: Path) -> list[str]:
     return sorted(found)
 
 
+def _holds_results(folder: Path, stamp: Path) -> bool:
+    """Whether ``folder`` holds anything but its stamp, lock and hidden (temporary) files."""
+    return any(not name.startswith(".") and name not in (LOCK_FILE, stamp.name) for name in os.listdir(folder))
+
+
 class RunFolder:
     """A folder of cached results made with one set of settings, owned by this process until :meth:`close`.
 
@@ -235,9 +238,11 @@ class RunFolder:
 
     Raises:
         RunFolderBusy: another process owns the folder.
-        ValueError: the folder is stamped with other settings (the message lists them), or by
-            another version of dvrk_gym (the message gives both fingerprints) or one whose
-            stamps had no source fingerprint; its results and stamp are left as they were.
+        ValueError: the folder holds results and is stamped with other settings (the message
+            lists them), or by another version of dvrk_gym (the message gives both fingerprints)
+            or one whose stamps had no source fingerprint; its results and stamp are left as
+            they were. A folder holding nothing but its stamp (a run refused or stopped before
+            it made anything) is stamped afresh.
         OSError: the folder cannot be made or written (a file of that name, no permission).
     """
 
@@ -324,6 +329,8 @@ class RunFolder:
                     f"{self.path} holds files but no settings stamp ({self.stamp.name}): {unknown[:5]}"
                     f"{' ...' if len(unknown) > 5 else ''} were made with settings nobody recorded; use an empty folder, or delete these"
                 )
+        elif not _holds_results(self.path, self.stamp):  # a run refused or stopped before making anything: nothing to protect
+            logger.info("%s holds no results yet: it is stamped with this run's settings", self.path)
         else:
             _refuse_other_source(self.stamp, found.pop(SOURCE_KEY, None), here, RESUME_REMEDY)
             if found != wanted:

@@ -15,12 +15,15 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from dvrk_gym.baselines.training import TrainConfig
 from dvrk_gym.calibration.pipeline import PipelineConfig
+from dvrk_gym.cli.main import main
 from dvrk_gym.envs.base import check_action
 from dvrk_gym.envs.debridement_config import DebridementConfig
 from dvrk_gym.envs.exploration import ExplorationConfig
 from dvrk_gym.envs.grid_touch import GridTouchConfig
 from dvrk_gym.envs.picks import PickTiming
+from dvrk_gym.reproduce.profiles import Profile
 from dvrk_gym.sim.robot.motion import MotionLimits
 from dvrk_gym.sim.table.grasp import GripperConfig
 from dvrk_gym.sim.world import WorldConfig
@@ -211,6 +214,7 @@ def test_an_env_refuses_a_complex_action_and_keeps_its_episode(make_env):
         ({"yaw": 2.0}, "yaw"),
         ({"yaw": float("nan")}, "yaw"),
         ({"yaw": 0.5j}, "yaw"),
+        ({"yaw": 10**400}, "yaw.*too large for a float"),
         ({"speed": 1.0}, "unknown reset option"),
     ],
 )
@@ -238,10 +242,11 @@ def test_envs_refuse_to_be_copied_or_pickled(make_env, env_id, copier, word):
     env.reset(seed=0)  # the env itself is untouched
 
 
-def test_a_refused_first_reset_leaves_the_env_usable_without_gymnasiums_passive_checker():
-    """The README's caveat: Gymnasium's passive checker (gym.make's default) breaks after a
-    refused first reset; the env itself does not, as ``disable_env_checker=True`` shows."""
-    env = gym.make("dvrk_gym/GridTouch-v0", camera_resolution=(320, 180), disable_env_checker=True)
+def test_a_refused_first_reset_leaves_a_made_env_usable():
+    """Gymnasium's passive checker (gym.make's default) breaks after a refused first reset: a
+    mistyped option in a notebook left the env unusable, so the ids are registered without it."""
+    assert gym.spec("dvrk_gym/GridTouch-v0").disable_env_checker
+    env = gym.make("dvrk_gym/GridTouch-v0", camera_resolution=(320, 180))
     try:
         with pytest.raises(ValueError, match="unknown reset option"):
             env.reset(options={"yawn": 0.0})
@@ -250,3 +255,30 @@ def test_a_refused_first_reset_leaves_the_env_usable_without_gymnasiums_passive_
         assert terminated and np.isfinite(reward)
     finally:
         env.close()
+
+
+@pytest.mark.parametrize(
+    "make",
+    [
+        lambda resolution: PipelineConfig(camera_resolution=resolution),
+        lambda resolution: Profile(name="p", camera_resolution=resolution),
+        lambda resolution: TrainConfig(camera_resolution=resolution),
+        lambda resolution: GridTouchConfig(camera_resolution=resolution),
+    ],
+    ids=["pipeline", "profile", "training", "env"],
+)
+def test_configs_that_stamp_a_run_folder_refuse_another_aspect_before_it_is_made(make):
+    """The aspect was checked only when the world was built, after the run had stamped its
+    folder with it: the corrected command was then refused as a run with other settings."""
+    with pytest.raises(ValueError, match=r"camera_resolution must keep the endoscope's 1920 x 1080 aspect.*got 100 x 100"):
+        make((100, 100))
+    make((320, 180))
+
+
+def test_calibrate_refuses_another_aspect_without_making_its_folder(tmp_path, capsys):
+    assert main(["calibrate", "--resolution", "16", "16", "--out", str(tmp_path / "run")]) == 2
+    assert (
+        "--resolution must keep the endoscope's 1920 x 1080 aspect (16:9, to a pixel), got 16 x 16; e.g. 320 x 180"
+        in capsys.readouterr().err
+    )
+    assert not (tmp_path / "run").exists()

@@ -346,3 +346,24 @@ def test_a_worker_killed_mid_task_fails_the_run_with_its_name_and_the_rerun_comp
         run_tasks(graph, tmp_path / "cache", workers=2, progress=False)
     results = run_tasks(graph, tmp_path / "cache", workers=2, progress=False)
     assert results["doomed"] == {**results["doomed"], "survived": True, "cached": False}
+
+
+def test_a_folder_holding_only_its_stamp_takes_a_new_runs_settings(tmp_path):
+    """A run refused after stamping its folder (a resolution whose circles the endoscope cannot
+    find is only known once the world renders) left the folder refusing the corrected run."""
+    RunFolder(tmp_path, {"camera_resolution": [128, 72]}).close()
+    (tmp_path / ".settings.json.tmp-1").write_text("")  # a temporary file is no result
+    with RunFolder(tmp_path, {"camera_resolution": [320, 180]}) as folder:
+        folder.write_json("model.json", {"made with": [320, 180]})
+    assert read_settings(tmp_path, "settings.json") == {"camera_resolution": [320, 180]}
+    with pytest.raises(ValueError, match=r"other settings \(camera_resolution: \[320, 180\] there, \[128, 72\] here"):
+        RunFolder(tmp_path, {"camera_resolution": [128, 72]})  # now it holds a result: refused, and left as it was
+    assert read_settings(tmp_path, "settings.json") == {"camera_resolution": [320, 180]}
+
+
+def test_a_folder_holding_a_stamped_subfolder_keeps_its_settings(tmp_path):
+    """reproduce's calibration/ is a run folder of its own: its parent holds results through it."""
+    RunFolder(tmp_path, {"seed": 0}).close()
+    RunFolder(tmp_path / "calibration", {"seed": 0}).close()
+    with pytest.raises(ValueError, match="other settings"):
+        RunFolder(tmp_path, {"seed": 1})

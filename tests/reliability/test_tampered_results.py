@@ -142,7 +142,10 @@ def test_a_huge_sweep_is_refused_before_its_grid_is_built():
         ("{}", "KeyError"),
         ("[]", "not a calibration table"),
         ('{"summary": 5}', "not a calibration table"),
-        ('{"summary": {"RBT": {"all settings": {"mm": {"mean": "x"}, "pixel": {"mean": 1}}}}}', "means are 'x' mm"),
+        ('{"summary": {"RBT": {"all settings": {"mm": {"mean": "x"}, "pixel": {"mean": 1}}}}}', r"RBT's mean error \(mm\) must be"),
+        ('{"summary": {"RBT": {"all settings": {"mm": {"mean": NaN}, "pixel": {"mean": 1}}}}}', r"mean error \(mm\) must be .* got nan"),
+        ('{"summary": {"RBT": {"all settings": {"mm": {"mean": 1}, "pixel": {"mean": -5}}}}}', r"mean error \(px\) must be .* got -5"),
+        ('{"summary": {"RBT": {"all settings": {"mm": {"mean": 1' + "0" * 400 + '}, "pixel": {"mean": 1}}}}}', "too large for a float"),
         ("not json", "is not valid JSON"),
     ],
 )
