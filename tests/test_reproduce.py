@@ -187,6 +187,7 @@ def test_reproduce_refuses_a_folder_made_by_an_older_dvrk_gym_before_running_any
         pass
     stamp = tmp_path / SETTINGS_STAMP
     stamp.write_text(json.dumps(read_settings(tmp_path, SETTINGS_STAMP)))  # as stamped before the fingerprint
+    (tmp_path / "report.md").write_text("the older run's report")  # a folder holding only its stamp would be taken
     with pytest.raises(ValueError, match=f"made by an older dvrk_gym: its stamp \\({SETTINGS_STAMP}\\) has no source fingerprint"):
         run_reproduce(config)
     assert not (tmp_path / "tasks").exists() and SOURCE_KEY not in json.loads(stamp.read_text())
