@@ -90,6 +90,12 @@ def test_delta_mode_moves_by_the_increment_at_10_hz_and_truncates(make):
     assert truncated and not terminated
 
 
+def test_delta_mode_videos_play_at_the_control_rate(make):
+    """RecordVideo reads render_fps: delta mode renders a frame per control step, and its videos played at 4 fps."""
+    assert make(action_mode="delta", control_period_s=0.05).metadata["render_fps"] == pytest.approx(20.0)
+    assert make().metadata["render_fps"] == type(make().unwrapped).metadata["render_fps"] == 4
+
+
 # ---------------------------------------------------------------------------- API and inputs
 @pytest.mark.slow
 @pytest.mark.parametrize("mode", ["primitive", "delta"])

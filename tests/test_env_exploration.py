@@ -21,6 +21,25 @@ def test_episode_starts_at_a_workspace_corner(make_env):
         env.reset(options={"corner": 7})
 
 
+def test_a_trajectory_starts_relaxed_unless_relax_false_keeps_the_cables_history(make_env):
+    """Every trajectory started relaxed, and a harness giving the other envs' "relax" option was refused."""
+    fresh = make_env("dvrk_gym/CalibrationExploration-v0")
+    start = fresh.reset(seed=0, options={"corner": 0})[1]["true_tip_position"]
+    env = make_env("dvrk_gym/CalibrationExploration-v0")
+    env.action_space.seed(0)
+    starts = {}
+    for relax in (None, True, False):
+        env.reset(seed=1, options={"corner": 1})
+        for _ in range(20):
+            env.step(env.action_space.sample())
+        starts[relax] = env.reset(options={"corner": 0} if relax is None else {"corner": 0, "relax": relax})[1]["true_tip_position"]
+    np.testing.assert_array_equal(starts[None], start)
+    np.testing.assert_array_equal(starts[True], start)
+    assert 1e-5 < np.linalg.norm(np.subtract(starts[False], start)) < 2e-3  # the hysteresis the trajectory left: 0.7 mm
+    with pytest.raises(ValueError, match="option 'relax' must be True or False"):
+        env.reset(options={"relax": 1})
+
+
 def test_spaces_are_the_documented_ones(make_env):
     env = make_env("dvrk_gym/CalibrationExploration-v0")
     assert env.action_space.shape == (6,)

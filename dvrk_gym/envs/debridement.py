@@ -162,6 +162,7 @@ class DebridementEnv(DvrkEnv[DebridementConfig]):
             self.action_names = DELTA_ACTION_NAMES
             high = np.array([self.config.max_delta_m] * 3 + [self.config.max_delta_jaw_rad], dtype=np.float32)
             self.action_space = spaces.Box(-high, high, dtype=np.float32)
+            self.metadata = {**self.metadata, "render_fps": 1.0 / self.config.control_period_s}  # a frame per control step
         box_low = np.tile(CAMERA_BOX_LOW_M, (MAX_FRAGMENTS, 1)).astype(np.float32)
         box_high = np.tile(CAMERA_BOX_HIGH_M, (MAX_FRAGMENTS, 1)).astype(np.float32)
         half_pi = np.float32(math.pi / 2)

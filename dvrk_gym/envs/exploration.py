@@ -17,7 +17,7 @@ import numpy as np
 from gymnasium import spaces
 
 from dvrk_gym import paper
-from dvrk_gym.envs.base import DvrkEnv, config_arguments
+from dvrk_gym.envs.base import DvrkEnv, config_arguments, relax_option
 from dvrk_gym.envs.configs import ExplorationConfig
 from dvrk_gym.sim.endoscope.stereo import StereoDetection
 from dvrk_gym.sim.robot import ik
@@ -125,11 +125,19 @@ class CalibrationExplorationEnv(DvrkEnv[ExplorationConfig]):
     right, px; -1 when unseen), ``marker_camera_position`` (x, y, z in the left camera
     frame, m; 0 unless both cameras saw the marker). Reward is always 0: this is data
     collection. ``info`` carries the truth for evaluation under ``true_*`` names.
+
+    Reset options:
+        ``"corner"``: which workspace corner (0-3) the trajectory starts at; default a
+            random one.
+        ``"relax"``: True (the default, seeded or not: each of the authors' trajectories is
+            collected alike) starts with relaxed cables, as a fresh env does; False goes
+            to the start through the cables, which keep their history from the trajectory
+            before (hysteresis), as GridTouch-v0 and Debridement-v0 do by default.
     """
 
     config_class = ExplorationConfig
     action_names = ACTION_NAMES
-    option_names = ("corner",)
+    option_names = ("corner", "relax")
 
     def __init__(
         self,
@@ -151,6 +159,7 @@ class CalibrationExplorationEnv(DvrkEnv[ExplorationConfig]):
         self._steps = 0
 
     def _check_options(self, options: dict[str, Any], seeded: bool) -> None:
+        super()._check_options(options, seeded)
         corner = options.get("corner")
         if corner is not None and (
             isinstance(corner, (bool, np.bool_)) or not isinstance(corner, (int, np.integer)) or corner not in (0, 1, 2, 3)
@@ -161,7 +170,7 @@ class CalibrationExplorationEnv(DvrkEnv[ExplorationConfig]):
         corner = options.get("corner")
         corner = int(self.np_random.integers(4)) if corner is None else int(corner)
         start = kin.pose_from_euler(workspace_corners()[corner], *home_orientation())
-        self.world.reset_robot(ik.inverse_kinematics(start))
+        self.world.reset_robot(ik.inverse_kinematics(start), relax=relax_option(options, seeded=True))  # relaxed unless asked
         self._steps = 0
         observation = self._observe()
         return observation, self._info(np.zeros(6, dtype=bool), np.zeros(6, dtype=bool), corner=corner)

@@ -113,9 +113,10 @@ class GridTouchEnv(DvrkEnv[GridTouchConfig]):
             if it has not touched since the last reset) and its cables keep their
             history, so each touch meets the hysteresis the touches before it left, as on
             the real robot, which lifted from one circle and went on to the next.
-            Default: True for a seeded reset (a seed alone fixes the episode), False
-            otherwise; ``reset(seed=s, options={"relax": False})`` keeps the history with
-            a new random stream (the same seed and history give the same episode).
+            Default: True for a seeded reset (a seed then fixes the episode, given the
+            yaw setting, which persists: give ``"yaw"`` with the seed), False otherwise;
+            ``reset(seed=s, options={"relax": False})`` keeps the history with a new
+            random stream (the same seed and history give the same episode).
     """
 
     config_class = GridTouchConfig
