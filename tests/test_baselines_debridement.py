@@ -157,7 +157,7 @@ def test_wrapper_refuses_delta_mode():
 
 
 def test_models_log_nowhere():
-    config = TrainConfig(agent="sac", steps=1, camera_resolution=TINY, eval_points=1)
+    config = TrainConfig(agent="sac", steps=1, camera_resolution=TINY)
     env = make_training_vec_env(config)
     try:
         model = build_model(config.spec, env, seed=0)

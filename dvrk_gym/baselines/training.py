@@ -10,11 +10,12 @@ fragment). These evaluation moves are measurements and are not counted in the bu
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 import time
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, ClassVar
 
@@ -106,8 +107,6 @@ class TrainConfig:
         }
         bounds.update({"curve_trials": (1, 10_000), "torch_threads": (1, 256)})
         check_int_fields("TrainConfig", self, bounds)
-        if self.eval_points > self.steps:  # the curve's points are whole env steps: more would be merged, silently
-            raise ValueError(f"eval_points ({self.eval_points}) must be at most steps ({self.steps}): one evaluation per env step at most")
         for name in ("env_overrides", "overrides"):
             if not isinstance(getattr(self, name), dict):
                 raise ValueError(f"{name} must be a dict of keywords, got {getattr(self, name)!r}")
@@ -127,7 +126,7 @@ class TrainConfig:
         }
 
     def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
+        return dataclasses.asdict(self)
 
 
 @dataclass(frozen=True)
@@ -154,7 +153,7 @@ class CurvePoint:
 
     def to_json(self) -> dict[str, Any]:
         """The point as JSON values: NaN errors (a pick agent's pixel error) as null."""
-        return {key: None if isinstance(value, float) and np.isnan(value) else value for key, value in asdict(self).items()}
+        return {key: None if isinstance(value, float) and np.isnan(value) else value for key, value in dataclasses.asdict(self).items()}
 
     @classmethod
     def from_json(cls, value: Any) -> CurvePoint:

@@ -82,8 +82,6 @@ class Profile:
             raise ValueError(f"rl_agents must be GridTouch-v0 agents {grid_agents}, got {unknown}")
         if self.rl_steps is not None:
             check_int("rl_steps (or None)", self.rl_steps, 1, _MAX_COUNT)
-            if self.rl_eval_points > self.rl_steps:  # as TrainConfig refuses it, but before the run folder is made
-                raise ValueError(f"rl_eval_points ({self.rl_eval_points}) must be at most rl_steps ({self.rl_steps})")
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)

@@ -282,12 +282,3 @@ def test_calibrate_refuses_another_aspect_without_making_its_folder(tmp_path, ca
         in capsys.readouterr().err
     )
     assert not (tmp_path / "run").exists()
-
-
-def test_more_curve_points_than_env_steps_are_refused_before_any_work():
-    """np.unique merged them: 100 points over 10 steps gave 11, silently."""
-    with pytest.raises(ValueError, match=r"eval_points \(100\) must be at most steps \(10\)"):
-        TrainConfig(steps=10, eval_points=100)
-    with pytest.raises(ValueError, match=r"rl_eval_points \(20\) must be at most rl_steps \(10\)"):
-        Profile(name="p", rl_steps=10)
-    TrainConfig(steps=10, eval_points=10)
