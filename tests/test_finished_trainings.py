@@ -48,7 +48,7 @@ def test_a_saved_state_that_cannot_be_resumed_is_refused_naming_the_way_out(tmp_
     out.mkdir()
     (out / TRAINING_STATE).write_bytes(b"not a state")
     args = _parse("--out", str(out))
-    with pytest.raises(ValueError, match=f"{TRAINING_STATE}.*; give --force to train from the start"):
+    with pytest.raises(ValueError, match=rf"{TRAINING_STATE}.* \(--force trains from the start, replacing it\)$"):
         args.func(args)
     assert (out / TRAINING_STATE).read_bytes() == b"not a state"
 

@@ -196,12 +196,12 @@ def test_failed_units_are_named_the_rest_kept_and_a_rerun_retries_only_them(tmp_
     assert retry.submitted == ["bias1-seed0"]
 
 
-def test_a_grid_whose_every_unit_failed_leaves_no_figure_of_another_grid(tmp_path):
+def test_a_grid_whose_every_unit_failed_leaves_no_table_or_figure_of_another_grid(tmp_path):
     run_sweep(SweepSettings(bias_seeds=(0, 1), pipeline=TINY), tmp_path, StandInExecutor(), progress=False)
     assert (tmp_path / "sweep_errors.png").is_file()
-    with pytest.raises(SweepError, match="This grid's 0 finished units"):
+    with pytest.raises(SweepError, match=r"This grid's 0 finished units are in \S+units; the same call"):
         run_sweep(SweepSettings(bias_seeds=(5,), pipeline=TINY), tmp_path, StandInExecutor(fail={(5, 0)}), progress=False)
-    assert read_rows(tmp_path / "sweep.csv") == [] and not (tmp_path / "sweep_errors.png").exists()
+    assert not (tmp_path / "sweep.csv").exists() and not (tmp_path / "sweep_errors.png").exists()
     assert sorted(p.name for p in (tmp_path / "units").iterdir()) == ["bias0-seed0.json", "bias1-seed0.json"]  # kept
 
 
@@ -327,3 +327,13 @@ def test_the_command_writes_the_table_and_resumes(tmp_path, capsys):
     assert (tmp_path / "sweep_errors.png").exists()
     assert main(arguments) == 0
     assert "0 units run, 1 loaded" in capsys.readouterr().out
+
+
+def test_a_sweep_whose_every_unit_failed_at_first_lets_the_corrected_call_take_its_folder(tmp_path):
+    """Its empty table kept the failed settings' stamp: a resolution whose grid circles are lost
+    (128 x 72) left the corrected resolution refused as a sweep with other settings."""
+    with pytest.raises(SweepError):
+        run_sweep(SweepSettings(bias_seeds=(0,), pipeline=TINY), tmp_path, StandInExecutor(fail={(0, 0)}), progress=False)
+    other = PipelineConfig(n_trajectories=3, dnn_epochs=6)
+    result = run_sweep(SweepSettings(bias_seeds=(0,), pipeline=other), tmp_path, StandInExecutor(), progress=False)
+    assert result.rows and len(read_rows(tmp_path / "sweep.csv")) == len(result.rows)

@@ -84,7 +84,7 @@ def _run_train(args: argparse.Namespace) -> int:
         try:
             result = train(config, progress=not args.no_progress, state_path=state_path, save_every=save_every)
         except TrainingStateError as error:
-            raise TrainingStateError(f"{error}; give --force to train from the start (replacing it), or another --out") from None
+            raise TrainingStateError(f"{error} (--force trains from the start, replacing it)") from None
         model_path = save_agent(result, out / "model.zip")  # the model first: nothing after it can lose it
         label = f"{args.algo}, seed {args.seed}"
         meta = {"agent": args.algo, "seed": args.seed, "env_steps": result.env_steps, "steps_per_second": result.steps_per_second}

@@ -118,17 +118,18 @@ def run_sweep(settings: SweepSettings, out: str | os.PathLike, executor: Executo
         logger.info("sweep in %s: %d units finished, %d to run on %s", folder.path, len(loaded), len(todo), executor.description)
         computed, failures = _run_units(todo, executor, folder, results, progress, total=len(loaded) + len(todo))
         rows = sweep_rows(settings, results)
-        csv_path = write_csv(rows, folder.file(CSV_NAME))
-        figure = folder.file(FIGURE_NAME)
+        csv_path, figure = folder.file(CSV_NAME), folder.file(FIGURE_NAME)
         if rows:
+            write_csv(rows, csv_path)
             plot_errors(rows, figure)
-        else:  # every unit of this grid failed: a figure of another grid's units would not match the table
+        else:  # every unit of this grid failed: another grid's table and figure would not be this one's,
+            csv_path.unlink(missing_ok=True)  # and an empty table would be a result, keeping the folder's settings
             figure.unlink(missing_ok=True)
     if failures:
         listed = "; ".join(f"{name} ({message})" for name, message in failures.items())
         raise SweepError(
             f"{len(failures)} of {len(todo)} units failed: {listed}. This grid's {len(results)} finished units are in "
-            f"{units_dir} and tabled in {csv_path}; the same call runs only the failed ones again"
+            f"{units_dir}{f' and tabled in {csv_path}' if rows else ''}; the same call runs only the failed ones again"
         )
     return SweepResult(rows, computed, loaded, csv_path, figure, executor.description, time.perf_counter() - start)
 

@@ -2,8 +2,8 @@
 
 A folder opened with settings is stamped with them (a JSON file in the folder); opening it
 again with other settings is refused with an error that names what differs, so results
-made with one set of settings are never mixed with another's (a folder holding nothing but
-its stamp, from a run refused or stopped before it made anything, takes the new settings).
+made with one set of settings are never mixed with another's (a folder holding no result but
+stamps, locks and empty folders, from a run refused before it made anything, takes new ones).
 The stamp also records which dvrk_gym made the results (:func:`~dvrk_gym.utils.source_fingerprint.source_fingerprint`,
 under the reserved key :data:`SOURCE_KEY`): a folder stamped by another version of the
 simulator, whose code (its identified instrument, its collector...) changes between
@@ -51,9 +51,8 @@ CORRUPT_SUFFIX = ".corrupt"
 UNREADABLE = (ValueError, OSError, EOFError, KeyError, TypeError, zipfile.BadZipFile)
 """What a loader raises on a file cut short or tampered with (JSON and model-file errors are ValueErrors)."""
 SOURCE_KEY = "dvrk_gym_source"
-"""The key of a settings stamp that holds the fingerprint of the dvrk_gym that made the folder's
-results (:meth:`SourceFingerprint.to_json`); reserved: no setting may be called so, and
-:func:`read_settings` leaves it out."""
+"""A stamp's key for the fingerprint of the dvrk_gym that made the folder's results
+(:meth:`SourceFingerprint.to_json`); reserved, and left out by :func:`read_settings`."""
 
 
 class RunFolderBusy(RuntimeError):
@@ -192,23 +191,21 @@ MAX_STAMP_BYTES = 2**20
 
 
 def _is_stamped_run_folder(folder: Path) -> bool:
-    """Whether ``folder`` is a run folder with a stamp of its own (a lock, and a JSON object
-    beside it recording a source fingerprint): its results are checked against its own
-    settings whenever a run opens it."""
-    if not (folder / LOCK_FILE).exists():
-        return False
-    for path in folder.glob("*.json"):
-        with contextlib.suppress(ValueError, OSError):
-            stamp = read_json(path, max_bytes=MAX_STAMP_BYTES)
-            if isinstance(stamp, dict) and SOURCE_KEY in stamp:
-                return True
+    """Whether ``folder`` is a run folder with a lock and a stamp of its own, which checks its results."""
+    return (folder / LOCK_FILE).exists() and any(_is_stamp(path) for path in folder.glob("*.json"))
+
+
+def _is_stamp(path: Path) -> bool:
+    """Whether ``path`` is a run folder's stamp: a JSON object recording a source fingerprint."""
+    with contextlib.suppress(ValueError, OSError):
+        stamp = read_json(path, max_bytes=MAX_STAMP_BYTES)
+        return isinstance(stamp, dict) and SOURCE_KEY in stamp
     return False
 
 
 def _unstamped_files(folder: Path) -> list[str]:
-    """The files in ``folder`` and the folders below it (caches such as ``tasks/``), as paths
-    relative to it, sorted; locks and hidden files (temporary ones) left out, and so are the
-    folders below that are stamped run folders of their own (a calibration's ``runs/cal``)."""
+    """The files in ``folder`` and below (caches such as ``tasks/``), relative to it, sorted; but
+    locks, hidden (temporary) files and stamped run folders below (a calibration's ``runs/cal``)."""
     found = []
     for here, folders, files in os.walk(folder):
         folders[:] = sorted(name for name in folders if not _is_stamped_run_folder(Path(here) / name))
@@ -219,8 +216,12 @@ def _unstamped_files(folder: Path) -> list[str]:
 
 
 def _holds_results(folder: Path, stamp: Path) -> bool:
-    """Whether ``folder`` holds anything but its stamp, lock and hidden (temporary) files."""
-    return any(not name.startswith(".") and name not in (LOCK_FILE, stamp.name) for name in os.listdir(folder))
+    """Whether ``folder`` or one below it holds a file but stamps, locks and hidden (temporary) ones."""
+    for here, _, files in os.walk(folder):  # empty folders (reproduce's figures/, a sweep's units/) hold nothing
+        for path in (Path(here) / name for name in files if not name.startswith(".") and name != LOCK_FILE):
+            if path != stamp and not (path.suffix == ".json" and path.parent != folder and _is_stamp(path)):
+                return True
+    return False
 
 
 class RunFolder:
@@ -241,8 +242,8 @@ class RunFolder:
         ValueError: the folder holds results and is stamped with other settings (the message
             lists them), or by another version of dvrk_gym (the message gives both fingerprints)
             or one whose stamps had no source fingerprint; its results and stamp are left as
-            they were. A folder holding nothing but its stamp (a run refused or stopped before
-            it made anything) is stamped afresh.
+            they were. A folder holding no file but stamps and locks (a run refused or stopped
+            before it made anything) is stamped afresh, unless this process already owns it.
         OSError: the folder cannot be made or written (a file of that name, no permission).
     """
 
@@ -252,8 +253,7 @@ class RunFolder:
             raise NotADirectoryError(f"{self.path} is a file, not a folder; give a folder for the run")
         self.path.mkdir(parents=True, exist_ok=True)
         self.stamp = self.path / stamp
-        self.made_s: dict[str, float] = {}
-        """Wall time of each result made (not loaded) by :meth:`cached`, by stage, seconds."""
+        self.made_s: dict[str, float] = {}  # wall time of each result made (not loaded) by cached(), by stage, s
         self._lock = FileLock(self.path / LOCK_FILE, timeout=0, thread_local=False, is_singleton=True)
         self._held = False
         self._acquire()
@@ -262,7 +262,7 @@ class RunFolder:
             if first_owner:
                 self._claim()
             if settings is not None:
-                self._check_and_stamp(settings)
+                self._check_and_stamp(settings, first_owner)
             if first_owner:  # only in a folder taken as this run's: a refused one is left as it was
                 remove_partial_files(self.path, skip_folders_with=LOCK_FILE)  # not inside another run's folder
         except BaseException:
@@ -316,7 +316,7 @@ class RunFolder:
             with contextlib.suppress(Exception):  # at interpreter exit the kernel drops the lock anyway
                 self.close()
 
-    def _check_and_stamp(self, settings: Mapping[str, Any]) -> None:
+    def _check_and_stamp(self, settings: Mapping[str, Any], first_owner: bool) -> None:
         wanted = json.loads(json.dumps(settings))  # tuples become lists, as they come back from the stamp
         if SOURCE_KEY in wanted:
             raise ValueError(f"{SOURCE_KEY!r} is reserved for the stamp's source fingerprint; give the setting another name")
@@ -329,7 +329,7 @@ class RunFolder:
                     f"{self.path} holds files but no settings stamp ({self.stamp.name}): {unknown[:5]}"
                     f"{' ...' if len(unknown) > 5 else ''} were made with settings nobody recorded; use an empty folder, or delete these"
                 )
-        elif not _holds_results(self.path, self.stamp):  # a run refused or stopped before making anything: nothing to protect
+        elif first_owner and not _holds_results(self.path, self.stamp):  # a run refused or stopped before making anything
             logger.info("%s holds no results yet: it is stamped with this run's settings", self.path)
         else:
             _refuse_other_source(self.stamp, found.pop(SOURCE_KEY, None), here, RESUME_REMEDY)

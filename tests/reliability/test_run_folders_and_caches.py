@@ -361,9 +361,24 @@ def test_a_folder_holding_only_its_stamp_takes_a_new_runs_settings(tmp_path):
     assert read_settings(tmp_path, "settings.json") == {"camera_resolution": [320, 180]}
 
 
-def test_a_folder_holding_a_stamped_subfolder_keeps_its_settings(tmp_path):
-    """reproduce's calibration/ is a run folder of its own: its parent holds results through it."""
+def test_a_folder_whose_subfolders_hold_no_result_takes_a_new_runs_settings_and_one_holding_one_does_not(tmp_path):
+    """reproduce makes figures/, tasks/ and calibration/ (a run folder of its own) right after
+    stamping, and a sweep units/: a run refused there still held no result."""
     RunFolder(tmp_path, {"seed": 0}).close()
+    (tmp_path / "figures").mkdir()
     RunFolder(tmp_path / "calibration", {"seed": 0}).close()
+    RunFolder(tmp_path, {"seed": 1}).close()
+    assert read_settings(tmp_path, "settings.json") == {"seed": 1}
+    with RunFolder(tmp_path / "calibration", {"seed": 1}) as calibration:
+        calibration.write_json("phase1.json", {"seed": 1})
     with pytest.raises(ValueError, match="other settings"):
-        RunFolder(tmp_path, {"seed": 1})
+        RunFolder(tmp_path, {"seed": 2})
+
+
+def test_a_second_opening_in_the_same_process_never_restamps_the_folder(tmp_path):
+    """The lock is re-entrant: an outer run that had made nothing yet had its stamp replaced."""
+    with RunFolder(tmp_path, {"seed": 0}) as outer:
+        with pytest.raises(ValueError, match="other settings"):
+            RunFolder(tmp_path, {"seed": 1})
+        outer.write_json("result.json", {"seed": 0})
+    assert read_settings(tmp_path, "settings.json") == {"seed": 0}
