@@ -17,7 +17,7 @@ import numpy as np
 from gymnasium import spaces
 
 from dvrk_gym import paper
-from dvrk_gym.envs.base import DvrkEnv, config_arguments, relax_option
+from dvrk_gym.envs.base import DvrkEnv, config_arguments
 from dvrk_gym.envs.configs import ExplorationConfig
 from dvrk_gym.sim.endoscope.stereo import StereoDetection
 from dvrk_gym.sim.robot import ik
@@ -170,7 +170,7 @@ class CalibrationExplorationEnv(DvrkEnv[ExplorationConfig]):
         corner = options.get("corner")
         corner = int(self.np_random.integers(4)) if corner is None else int(corner)
         start = kin.pose_from_euler(workspace_corners()[corner], *home_orientation())
-        self.world.reset_robot(ik.inverse_kinematics(start), relax=relax_option(options, seeded=True))  # relaxed unless asked
+        self.world.reset_robot(ik.inverse_kinematics(start), relax=bool(options.get("relax", True)))  # checked by _check_options
         self._steps = 0
         observation = self._observe()
         return observation, self._info(np.zeros(6, dtype=bool), np.zeros(6, dtype=bool), corner=corner)

@@ -217,11 +217,8 @@ def _unstamped_files(folder: Path) -> list[str]:
 
 def _holds_results(folder: Path, stamp: Path) -> bool:
     """Whether ``folder`` or one below it holds a file but stamps, locks and hidden (temporary) ones."""
-    for here, _, files in os.walk(folder):  # empty folders (reproduce's figures/, a sweep's units/) hold nothing
-        for path in (Path(here) / name for name in files if not name.startswith(".") and name != LOCK_FILE):
-            if path != stamp and not (path.suffix == ".json" and path.parent != folder and _is_stamp(path)):
-                return True
-    return False
+    files = (Path(here) / name for here, _, names in os.walk(folder) for name in names if not name.startswith(".") and name != LOCK_FILE)
+    return any(path != stamp and not (path.suffix == ".json" and path.parent != folder and _is_stamp(path)) for path in files)
 
 
 class RunFolder:
@@ -242,8 +239,8 @@ class RunFolder:
         ValueError: the folder holds results and is stamped with other settings (the message
             lists them), or by another version of dvrk_gym (the message gives both fingerprints)
             or one whose stamps had no source fingerprint; its results and stamp are left as
-            they were. A folder holding no file but stamps and locks (a run refused or stopped
-            before it made anything) is stamped afresh, unless this process already owns it.
+            they were; but a folder with no file but stamps and locks (a run refused before it made
+            anything) is stamped afresh, unless this process already owns it.
         OSError: the folder cannot be made or written (a file of that name, no permission).
     """
 
@@ -329,15 +326,18 @@ class RunFolder:
                     f"{self.path} holds files but no settings stamp ({self.stamp.name}): {unknown[:5]}"
                     f"{' ...' if len(unknown) > 5 else ''} were made with settings nobody recorded; use an empty folder, or delete these"
                 )
-        elif first_owner and not _holds_results(self.path, self.stamp):  # a run refused or stopped before making anything
-            logger.info("%s holds no results yet: it is stamped with this run's settings", self.path)
         else:
-            _refuse_other_source(self.stamp, found.pop(SOURCE_KEY, None), here, RESUME_REMEDY)
-            if found != wanted:
-                differences = "; ".join(settings_differences(found, wanted))
-                raise ValueError(
-                    f"{self.path} holds a run with other settings ({differences}; see {self.stamp}); use another --out or delete it"
-                )
+            try:
+                _refuse_other_source(self.stamp, found.pop(SOURCE_KEY, None), here, RESUME_REMEDY)
+                if found != wanted:
+                    differences = "; ".join(settings_differences(found, wanted))
+                    raise ValueError(
+                        f"{self.path} holds a run with other settings ({differences}; see {self.stamp}); use another --out or delete it"
+                    )
+            except ValueError:  # taken all the same when a run was refused or stopped before it made anything
+                if not first_owner or _holds_results(self.path, self.stamp):
+                    raise
+                logger.info("%s holds no results yet: it is stamped with this run's settings instead", self.path)
         atomic_write_json(self.stamp, {**wanted, SOURCE_KEY: here.to_json()}, indent=1, sort_keys=True)
 
     def file(self, name: str) -> Path:
