@@ -189,6 +189,11 @@ def test_a_pick_aborted_by_a_physics_failure_counts_no_fragment_as_taken_by_anot
     _, _, terminated, _, info = env.step(oracle_action(_first_on_paper(env)))
     assert terminated and info["sim_error"] and info["picks"] == 0
     assert (info["unpicked_delivered"], info["unpicked_lost"], info["unpicked_on_paper"]) == (0, 0, 0)
+    # the same keys as a judged pick's (they were missing: info["outcome"] raised KeyError)
+    judged = make(fragment="raisin", contact="rigid")
+    judged.reset(seed=0)
+    assert set(info) == set(judged.step(oracle_action(_first_on_paper(judged)))[4])
+    assert info["outcome"] is None and info["pick_fragment"] == -1 and info["pick_time_s"] == 0.0
 
 
 def test_a_pick_sent_under_the_paper_slides_its_jaws_as_a_grid_touch_does(make):

@@ -23,6 +23,8 @@ AGENT_DESCRIPTIONS: dict[str, str] = {
 }
 """One line per agent, for help texts and tables."""
 
+DEFAULT_EVAL_POINTS = 20
+"""Evaluations along a learning curve unless asked otherwise (a training of fewer env steps has one a step)."""
 MAX_EVAL_POINTS = 10_000
 """The most evaluations along a learning curve (``TrainConfig.eval_points``; a profile's ``rl_eval_points``)."""
 

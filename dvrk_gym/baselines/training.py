@@ -28,7 +28,7 @@ from tqdm.auto import tqdm
 
 from dvrk_gym import paper
 from dvrk_gym.baselines.agents import AgentSpec, build_model, get_agent
-from dvrk_gym.baselines.budgets import CALIBRATOR_MOVES, DEBRIDEMENT_ID, MAX_EVAL_POINTS
+from dvrk_gym.baselines.budgets import CALIBRATOR_MOVES, DEBRIDEMENT_ID, DEFAULT_EVAL_POINTS, MAX_EVAL_POINTS
 from dvrk_gym.baselines.picking import GripOffsetLog
 from dvrk_gym.baselines.resume import ResetRecorder, TrainingStateError, TrainingStateWriter, restore_training_state
 from dvrk_gym.baselines.wrappers import TRAINING_YAWS
@@ -68,7 +68,8 @@ class TrainConfig:
             (GridTouch agents; a pick's yaw comes from its fragment).
         n_envs: parallel training envs (each step of the vector env is ``n_envs`` moves).
         vec_env: "dummy" (one process) or "subproc" (a process per env).
-        eval_points: evaluations along the learning curve (plus one before training).
+        eval_points: evaluations along the learning curve (plus one before training); at
+            most one per env step, so a shorter training has ``steps``.
         curve_trials: pick agents: debridement trials (of eight picks) per curve point.
         torch_threads: torch's intra-op threads while training (restored after). One is
             fastest here: small networks on 2 shared cores ran 12x slower with two threads.
@@ -85,7 +86,7 @@ class TrainConfig:
     training_yaws: str = "paper"
     n_envs: int = 1
     vec_env: str = "dummy"
-    eval_points: int = 20
+    eval_points: int = DEFAULT_EVAL_POINTS
     curve_trials: int = CURVE_TRIALS
     torch_threads: int = 1
     env_overrides: dict[str, Any] = field(default_factory=dict)

@@ -10,6 +10,7 @@ import argparse
 from pathlib import Path
 
 from dvrk_gym import paper
+from dvrk_gym.baselines.budgets import DEFAULT_EVAL_POINTS, MAX_EVAL_POINTS
 from dvrk_gym.cli.options import add_instrument_options, add_progress_option, writable_folder
 from dvrk_gym.utils.atomic import atomic_write_json, atomic_write_text
 from dvrk_gym.utils.checks import check_int
@@ -42,6 +43,11 @@ def _run_train(args: argparse.Namespace) -> int:
         check_int("--steps", args.steps, 1, 10**9)
     save_every = check_int("--save-every", args.save_every, 1, 10**9)
     steps = resolve_budget(args.budget, args.steps)
+    eval_points = DEFAULT_EVAL_POINTS if args.eval_points is None else check_int("--eval-points", args.eval_points, 1, MAX_EVAL_POINTS)
+    if args.eval_points is not None and eval_points > steps:
+        raise ValueError(
+            f"--eval-points {eval_points} is more than the {steps} env steps trained: a learning curve has at most one point a step"
+        )
     picks = AGENT_ENVS[args.algo] == DEBRIDEMENT_ID
     if picks and args.reward is not None:
         raise ValueError(f"--reward chooses GridTouch's reward; {args.algo} learns Debridement-v0 with its shaped pick reward")
@@ -61,7 +67,7 @@ def _run_train(args: argparse.Namespace) -> int:
         training_yaws=args.training_yaws,
         n_envs=args.n_envs,
         vec_env=args.vec_env,
-        eval_points=args.eval_points,
+        eval_points=eval_points,
         overrides=overrides,
         env_overrides=env_overrides,
     )
@@ -261,7 +267,11 @@ def _add_train(subparsers: argparse._SubParsersAction) -> None:
         "--vec-env", choices=("dummy", "subproc"), default="dummy", help="vector env for --n-envs > 1 (default: %(default)s)"
     )
     train.add_argument("--learning-starts", type=int, help="random moves before learning (default: the agent's, 200; sac_pick 100)")
-    train.add_argument("--eval-points", type=int, default=20, help="evaluations along the learning curve (default: %(default)s)")
+    train.add_argument(
+        "--eval-points",
+        type=int,
+        help=f"evaluations along the learning curve, at most one per env step (default: {DEFAULT_EVAL_POINTS}; fewer if shorter)",
+    )
     train.add_argument(
         "--save-every",
         type=int,

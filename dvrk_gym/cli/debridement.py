@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import Any
 
 from dvrk_gym import paper
 from dvrk_gym.cli.options import add_instrument_options, add_progress_option, writable_folder
@@ -20,9 +21,42 @@ from dvrk_gym.sim.table.contact import CONTACTS, DEFAULT_CONTACT
 from dvrk_gym.utils.checks import check_endoscope_resolution, check_int
 
 
+def _calibration_instrument(args: argparse.Namespace, stamped: dict[str, Any]) -> dict[str, Any]:
+    """The instrument and endoscope of the picks: the calibration folder's (``stamped``), else the flags', else the paper's.
+
+    Raises:
+        ValueError: a flag out of range, or one that differs from the folder's (it would be ignored).
+    """
+    if args.bias_seed is not None:
+        check_int("--bias-seed", args.bias_seed, 0, 2**31 - 1)
+    if args.resolution is not None:
+        check_endoscope_resolution("--resolution", args.resolution)
+    given = {
+        "bias": args.bias,
+        "bias_seed": args.bias_seed,
+        "camera_resolution": None if args.resolution is None else list(args.resolution),
+    }
+    for key, flag in (("bias", "--bias"), ("bias_seed", "--bias-seed"), ("camera_resolution", "--resolution")):
+        if given[key] is not None and key in stamped and given[key] != stamped[key]:
+            raise ValueError(
+                f"{flag} {given[key]} differs from the {stamped[key]} that {args.calibration} was calibrated with; the picks "
+                f"go through its calibration's instrument and endoscope, so leave {flag} out (or calibrate another folder)"
+            )
+    defaults = {"bias": "paper", "bias_seed": 0, "camera_resolution": paper.ENDOSCOPE_RESOLUTION_PX}
+    world = {key: stamped.get(key, defaults[key] if given[key] is None else given[key]) for key in defaults}
+    return {
+        "bias": world["bias"],
+        "bias_seed": check_int(f"the bias_seed in {args.calibration}'s settings", world["bias_seed"], 0, 2**31 - 1),
+        # the picks see through the endoscope the calibration was made with, as its instrument
+        "camera_resolution": check_endoscope_resolution(
+            f"the camera_resolution in {args.calibration}'s settings", world["camera_resolution"]
+        ),
+    }
+
+
 def _run_debride(args: argparse.Namespace) -> int:
     from dvrk_gym.calibration.loading import load_calibrator
-    from dvrk_gym.calibration.pipeline import CALIBRATOR_FILES, RETIRED_CALIBRATOR_FILES
+    from dvrk_gym.calibration.pipeline import CALIBRATOR_FILES, RETIRED_CALIBRATOR_FILES, read_pipeline_settings
     from dvrk_gym.calibration.policy import CalibratedPolicy
     from dvrk_gym.envs.debridement import fragment_target
     from dvrk_gym.evaluation.trials import cell_label, cell_name, format_trial_table, run_debridement, save_cell
@@ -42,18 +76,10 @@ def _run_debride(args: argparse.Namespace) -> int:
             f"--calibration {args.calibration} {found}; give the folder of a calibration run ('dvrk-gym calibrate'), "
             "or add --calibrate to run the calibration there first"
         )
+    world = _calibration_instrument(args, read_pipeline_settings(args.calibration) or {})
     writable_folder(args.out)
-    calibrator, settings = load_calibrator(
-        args.calibration, args.calibrator, args.bias, args.bias_seed, tuple(args.resolution), calibrate_if_missing=args.calibrate
-    )
-    bias = settings.get("bias", args.bias)
-    # the picks see through the endoscope the calibration was made with, as its instrument
-    resolution = check_endoscope_resolution(
-        f"the camera_resolution in {args.calibration}'s settings", settings.get("camera_resolution", args.resolution)
-    )
-    bias_seed = check_int(f"the bias_seed in {args.calibration}'s settings", settings.get("bias_seed", args.bias_seed), 0, 2**31 - 1)
+    calibrator, _ = load_calibrator(args.calibration, args.calibrator, **world, calibrate_if_missing=args.calibrate)
     policy = CalibratedPolicy(calibrator, target=fragment_target)
-    world = {"bias": bias, "bias_seed": bias_seed, "camera_resolution": resolution}
     trials = run_debridement(policy, args.trials, args.seed, args.fragment, **world, progress=not args.no_progress, contact=args.contact)
     text = format_trial_table(trials, args.calibrator, args.fragment, args.seed)
     print(text)
@@ -62,9 +88,8 @@ def _run_debride(args: argparse.Namespace) -> int:
         "fragment": args.fragment,
         "seed": args.seed,
         "calibration": str(args.calibration),
-        "bias": bias,
-        "bias_seed": bias_seed,
-        "camera_resolution": list(resolution),
+        **world,
+        "camera_resolution": list(world["camera_resolution"]),
         "contact": args.contact,
     }
     other_paper = args.contact != DEFAULT_CONTACT
@@ -109,6 +134,6 @@ def add_commands(subparsers: argparse._SubParsersAction) -> None:
         "authors' records of their table's runs show) or rigid (they stall in place) (default: %(default)s)",
     )
     debride.add_argument("--out", type=Path, default=Path("dvrk_gym_out/debridement"), help="output folder (default: %(default)s)")
-    add_instrument_options(debride, note=", with --calibrate if the folder has no run yet")
+    add_instrument_options(debride, from_folder="--calibration")
     add_progress_option(debride)
     debride.set_defaults(func=_run_debride)

@@ -72,29 +72,34 @@ def check_flag_bounds(
             parser.error(str(error))
 
 
-def add_instrument_options(parser: argparse.ArgumentParser, resolution: bool = True, note: str = "") -> None:
+def add_instrument_options(parser: argparse.ArgumentParser, resolution: bool = True, from_folder: str = "") -> None:
     """``--bias`` and ``--bias-seed`` (the simulated instrument), and ``--resolution`` (the endoscope's image size).
 
     Args:
         parser: the command's parser.
         resolution: also add ``--resolution W H`` (pixels).
-        note: words added to each help text (such as when the option applies).
+        from_folder: for a command whose run folder (this flag) fixes the instrument: the
+            options default to None (the folder's), and the command refuses a value that
+            differs from the folder's.
     """
-    parser.add_argument("--bias", default="paper", help=f"cable bias preset: none, paper or severe{note} (default: %(default)s)")
-    parser.add_argument("--bias-seed", type=int, default=0, help=f"which instrument to draw{note} (default: %(default)s)")
+    default_bias, default_seed = ("paper", 0) if not from_folder else (None, None)
+    note = f" (default: {from_folder}'s; for a folder with no run yet, %s)" if from_folder else " (default: %s)"
+    parser.add_argument("--bias", default=default_bias, help="cable bias preset: none, paper or severe" + note % "paper")
+    parser.add_argument("--bias-seed", type=int, default=default_seed, help="which instrument to draw" + note % "0")
     if resolution:
-        add_resolution_option(parser)
+        add_resolution_option(parser, from_folder=from_folder)
 
 
-def add_resolution_option(parser: argparse.ArgumentParser) -> None:
-    """``--resolution W H``: the endoscope's image size, pixels."""
+def add_resolution_option(parser: argparse.ArgumentParser, from_folder: str = "") -> None:
+    """``--resolution W H``: the endoscope's image size, pixels (``from_folder``: as in :func:`add_instrument_options`)."""
+    note = f"{from_folder}'s; for a folder with no run yet, 1920 1080" if from_folder else "1920 1080"
     parser.add_argument(
         "--resolution",
         type=int,
         nargs=2,
-        default=(1920, 1080),
+        default=None if from_folder else (1920, 1080),
         metavar=("W", "H"),
-        help="endoscope image size in pixels (default: 1920 1080)",
+        help=f"endoscope image size in pixels (default: {note})",
     )
 
 

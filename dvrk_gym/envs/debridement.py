@@ -31,6 +31,7 @@ fragments the endoscope sees (:mod:`dvrk_gym.sim.endoscope.fragment_detection`).
 
 from __future__ import annotations
 
+import copy
 import logging
 import math
 from dataclasses import dataclass, field
@@ -56,7 +57,7 @@ from dvrk_gym.envs.exploration import CAMERA_BOX_HIGH_M, CAMERA_BOX_LOW_M, encod
 from dvrk_gym.envs.grid_touch import ACTION_HIGH as PICK_HIGH
 from dvrk_gym.envs.grid_touch import ACTION_LOW as PICK_LOW
 from dvrk_gym.envs.grid_touch import tool_pose
-from dvrk_gym.envs.picks import CLOSED_JAW_RAD, PHASES, PickPrimitive, PickRun
+from dvrk_gym.envs.picks import ABORTED_PICK_INFO, CLOSED_JAW_RAD, PHASES, PickPrimitive, PickRun
 from dvrk_gym.sim.endoscope.fragment_detection import MAX_FRAGMENTS, FragmentDetection, FragmentObserver
 from dvrk_gym.sim.robot import ik
 from dvrk_gym.sim.robot import kinematics as kin
@@ -220,7 +221,8 @@ class DebridementEnv(DvrkEnv[DebridementConfig]):
             observation = self._observe() if error is None else self._last_observation
         except (pybullet.error, ValueError, FloatingPointError, np.linalg.LinAlgError) as failure:
             logger.warning("the simulation failed during a step: %s", failure, exc_info=logger.isEnabledFor(logging.DEBUG))
-            reward, info, error, observation = 0.0, {}, f"{type(failure).__name__}: {failure}", self._last_observation
+            info = copy.deepcopy(ABORTED_PICK_INFO) if self.primitive else {}  # the same keys as a judged pick's
+            reward, error, observation = 0.0, f"{type(failure).__name__}: {failure}", self._last_observation
         episode.steps += 1
         info.update(self._episode_info(failed=error is not None))
         info["clamped"] = self._clamped_names(clamped) + info.pop("clamped_joints", [])

@@ -39,6 +39,19 @@ eight raisins dropped at one point pile over the rim."""
 TEACH_ITERATIONS = 4
 """Fixed-point iterations that find the command putting the true jaw tip on a drop point."""
 
+ABORTED_PICK_INFO: dict[str, object] = {
+    "outcome": None,
+    "pick_fragment": -1,
+    "true_grip_offset_ratio": float("inf"),
+    "true_grip_offset_m": None,
+    "true_tip_at_grip": None,
+    "true_tip_above_fragment_m": None,
+    "phase_times_s": dict.fromkeys(PHASES, 0.0),
+    "pick_time_s": 0.0,
+}
+"""A pick's step info when the physics failed with an exception during it: the pick has no
+outcome (None), judged no fragment (-1) and took no time that counts."""
+
 
 @dataclass(frozen=True)
 class PickRun:

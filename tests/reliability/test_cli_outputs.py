@@ -196,6 +196,7 @@ REFUSED_BEFORE_ANY_WORK = [
     (["debride", "--calibrate", "--bias-seed", "-1"], "--bias-seed"),
     (["baseline", "train", "--algo", "sac", "--n-envs", "0"], "--n-envs"),
     (["baseline", "train", "--algo", "sac", "--eval-points", "-1"], "--eval-points"),
+    (["baseline", "train", "--algo", "sac", "--eval-points", "11", "--steps", "10"], "--eval-points 11 is more than the 10 env steps"),
     (["baseline", "train", "--algo", "sac", "--seed", "-1"], "--seed"),
     (["baseline", "train", "--algo", "sac", "--steps", "-1"], "--steps"),
     (["evaluate", "--episodes", "3"], "--policy only"),
@@ -308,10 +309,28 @@ def test_debride_picks_through_the_endoscope_its_calibration_was_made_with(small
     """The calibration was made at 640 x 360; debride ran its picks at --resolution's default,
     1920 x 1080, and recorded that, with no word of the difference."""
     out = tmp_path / "out"
-    assert main(["debride", "--calibration", str(small_calibration), "--trials", "1", "--out", str(out), "--no-progress"]) == 0
+    argv = ["debride", "--calibration", str(small_calibration), "--trials", "1", "--out", str(out), "--no-progress"]
+    assert main([*argv, "--bias", "paper", "--bias-seed", "0"]) == 0  # the folder's own instrument, given again
     capsys.readouterr()
     (cell,) = out.glob("*.json")
     assert json.loads(cell.read_text())["camera_resolution"] == [640, 360]
+
+
+@pytest.mark.parametrize(
+    "flags, word",
+    [
+        (["--bias", "severe"], "--bias severe differs from the paper"),
+        (["--bias-seed", "3"], "--bias-seed 3 differs from the 0"),
+        (["--resolution", "1920", "1080"], "--resolution [1920, 1080] differs from the [640, 360]"),
+    ],
+)
+def test_debride_refuses_an_instrument_other_than_its_calibrations(small_calibration, tmp_path, capsys, flags, word):
+    """The picks go through the calibration folder's instrument; a flag naming another one was
+    ignored without a word (the trial table then said it was the folder's). It is refused
+    before anything is written; the same flag with the folder's own value runs (above)."""
+    out = tmp_path / "out"
+    _fails_in_one_line(capsys, ["debride", "--calibration", str(small_calibration), "--out", str(out), *flags], word)
+    assert not out.exists()
 
 
 @pytest.mark.parametrize(
