@@ -23,6 +23,10 @@ REFUSALS = [
     ("bench_sweep", ["--workers", "0"], "--workers must be"),
     ("bench_models", ["--folds", "0"], "--folds must be"),
     ("bench_faults", ["--workers", "0"], "--workers must be"),
+    ("bench_fidelity", ["--workers", "0"], "--workers must be"),
+    ("bench_fidelity", ["--seeds", "1", "1"], "--seeds must be at most 100 distinct"),
+    ("bench_fidelity", ["--bias-seeds", "-1"], "--bias-seeds must be"),
+    ("bench_fidelity", ["--resolution", "640", "480"], "--resolution"),
 ]
 
 

@@ -2,6 +2,7 @@
 
 import dataclasses
 import json
+import sys
 from unittest import mock
 
 import gymnasium as gym
@@ -147,6 +148,19 @@ def test_policies_of_every_kind_are_accepted_and_bad_specs_are_clear_errors():
     ):
         with pytest.raises(ValueError, match=message):
             load_policy_factory(spec)
+
+
+def test_a_policy_module_in_the_current_folder_is_found_as_an_installed_command_would_look(tmp_path, monkeypatch):
+    """The installed ``dvrk-gym`` has neither the current folder nor "" on its import path (as
+    ``python -m`` has), so ``--policy mypolicy:make`` beside the user was "cannot import"."""
+    (tmp_path / "mypolicy_beside_the_user.py").write_text("def make(env):\n    return lambda observation: 7\n")
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(sys, "path", [p for p in sys.path if p not in ("", str(tmp_path))])
+    path_before = list(sys.path)
+    factory = load_policy_factory("mypolicy_beside_the_user:make")
+    assert factory(None)(None) == 7
+    assert sys.path == path_before  # the folder was looked in, not left on the path
+    monkeypatch.delitem(sys.modules, "mypolicy_beside_the_user")
 
 
 def test_a_factory_that_does_not_take_the_env_is_refused_and_a_factorys_own_type_error_comes_through():

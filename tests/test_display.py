@@ -262,6 +262,45 @@ def test_auto_falls_back_to_tinyrenderer_with_one_log_line_when_egl_cannot_start
         insisting.image(world.physics, "left")
 
 
+FORKED_AFTER_EGL = """
+import multiprocessing, os, gymnasium as gym, dvrk_gym
+from dvrk_gym.sim.physics.mirror import RendererUnavailable
+kwargs = dict(camera_resolution=(320, 180), render_mode="rgb_array", render_resolution=(160, 96))
+parent = gym.make("dvrk_gym/GridTouch-v0", **kwargs); parent.reset(seed=0); parent.render()
+def child(renderer):
+    env = gym.make("dvrk_gym/GridTouch-v0", renderer=renderer, **kwargs); env.reset(seed=0)
+    try:
+        frame = env.render()
+        print("CHILD", renderer, frame.shape, env.unwrapped._display.renderer, flush=True)
+    except RendererUnavailable as error:
+        print("CHILD", renderer, "refused:", "forked" in str(error) and "spawn" in str(error), flush=True)
+    os._exit(0)
+for renderer in ("auto", "egl"):
+    process = multiprocessing.get_context("fork").Process(target=child, args=(renderer,))
+    process.start(); process.join(90)
+    if process.is_alive():
+        process.kill(); print("CHILD", renderer, "hung", flush=True)
+print("PARENT", parent.render().shape, parent.unwrapped._display.renderer, flush=True)
+"""
+
+
+@needs_egl
+def test_a_process_forked_after_egl_drew_renders_with_tinyrenderer_instead_of_hanging():
+    """An async vector env forks its workers: a worker reusing the parent's EGL client crashed,
+    and one starting its own hung in its first frame. Such a process draws with TinyRenderer
+    ("auto") or is refused in one line ("egl"); the parent still draws with EGL."""
+    done = subprocess.run(
+        [sys.executable, "-c", FORKED_AFTER_EGL],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        env={**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[1])},
+    )
+    assert done.returncode == 0, done.stderr[-2000:]
+    said = [line for line in done.stdout.splitlines() if line.startswith(("CHILD", "PARENT"))]
+    assert said == ["CHILD auto (96, 160, 3) tiny", "CHILD egl refused: True", "PARENT (96, 160, 3) egl"], done.stdout
+
+
 @pytest.mark.slow
 @pytest.mark.skipif(not (shutil.which("unshare") and hasattr(os, "geteuid") and os.geteuid() == 0), reason="needs root and unshare")
 def test_without_libegl_render_falls_back_to_tinyrenderer_in_the_same_process():

@@ -53,6 +53,21 @@ def test_successive_episodes_tour_the_35_circles_and_seed_restarts_the_tour(make
     assert info["circle_index"] == 6  # from the last row's -x end back to the first row's +x end
 
 
+def test_a_seed_alone_fixes_the_episode_whatever_yaw_the_episodes_before_it_set(make_env):
+    """A seeded reset kept the yaw setting of earlier episodes: reset(seed=0) touched at yaw 0.5
+    after a {"yaw": 0.5} episode, and at a random yaw after {"yaw": "random"}."""
+    fresh = make_env("dvrk_gym/GridTouch-v0")
+    expected = fresh.reset(seed=0)
+    for earlier in ({"yaw": 0.5}, {"yaw": "random"}):
+        env = make_env("dvrk_gym/GridTouch-v0")
+        env.reset(seed=1, options=earlier)
+        observation, info = env.reset(seed=0)
+        assert info["target_yaw"] == 0.0 and info == pytest.approx(expected[1])
+        assert all(np.array_equal(observation[key], expected[0][key]) for key in observation)
+        _, info = env.reset(options={"yaw": 0.5})
+        assert env.reset()[1]["target_yaw"] == 0.5  # an unseeded reset keeps the setting
+
+
 def test_the_tour_is_the_authors_order_row_by_row_along_y_each_row_from_plus_x_to_minus_x(make_env):
     env = make_env("dvrk_gym/GridTouch-v0")
     centres = env.unwrapped.circle_centers[list(TOUR)]

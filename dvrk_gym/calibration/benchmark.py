@@ -8,6 +8,7 @@ and the circle's centre, over the 35 circles, in pixels (left image) and millime
 from __future__ import annotations
 
 import logging
+import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -76,7 +77,7 @@ def touch_grid_episodes(
         seed=seed,
         options=lambda i: {"yaw": yaw, "circle": int(order[i]), "relax": i == 0},
         progress=progress,
-        description=f"touch grid ({yaw})",
+        description=f"touch grid ({yaw if isinstance(yaw, str) else f'yaw {math.degrees(yaw):+.0f} deg'})",
     )
 
 

@@ -252,7 +252,7 @@ def _add_train(subparsers: argparse._SubParsersAction) -> None:
     )
     train.add_argument("--steps", type=int, help="an explicit number of env steps (overrides --budget), for tests and quick runs")
     train.add_argument("--seed", type=int, default=0, help="seeds the model and the envs (default: %(default)s)")
-    train.add_argument("--out", type=Path, help="output folder (default: dvrk_gym_out/baselines/<algo>_<budget>_seed<seed>)")
+    train.add_argument("--out", type=Path, help="output folder (default: dvrk_gym_out/baselines/<algo>_<budget or --steps>_seed<seed>)")
     add_instrument_options(train)
     train.add_argument(
         "--training-yaws",

@@ -198,7 +198,8 @@ def add_commands(subparsers: argparse._SubParsersAction) -> None:
         help="Phase I: run the paper's random exploration and save the data",
         description="Collect the paper's Phase I in --out (phase1.npz: the raw rows and the kept ones), as the authors' "
         "collector ran it: trajectories from the four corners, a pause every 2 mm, random rotations at each pause. The "
-        "folder is stamped as calibrate stamps it, so `dvrk-gym calibrate --out` with the same options resumes from it.",
+        "folder is stamped as calibrate stamps it, so `dvrk-gym calibrate --out` with the same options (and its default --epochs) "
+        "resumes from it.",
     )
     collect.add_argument("--out", type=Path, default=Path("dvrk_gym_out/calibration"), help="output folder (default: %(default)s)")
     collect.add_argument("--trajectories", type=int, default=paper.PHASE1_TRAJECTORIES, help="trajectories (the paper: %(default)s)")

@@ -85,6 +85,11 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _command(args: argparse.Namespace) -> str:
+    """The command as typed: ``"baseline train"`` for a subcommand."""
+    return " ".join(filter(None, (args.command, getattr(args, "baseline_command", None))))
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``dvrk-gym`` console script."""
     args = build_parser().parse_args(argv)
@@ -96,12 +101,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         return int(args.func(args))
     except (ValueError, OSError, RunFolderBusy) as error:  # bad input, unwritable output, a folder in use: one line, status 2
         remove_empty_created_folders()
-        print(f"dvrk-gym {args.command}: error: {_one_line(error, args)}", file=sys.stderr)
+        print(f"dvrk-gym {_command(args)}: error: {_one_line(error, args)}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         remove_empty_created_folders()
         kept = "cached stages are kept: the same command resumes" if keeps_work_when_interrupted(args) else "nothing is kept: run it again"
-        print(f"dvrk-gym {args.command}: interrupted ({kept})", file=sys.stderr)
+        print(f"dvrk-gym {_command(args)}: interrupted ({kept})", file=sys.stderr)
         return 130
 
 

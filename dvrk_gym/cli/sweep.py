@@ -7,7 +7,7 @@ import sys
 from pathlib import Path
 
 from dvrk_gym import paper
-from dvrk_gym.cli.options import add_executor_options, add_progress_option, add_resolution_option, make_executor
+from dvrk_gym.cli.options import add_executor_options, add_progress_option, add_resolution_option, make_executor, writable_folder
 
 
 def _run_sweep(args: argparse.Namespace) -> int:
@@ -22,6 +22,7 @@ def _run_sweep(args: argparse.Namespace) -> int:
             n_trajectories=args.trajectories, dnn_epochs=args.epochs, bias=args.bias, camera_resolution=tuple(args.resolution)
         ),
     )
+    writable_folder(args.out)  # before the grid is announced: an --out that cannot hold it is refused first
     executor = make_executor(args)
     units = len(settings.units())
     print(f"sweep: {len(settings.bias_seeds)} instruments x {len(settings.seeds)} seeds = {units} units on {executor.description}")

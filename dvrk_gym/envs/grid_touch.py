@@ -104,7 +104,8 @@ class GridTouchEnv(DvrkEnv[GridTouchConfig]):
     Reset options:
         ``"yaw"``: a yaw (rad, in [-pi/2, pi/2]) for this and later circles, or
             ``"random"``: a random yaw per circle (the paper's sixth setting). Default 0;
-            the setting persists until changed.
+            the setting persists through unseeded resets; a seeded one returns it to 0, as
+            a fresh env has it.
         ``"circle"``: which circle (0-34, row-major) to touch; default: the next one of
             the authors' tour (:data:`TOUR`; its first, circle 6, after a seeded reset).
         ``"relax"``: True starts the episode at home (``HOME_POSITION_M``, yaw 0) with
@@ -113,8 +114,8 @@ class GridTouchEnv(DvrkEnv[GridTouchConfig]):
             if it has not touched since the last reset) and its cables keep their
             history, so each touch meets the hysteresis the touches before it left, as on
             the real robot, which lifted from one circle and went on to the next.
-            Default: True for a seeded reset (a seed then fixes the episode, given the
-            yaw setting, which persists: give ``"yaw"`` with the seed), False otherwise;
+            Default: True for a seeded reset (a seed then fixes the episode: the tour,
+            the yaw setting and the cables start as in a fresh env), False otherwise;
             ``reset(seed=s, options={"relax": False})`` keeps the history with a new
             random stream (the same seed and history give the same episode).
     """
@@ -192,8 +193,8 @@ class GridTouchEnv(DvrkEnv[GridTouchConfig]):
             raise ValueError(f"carried '_touched' must be True or False, got {attributes['_touched']!r}")
 
     def _reset_episode(self, options: dict[str, Any]) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
-        if self._seeded_reset:
-            self._next_circle = TOUR[0]  # a seed starts the tour again
+        if self._seeded_reset:  # a seed starts the tour again at a fresh env's yaw: it alone fixes the episode
+            self._next_circle, self._yaw_setting = TOUR[0], 0.0
         if "yaw" in options:
             self._yaw_setting = _check_yaw_option(options["yaw"])
         self._circle = int(options.get("circle", self._next_circle))

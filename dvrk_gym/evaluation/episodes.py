@@ -12,6 +12,8 @@ from __future__ import annotations
 
 import importlib
 import inspect
+import os
+import sys
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from typing import Any
@@ -59,14 +61,23 @@ def as_policy(policy: Any) -> Policy:
 
 
 def load_policy_factory(spec: str) -> Callable[[gym.Env], Any]:
-    """Import ``"package.module:factory"``: a function taking the env, returning a policy."""
+    """Import ``"package.module:factory"`` (from the import path or the current folder): a function taking the env, returning a policy."""
     module_name, _, attribute = spec.partition(":")
     if not module_name or not attribute:
         raise ValueError(f"--policy must look like 'package.module:factory', got {spec!r}")
+    # The current folder too, as `python -m` would look: an installed command's import path
+    # lacks it, so a policy file beside the user was not found.
+    here = os.getcwd()
+    added = here not in sys.path and "" not in sys.path
+    if added:
+        sys.path.insert(0, here)
     try:
         module = importlib.import_module(module_name)
     except ImportError as error:
-        raise ValueError(f"cannot import {module_name!r} for --policy: {error}") from None
+        raise ValueError(f"cannot import {module_name!r} for --policy (from the import path and the current folder): {error}") from None
+    finally:
+        if added:
+            sys.path.remove(here)
     try:
         factory = getattr(module, attribute)
     except AttributeError:

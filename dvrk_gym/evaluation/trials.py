@@ -187,7 +187,8 @@ def unpicked_note(total: Mapping[str, Any]) -> str:
 def format_trial_table(trials: list[Trial], calibrator: str, fragment: str, seed: int = 0) -> str:
     """The paper's trial table in text: one row per trial, totals, the paper's figures beside."""
     label = paper.METHOD_LABELS.get(calibrator, calibrator)
-    lines = [f"Debridement of {paper.FRAGMENT_LABELS.get(fragment, fragment)} with {label}: {len(trials)} trials (seed {seed})"]
+    count = f"{len(trials)} trial" + ("" if len(trials) == 1 else "s")
+    lines = [f"Debridement of {paper.FRAGMENT_LABELS.get(fragment, fragment)} with {label}: {count} (seed {seed})"]
     lines.append(f"{'trial':>5}  {'outcomes':<17}{'successes':>10}{'s/fragment':>12}")
     for i, trial in enumerate(trials, start=1):
         note = f"  sim error: {trial.sim_error}" if trial.sim_error else ""

@@ -268,7 +268,7 @@ def test_a_refused_command_prints_one_line_without_pybullets_banner():
     command's stderr is its one error line."""
     done = run_cli("baseline", "train", "--algo", "sac", "--n-envs", "0", timeout_s=120.0)
     assert done.returncode == 2
-    assert done.stderr.splitlines() == ["dvrk-gym baseline: error: --n-envs must be an int in [1, 64], got 0"], done.stderr
+    assert done.stderr.splitlines() == ["dvrk-gym baseline train: error: --n-envs must be an int in [1, 64], got 0"], done.stderr
 
 
 def test_a_refused_command_keeps_an_existing_folder_and_its_files(capsys, tmp_path):
@@ -303,6 +303,18 @@ def test_a_refused_command_does_not_remove_folders_an_earlier_call_made(capsys, 
     made = writable_folder(tmp_path / "made")  # as an earlier command in this process would
     _fails_in_one_line(capsys, ["baseline", "evaluate", "--model", "missing.zip", "--out", str(tmp_path / "other")], "missing.zip")
     assert made.is_dir() and not (tmp_path / "other").exists()
+
+
+def test_sweep_refuses_an_out_that_is_a_file_before_announcing_its_grid(capsys, tmp_path):
+    """It printed "sweep: 5 instruments x 1 seeds = 5 units on ..." and then the refusal."""
+    (tmp_path / "afile").write_text("x")
+    status = main(["sweep", "--out", str(tmp_path / "afile")])
+    captured = capsys.readouterr()
+    assert status == 2 and captured.out == "" and "is a file, not a folder" in captured.err
+
+
+def test_a_subcommands_error_names_it_as_typed(capsys):
+    _fails_in_one_line(capsys, ["baseline", "evaluate", "--model", "missing.zip"], "dvrk-gym baseline evaluate: error:")
 
 
 def test_debride_picks_through_the_endoscope_its_calibration_was_made_with(small_calibration, tmp_path, capsys):

@@ -29,6 +29,7 @@ from __future__ import annotations
 import functools
 import importlib.util
 import logging
+import os
 import subprocess
 import sys
 import tempfile
@@ -141,6 +142,13 @@ class EglMirror:
         path = egl_plugin_path() if plugin_path is None else plugin_path
         if path is None:
             raise RendererUnavailable(f"this pybullet has no EGL renderer plugin (module {EGL_PLUGIN_MODULE!r} not found)")
+        if _SharedEglClient.started_in_pid not in (None, os.getpid()):
+            raise RendererUnavailable(
+                f"PyBullet's EGL renderer was started in process {_SharedEglClient.started_in_pid} before this process "
+                "was forked from it, and its state does not survive a fork (drawing with it here would hang or crash); "
+                "start an async vector env's workers with 'spawn' or 'forkserver' "
+                "(gym.make_vec(..., vector_kwargs={'context': 'spawn'})), or render with renderer='tiny'"
+            )
         failure = egl_usable(path)
         if failure is not None:
             raise RendererUnavailable(f"PyBullet's EGL renderer ({path}) does not run here: {failure}")
@@ -301,6 +309,10 @@ class _SharedEglClient:
 
     _by_key: dict[tuple[str, int], _SharedEglClient] = {}
     _lock = threading.Lock()
+    started_in_pid: int | None = None
+    """The process that first loaded the plugin. Its EGL state (Mesa's, which stays after the
+    plugin is unloaded) is copied into a process forked from it and does not work there: a
+    forked child reusing the client crashed, and one starting its own hung in its first frame."""
 
     def __init__(self, path: str) -> None:
         self.path = path
@@ -311,6 +323,8 @@ class _SharedEglClient:
         if self.plugin < 0:
             self.client.disconnect()
             raise RendererUnavailable(f"PyBullet could not load its EGL renderer from {path}")
+        if _SharedEglClient.started_in_pid is None:
+            _SharedEglClient.started_in_pid = os.getpid()
         # A loaded OBJ file is cached for the life of the process unless this is off, and
         # fragments bring new meshes at every reset.
         self.client.setPhysicsEngineParameter(enableFileCaching=0)
