@@ -166,7 +166,9 @@ def test_fidelity_command_writes_finite_numbers_with_the_real_rows_in_the_real_c
         "trajectories": 2,
         "seed": 0,
         "camera_resolution": [640, 360],
+        "bootstrap_replicates": 200,
     }
+    assert "sd: standard error from a moving-block bootstrap" in printed
     real = fidelity_statistics(*load_paper_phase1()).to_dict()
     assert report["real"] == real
     assert report["sim"]["raw_rows"] == 2 * 93 and 10 <= report["sim"]["rows"] <= report["sim"]["raw_rows"]

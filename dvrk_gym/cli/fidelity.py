@@ -7,12 +7,16 @@ from pathlib import Path
 
 from dvrk_gym import paper
 from dvrk_gym.cli.options import add_instrument_options, add_progress_option, writable_folder
+from dvrk_gym.utils.checks import check_int
 
 
 def _run_fidelity(args: argparse.Namespace) -> int:
     from dvrk_gym.fidelity.comparison import run_fidelity
     from dvrk_gym.fidelity.report import format_table, write_report
+    from dvrk_gym.fidelity.uncertainty import MAX_BOOTSTRAP_REPLICATES
 
+    if args.bootstrap != 0:
+        check_int("--bootstrap", args.bootstrap, 2, MAX_BOOTSTRAP_REPLICATES)
     writable_folder(args.out)  # before the collection: a folder that cannot hold the report is found now
     run = run_fidelity(
         bias=args.bias,
@@ -22,6 +26,7 @@ def _run_fidelity(args: argparse.Namespace) -> int:
         seed=args.seed,
         camera_resolution=tuple(args.resolution),
         progress=not args.no_progress,
+        bootstrap_replicates=args.bootstrap,
     )
     print(format_table(run))
     json_path, png_path = write_report(run, args.out)
@@ -62,6 +67,14 @@ def add_commands(subparsers: argparse._SubParsersAction) -> None:
         metavar="FRACTION",
         help="the preset with wrist motors that stop this fraction of each step short, in [0, 1), instead of its "
         "own: the reported pose lags the command (default: the preset's; paper's is 0.19, matched to the real rows)",
+    )
+    fidelity.add_argument(
+        "--bootstrap",
+        type=int,
+        default=200,
+        metavar="REPLICATES",
+        help="moving-block bootstrap replicates of each statistic's standard error on each side, 0 for none "
+        "(default: %(default)s, about 3 s)",
     )
     add_progress_option(fidelity)
     fidelity.set_defaults(func=_run_fidelity)

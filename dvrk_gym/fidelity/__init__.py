@@ -2,6 +2,7 @@
 
 :mod:`~dvrk_gym.fidelity.statistics` computes the statistics of a Phase I data set (the
 same code for the authors' real rows and for a simulated collection);
+:mod:`~dvrk_gym.fidelity.uncertainty` estimates their standard errors from the rows;
 :mod:`~dvrk_gym.fidelity.comparison` collects Phase I in simulation and judges each
 statistic against the real one; :mod:`~dvrk_gym.fidelity.report` prints the table and
 writes ``fidelity.json`` and ``fidelity.png``.
@@ -20,6 +21,7 @@ __all__, __getattr__, __dir__ = lazy_exports(  # PEP 562: each name imported fro
         "FidelityStatistics": "statistics",
         "fidelity_statistics": "statistics",
         "rigid_residuals_camera": "statistics",
+        "bootstrap_sd": "uncertainty",
         "FidelityRun": "comparison",
         "compare": "comparison",
         "run_fidelity": "comparison",

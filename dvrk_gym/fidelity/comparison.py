@@ -11,6 +11,8 @@ of the half-range of the paper's pitches, -15 to 25 degrees) of it.
 from __future__ import annotations
 
 import dataclasses
+import math
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -18,8 +20,10 @@ import numpy as np
 from dvrk_gym import paper
 from dvrk_gym.calibration.datasets import load_paper_phase1
 from dvrk_gym.calibration.phase1 import run_paper_phase1
-from dvrk_gym.fidelity.statistics import PAPER_YAWS_DEG, FidelityStatistics, fidelity_statistics
+from dvrk_gym.fidelity.statistics import FidelityStatistics, fidelity_statistics, named_statistics
+from dvrk_gym.fidelity.uncertainty import BOOTSTRAP_BLOCK_ROWS, BOOTSTRAP_REPLICATES, MAX_BOOTSTRAP_REPLICATES, bootstrap_sd
 from dvrk_gym.sim.robot.bias import BIAS_PRESETS
+from dvrk_gym.utils.checks import check_int
 
 __all__ = [
     "RELATIVE_TOLERANCE",
@@ -59,6 +63,9 @@ class ComparisonRow:
         passed: whether ``difference`` meets the target.
         tolerance: the target's bound: on ``|difference|`` for a share, on
             ``|difference - 1|`` for a ratio (``RELATIVE_TOLERANCE``).
+        real_sd, sim_sd: the standard error of each value from its rows' sampling (a
+            moving-block bootstrap, :mod:`~dvrk_gym.fidelity.uncertainty`), in its unit;
+            None where none was estimated.
     """
 
     name: str
@@ -68,6 +75,19 @@ class ComparisonRow:
     difference: float
     passed: bool
     tolerance: float
+    real_sd: float | None = None
+    sim_sd: float | None = None
+
+    @property
+    def z(self) -> float | None:
+        """``(sim - real)`` in standard errors of that difference, ``sqrt(real_sd^2 + sim_sd^2)``
+        (None without both, or when they are 0 or not finite): how far beyond the rows' own
+        sampling the two lie, whatever the target's bound."""
+        if self.real_sd is None or self.sim_sd is None:
+            return None
+        scale = math.hypot(self.real_sd, self.sim_sd)
+        z = (self.sim - self.real) / scale if scale > 0 else math.nan
+        return z if math.isfinite(z) else None
 
     @property
     def target(self) -> str:
@@ -94,7 +114,14 @@ def _row(name: str, real: float, sim: float, share: bool, tolerance: float | Non
     )
 
 
-def compare(real: FidelityStatistics, sim: FidelityStatistics, real_kept_share: float, sim_kept_share: float) -> list[ComparisonRow]:
+def compare(
+    real: FidelityStatistics,
+    sim: FidelityStatistics,
+    real_kept_share: float,
+    sim_kept_share: float,
+    real_sd: Mapping[str, float] | None = None,
+    sim_sd: Mapping[str, float] | None = None,
+) -> list[ComparisonRow]:
     """Each statistic of both data sets with its verdict, in the issue's order.
 
     Args:
@@ -102,30 +129,27 @@ def compare(real: FidelityStatistics, sim: FidelityStatistics, real_kept_share: 
         sim: the statistics of the simulated rows.
         real_kept_share: kept rows over raw rows of the real collection.
         sim_kept_share: the same for the simulated collection.
+        real_sd, sim_sd: standard errors by statistic name
+            (:func:`~dvrk_gym.fidelity.uncertainty.bootstrap_sd`); a name missing has none.
     """
-    rows = [
-        _row("rigid residual RMS (mm)", real.rigid_residual_rms_mm, sim.rigid_residual_rms_mm, False),
-        _row("residual share along view axis", real.view_axis_share, sim.view_axis_share, True),
-        _row("jitter along view axis (mm)", real.view_axis_jitter_mm, sim.view_axis_jitter_mm, False),
-        _row("jitter in image plane (mm)", real.image_plane_jitter_mm, sim.image_plane_jitter_mm, False),
-        _row("same reported position, consecutive rows (share)", real.same_position_share, sim.same_position_share, True),
-        _row("pitch autocorrelation, consecutive rows", real.pitch_autocorrelation, sim.pitch_autocorrelation, True, CORRELATION_TOLERANCE),
-        _row("tilt of the rows' plane in the base frame (deg)", real.plane_tilt_deg, sim.plane_tilt_deg, False),
-    ]
-    for yaw, real_fraction, sim_fraction in zip(PAPER_YAWS_DEG, real.kept_fraction_per_yaw, sim.kept_fraction_per_yaw):
-        rows.append(_row(f"kept rows at yaw {yaw:+.0f} (share)", real_fraction, sim_fraction, True))
-    rows += [
-        _row("kept share of raw rows", real_kept_share, sim_kept_share, True),
-        _row("pitch of kept rows, 5th pct (deg)", real.pitch_p5_deg, sim.pitch_p5_deg, False),
-        _row("pitch of kept rows, 95th pct (deg)", real.pitch_p95_deg, sim.pitch_p95_deg, False),
-    ]
-    for yaw, real_pitch, sim_pitch in zip(PAPER_YAWS_DEG, real.pitch_median_per_yaw_deg, sim.pitch_median_per_yaw_deg):
-        rows.append(_row(f"median pitch at yaw {yaw:+.0f} (deg)", real_pitch, sim_pitch, True, PITCH_MEDIAN_TOLERANCE_DEG))
-    if real.cv_linear_mm2 is not None and sim.cv_linear_mm2 is not None:
-        rows.append(_row("contiguous 10-fold CV, linear (mm^2)", real.cv_linear_mm2, sim.cv_linear_mm2, False))
-    if real.cv_forest_mm2 is not None and sim.cv_forest_mm2 is not None:
-        rows.append(_row("contiguous 10-fold CV, forest (mm^2)", real.cv_forest_mm2, sim.cv_forest_mm2, False))
+    sim_values = {name: value for name, value, _ in named_statistics(sim, sim_kept_share)}
+    rows = []
+    for name, value, kind in named_statistics(real, real_kept_share):
+        if name not in sim_values:  # a cross-validation run on one side only
+            continue
+        share, tolerance = _JUDGED[kind]
+        row = _row(name, value, sim_values[name], share, tolerance)
+        rows.append(dataclasses.replace(row, real_sd=(real_sd or {}).get(name), sim_sd=(sim_sd or {}).get(name)))
     return rows
+
+
+_JUDGED: dict[str, tuple[bool, float | None]] = {
+    "ratio": (False, None),
+    "share": (True, None),
+    "correlation": (True, CORRELATION_TOLERANCE),
+    "median pitch": (True, PITCH_MEDIAN_TOLERANCE_DEG),
+}
+"""How each kind of statistic (:func:`~dvrk_gym.fidelity.statistics.named_statistics`) is judged: (by difference, its tolerance)."""
 
 
 @dataclass(frozen=True)
@@ -167,6 +191,7 @@ def run_fidelity(
     seed: int = 0,
     camera_resolution: tuple[int, int] = paper.ENDOSCOPE_RESOLUTION_PX,
     progress: bool = True,
+    bootstrap_replicates: int = BOOTSTRAP_REPLICATES,
 ) -> FidelityRun:
     """Collect Phase I in simulation and compare it, statistic by statistic, with the real rows.
 
@@ -180,10 +205,16 @@ def run_fidelity(
         seed: seeds the exploration and the episodes, and the cross-validated forest.
         camera_resolution: the endoscope's image size (width, height), pixels.
         progress: show a progress bar.
+        bootstrap_replicates: replicates of each side's standard errors
+            (:func:`~dvrk_gym.fidelity.uncertainty.bootstrap_sd`, seeded by ``seed``; about
+            1.5 s each side at 200); 0: none.
 
     Raises:
-        ValueError: when the simulation keeps too few rows for the statistics.
+        ValueError: when the simulation keeps too few rows for the statistics, or
+            ``bootstrap_replicates`` is 1 or out of range.
     """
+    if bootstrap_replicates != 0:
+        check_int("bootstrap_replicates", bootstrap_replicates, 2, MAX_BOOTSTRAP_REPLICATES)
     if bias not in BIAS_PRESETS:
         raise ValueError(f"unknown bias preset {bias!r}; the presets are {sorted(BIAS_PRESETS)}")
     config = BIAS_PRESETS[bias]
@@ -207,6 +238,13 @@ def run_fidelity(
             f"no statistics of the simulated Phase I's {len(kept.y)} kept rows (of {len(data.y)}): {error}; "
             "with few rows kept, collect more trajectories or at a higher camera resolution"
         ) from error
+    sds: tuple[dict[str, float] | None, ...] = (None, None)
+    if bootstrap_replicates:
+        sds = tuple(
+            # at least four blocks a replicate: a short collection's blocks are shorter than a trajectory
+            bootstrap_sd(X, y, replicates=bootstrap_replicates, block=max(1, min(BOOTSTRAP_BLOCK_ROWS, len(X) // 4)), seed=seed)
+            for X, y in ((real_X, real_y), (kept.X, kept.y))
+        )
     settings: dict[str, object] = {
         "bias": bias,
         "bias_seed": int(bias_seed),
@@ -214,6 +252,7 @@ def run_fidelity(
         "trajectories": int(n_trajectories),
         "seed": int(seed),
         "camera_resolution": [int(v) for v in camera_resolution],
+        "bootstrap_replicates": int(bootstrap_replicates),
     }
     return FidelityRun(
         settings=settings,
@@ -224,5 +263,5 @@ def run_fidelity(
         sim_raw_rows=data.n_raw,
         real=real,
         sim=sim,
-        rows=compare(real, sim, REAL_KEPT_SHARE, data.n_kept / data.n_raw),
+        rows=compare(real, sim, REAL_KEPT_SHARE, data.n_kept / data.n_raw, *sds),
     )

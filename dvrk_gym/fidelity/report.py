@@ -23,6 +23,7 @@ from dvrk_gym.fidelity.comparison import (
     FidelityRun,
 )
 from dvrk_gym.fidelity.statistics import PAPER_YAWS_DEG, finite_or_none, rigid_residuals_camera
+from dvrk_gym.fidelity.uncertainty import BOOTSTRAP_BLOCK_ROWS
 from dvrk_gym.utils.atomic import atomic_savefig, atomic_write_text
 
 __all__ = ["JSON_NAME", "PNG_NAME", "format_table", "plot_fidelity", "report_dict", "write_report"]
@@ -40,8 +41,13 @@ def _difference(row: ComparisonRow) -> str:
     return f"ratio {row.difference:.2f}"
 
 
+def _sd(value: float | None) -> str:
+    return "-" if value is None or not np.isfinite(value) else f"{value:.3g}"
+
+
 def format_table(run: FidelityRun) -> str:
-    """The statistics side by side: statistic, real, sim, ratio or difference, target, verdict."""
+    """The statistics side by side: statistic, real and sim with their standard errors, ratio
+    or difference, the difference in standard errors (z), target, verdict."""
     settings = run.settings
     header = (
         f"Fidelity: the authors' {run.real.rows} real Phase I rows against a simulated Phase I "
@@ -49,17 +55,25 @@ def format_table(run: FidelityRun) -> str:
         f"seed {settings['seed']}, {run.sim_raw_rows} raw rows, {run.sim.rows} kept)"
     )
     width = max(len(row.name) for row in run.rows)
-    lines = [header, f"{'statistic':<{width}}  {'real':>8}  {'sim':>8}  {'sim vs real':>12}  {'target':>15}  verdict"]
+    columns = f"{'real':>8}  {'sd':>7}  {'sim':>8}  {'sd':>7}  {'sim vs real':>12}  {'z':>6}"
+    lines = [header, f"{'statistic':<{width}}  {columns}  {'target':>15}  verdict"]
     for row in run.rows:
+        z = "-" if row.z is None else f"{row.z:+.1f}"
         lines.append(
-            f"{row.name:<{width}}  {row.real:>8.2f}  {row.sim:>8.2f}  "
-            f"{_difference(row):>12}  {row.target:>15}  {'pass' if row.passed else 'FAIL'}"
+            f"{row.name:<{width}}  {row.real:>8.2f}  {_sd(row.real_sd):>7}  {row.sim:>8.2f}  {_sd(row.sim_sd):>7}  "
+            f"{_difference(row):>12}  {z:>6}  {row.target:>15}  {'pass' if row.passed else 'FAIL'}"
         )
     lines.append(
         f"{run.passed} of {len(run.rows)} statistics within target "
         f"(ratio within {RELATIVE_TOLERANCE:.0%}, shares within {SHARE_TOLERANCE:.2f} absolute, "
         f"the pitch autocorrelation within {CORRELATION_TOLERANCE:.1f}, median pitches within {PITCH_MEDIAN_TOLERANCE_DEG:.0f} degrees)"
     )
+    replicates = settings.get("bootstrap_replicates", 0)
+    if replicates:
+        lines.append(
+            f"sd: standard error from a moving-block bootstrap of each side's rows ({replicates} replicates, blocks of "
+            f"{BOOTSTRAP_BLOCK_ROWS} rows; none for the kept share and the CVs); z: (sim - real) over both sds combined"
+        )
     return "\n".join(lines)
 
 
@@ -84,6 +98,9 @@ def report_dict(run: FidelityRun) -> dict[str, Any]:
                 "value": finite_or_none(row.difference),
                 "tolerance": row.tolerance,
                 "passed": row.passed,
+                "real_sd": None if row.real_sd is None else finite_or_none(row.real_sd),
+                "sim_sd": None if row.sim_sd is None else finite_or_none(row.sim_sd),
+                "z": row.z,
             }
             for row in run.rows
         ],

@@ -75,6 +75,7 @@ __all__ = [
     "contiguous_cv_mse_mm2",
     "fidelity_statistics",
     "finite_or_none",
+    "named_statistics",
     "rigid_residuals_camera",
 ]
 
@@ -323,3 +324,37 @@ def fidelity_statistics(
         cv_linear_mm2=linear,
         cv_forest_mm2=forest,
     )
+
+
+def named_statistics(stats: FidelityStatistics, kept_share: float | None = None) -> list[tuple[str, float, str]]:
+    """Each statistic of the fidelity table as ``(name with its unit, value, kind)``, in the issue's order.
+
+    ``kind`` says how a comparison judges it: "ratio", "share", "correlation" or "median
+    pitch". ``kept_share`` is the kept share of raw rows (not a statistic of the kept rows;
+    None leaves it out); the cross-validations are there when they were run.
+    """
+    named = [
+        ("rigid residual RMS (mm)", stats.rigid_residual_rms_mm, "ratio"),
+        ("residual share along view axis", stats.view_axis_share, "share"),
+        ("jitter along view axis (mm)", stats.view_axis_jitter_mm, "ratio"),
+        ("jitter in image plane (mm)", stats.image_plane_jitter_mm, "ratio"),
+        ("same reported position, consecutive rows (share)", stats.same_position_share, "share"),
+        ("pitch autocorrelation, consecutive rows", stats.pitch_autocorrelation, "correlation"),
+        ("tilt of the rows' plane in the base frame (deg)", stats.plane_tilt_deg, "ratio"),
+    ]
+    named += [(f"kept rows at yaw {yaw:+.0f} (share)", f, "share") for yaw, f in zip(PAPER_YAWS_DEG, stats.kept_fraction_per_yaw)]
+    if kept_share is not None:
+        named.append(("kept share of raw rows", kept_share, "share"))
+    named += [
+        ("pitch of kept rows, 5th pct (deg)", stats.pitch_p5_deg, "ratio"),
+        ("pitch of kept rows, 95th pct (deg)", stats.pitch_p95_deg, "ratio"),
+    ]
+    named += [
+        (f"median pitch at yaw {yaw:+.0f} (deg)", pitch, "median pitch")
+        for yaw, pitch in zip(PAPER_YAWS_DEG, stats.pitch_median_per_yaw_deg)
+    ]
+    if stats.cv_linear_mm2 is not None:
+        named.append(("contiguous 10-fold CV, linear (mm^2)", stats.cv_linear_mm2, "ratio"))
+    if stats.cv_forest_mm2 is not None:
+        named.append(("contiguous 10-fold CV, forest (mm^2)", stats.cv_forest_mm2, "ratio"))
+    return named

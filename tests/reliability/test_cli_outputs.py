@@ -208,6 +208,7 @@ REFUSED_BEFORE_ANY_WORK = [
     (["reproduce", "--seed", "-1"], "--seed"),
     (["fidelity", "--trajectories", "0"], "--trajectories"),
     (["fidelity", "--seed", "-1"], "--seed"),
+    (["fidelity", "--bootstrap", "1"], "--bootstrap"),
     (["debride", "--calibrate", "--seed", "-1"], "--seed"),
     (["sweep", "--scheduler", "tcp://127.0.0.1:1", "--connect-timeout", "nan"], "--connect-timeout"),
     (["reproduce", "--scheduler", "tcp://127.0.0.1:1", "--connect-timeout", "-1"], "--connect-timeout"),
