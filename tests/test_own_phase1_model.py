@@ -37,6 +37,37 @@ def test_an_unfitted_scikit_learn_model_is_fitted_by_fit_phase1(rows):
     assert model.predict(X).shape == (300, 3)
 
 
+def test_an_unfitted_model_of_ones_own_taken_as_fitted_says_to_call_fit_phase1(rows):
+    """A model wrapping a scikit-learn one has no fitted attribute of its own to ask, so it is
+    taken as fitted; its predict then failed deep inside scikit-learn (NotFittedError)."""
+    X, y = rows
+
+    class Wrapper:
+        def __init__(self):
+            self.model = KNeighborsRegressor(3)
+
+        def fit(self, X, y):
+            self.model.fit(X, y)
+            return self
+
+        def predict(self, X):
+            return self.model.predict(X)
+
+    with pytest.raises(ValueError, match=r"Phase I model Wrapper could not predict \(NotFittedError.*call fit_phase1 first"):
+        TwoPhaseCalibrator(dnn=Wrapper(), forests=ResidualForests(trees=2)).fit_phase2(X, y)
+    model = TwoPhaseCalibrator(dnn=Wrapper(), forests=ResidualForests(trees=2)).fit_phase1(X, y).fit_phase2(X, y)
+    assert model.predict(X).shape == (300, 3)
+
+
+def test_fit_of_the_two_phase_calibrator_warns_that_it_fits_phase1_only(rows):
+    """make_calibrator("dnn+rf").fit(X, y) scored the network alone under the DNN+RF label."""
+    X, y = rows
+    model = TwoPhaseCalibrator(dnn=KNeighborsRegressor(3), forests=ResidualForests(trees=2))
+    with pytest.warns(UserWarning, match="fits Phase I .* only"):
+        model.fit(X, y)
+    assert model.phase1_fitted_ and not model.phase2_fitted_
+
+
 def test_a_phase1_model_returning_the_wrong_shape_is_named(rows):
     X, y = rows
 

@@ -13,7 +13,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from dvrk_gym.calibration.models.features import MAX_ANGLE_RAD
+from dvrk_gym.calibration.models.features import MAX_ANGLE_RAD, check_targets
 from dvrk_gym.sim.robot import kinematics as kin
 
 Target = tuple[np.ndarray, float]
@@ -78,6 +78,8 @@ class CalibratedPolicy:
     def __init__(self, calibrator: Calibrator, target: Callable[[Any], Target] = grid_touch_target, round_yaw: bool = True) -> None:
         if not hasattr(calibrator, "predict"):
             raise TypeError(f"calibrator must have a predict(X) method, got {type(calibrator).__name__}")
+        if not isinstance(round_yaw, (bool, np.bool_)):
+            raise ValueError(f"round_yaw must be True or False, got {round_yaw!r}")
         self.calibrator = calibrator
         self.target = target
         self.round_yaw = round_yaw
@@ -88,4 +90,6 @@ class CalibratedPolicy:
         base = np.asarray(self.calibrator.predict(X), dtype=float).reshape(-1)
         if base.shape != (3,) or not np.isfinite(base).all():
             raise ValueError(f"the calibrator returned {base!r} for input {X.ravel().tolist()}; expected 3 finite numbers")
+        # millimetres would be clamped into the workspace and scored as a miss of centimetres
+        check_targets(base[None, :], 1, name=f"{type(self.calibrator).__name__}.predict(X)")
         return np.array([*base, X[0, 3]], dtype=np.float32)

@@ -16,7 +16,7 @@ from typing import Any, ClassVar, TypeVar, cast
 import numpy as np
 
 from dvrk_gym.utils.atomic import atomic_open
-from dvrk_gym.utils.bounded_zip import ArchiveLimitError, ArchiveLimits, open_archive, read_member
+from dvrk_gym.utils.bounded_zip import ArchiveLimitError, ArchiveLimits, open_archive, read_member, read_npy_header
 
 __all__ = ["DATA_FILE_LIMITS", "ArrayRecord", "non_finite_rows", "read_npz_arrays"]
 
@@ -24,7 +24,6 @@ DATA_FILE_LIMITS = ArchiveLimits(max_file_bytes=512 * 2**20, max_members=10_000,
 """What a data file may hold: 512 MiB on disk and inflated, 256 MiB an array, 10,000 arrays
 (the paper's Phase I, 5,301 rows, takes about 0.5 MB)."""
 _ALLOWED_KINDS = "fiub"  # float, signed and unsigned integer, bool
-_MAX_NPY_HEADER_BYTES = 10_000
 _Record = TypeVar("_Record", bound="ArrayRecord")
 
 
@@ -32,14 +31,7 @@ def _npy_array(path: str | PathLike, name: str, data: bytes) -> np.ndarray:
     """One ``.npy`` member parsed from its bytes: the header's shape and dtype are checked
     against the bytes actually there before any array is made."""
     stream = io.BytesIO(data)
-    try:
-        version = np.lib.format.read_magic(stream)
-        if version not in ((1, 0), (2, 0)):
-            raise ValueError(f"npy format version {version}; expected 1.0 or 2.0")
-        read_header = np.lib.format.read_array_header_1_0 if version == (1, 0) else np.lib.format.read_array_header_2_0
-        shape, fortran_order, dtype = read_header(stream, max_header_size=_MAX_NPY_HEADER_BYTES)
-    except (ValueError, SyntaxError, TypeError, EOFError) as error:
-        raise ValueError(f"{path}: member {name!r} has no valid npy header: {error}") from None
+    shape, fortran_order, dtype = read_npy_header(stream, f"{path}: member {name!r}")
     if dtype.hasobject or dtype.kind not in _ALLOWED_KINDS:
         raise ValueError(f"{path}: member {name!r} has dtype {dtype}; only numeric and bool arrays are read (never pickles)")
     count = math.prod(shape)

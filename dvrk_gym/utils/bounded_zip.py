@@ -11,15 +11,21 @@ records (``.npz``) and agent files (stable-baselines3's ``.zip``) are read throu
 from __future__ import annotations
 
 import io
+import math
 import os
 import zipfile
 from dataclasses import dataclass
 from pathlib import Path
+from typing import BinaryIO
+
+import numpy as np
 
 from dvrk_gym.utils.atomic import check_regular_file
 
 MIB = 2**20
 _CHUNK_BYTES = MIB
+NPY_MAX_HEADER_BYTES = 10_000
+"""The longest ``.npy`` header read (numpy's own default limit)."""
 
 
 class ArchiveLimitError(ValueError):
@@ -113,3 +119,47 @@ def read_member(archive: zipfile.ZipFile, name: str, limits: ArchiveLimits = Arc
             raise
         raise ArchiveLimitError(f"{source}: member {name!r} is corrupt ({type(error).__name__}: {error})") from None
     return b"".join(chunks)
+
+
+def read_npy_header(stream: BinaryIO, where: str) -> tuple[tuple[int, ...], bool, np.dtype]:
+    """The shape, Fortran order and dtype an ``.npy`` stream's header declares (the stream is left after it).
+
+    Raises:
+        ValueError: no valid header of format 1.0 or 2.0 within ``NPY_MAX_HEADER_BYTES`` (``where`` names it).
+    """
+    try:
+        version = np.lib.format.read_magic(stream)
+        if version not in ((1, 0), (2, 0)):
+            raise ValueError(f"npy format version {version}; expected 1.0 or 2.0")
+        read_header = np.lib.format.read_array_header_1_0 if version == (1, 0) else np.lib.format.read_array_header_2_0
+        shape, fortran_order, dtype = read_header(stream, max_header_size=NPY_MAX_HEADER_BYTES)
+    except (ValueError, SyntaxError, TypeError, EOFError) as error:
+        raise ValueError(f"{where} has no valid npy header: {error}") from None
+    return tuple(int(n) for n in shape), bool(fortran_order), dtype
+
+
+def check_npy_members(archive: zipfile.ZipFile) -> None:
+    """Refuse an archive with an ``.npy`` member whose header declares other than the bytes the
+    member holds, or objects (pickles): numpy allocates what a header declares before it reads
+    the data, so a header of 2**31 elements in a file of kilobytes reserved 16 GiB. Only each
+    header is inflated.
+
+    Raises:
+        ArchiveLimitError: such a member (the message names it).
+    """
+    source = archive.filename or "archive in memory"
+    for info in archive.infolist():
+        if not info.filename.endswith(".npy"):
+            continue
+        where = f"{source}: member {info.filename!r}"
+        try:
+            with archive.open(info) as stream:
+                head = io.BytesIO(stream.read(NPY_MAX_HEADER_BYTES + 64))
+            shape, _, dtype = read_npy_header(head, where)
+        except (zipfile.BadZipFile, OSError, EOFError, NotImplementedError, ValueError, RuntimeError) as error:
+            raise ArchiveLimitError(str(error) if str(error).startswith(where) else f"{where} is corrupt ({error})") from None
+        if dtype.hasobject:
+            raise ArchiveLimitError(f"{where} holds objects ({dtype}); no pickle is read")
+        declared, held = math.prod(shape) * dtype.itemsize, info.file_size - head.tell()
+        if declared != held:
+            raise ArchiveLimitError(f"{where} declares {shape} {dtype} ({declared:,} bytes) but holds {held:,} bytes")

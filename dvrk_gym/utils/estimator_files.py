@@ -10,9 +10,11 @@ trusting a size it has not checked:
    a type of the caller's explicit ``trusted`` list and be built by one of skops' plain
    loaders (:data:`PLAIN_LOADERS`: no functions, methods or operators) -- stricter than
    skops, which also trusts its own defaults (any scikit-learn estimator, numpy's ufuncs...);
-3. each decision tree's declared feature and output counts, which scikit-learn allocates
+3. each ``.npy`` array's header must declare the bytes its member holds (numpy allocates what
+   a header declares before reading), and no objects;
+4. each decision tree's declared feature and output counts, which scikit-learn allocates
    from when it builds the tree, are bounded (:data:`MAX_TREE_FEATURES`, :data:`MAX_TREE_OUTPUTS`);
-4. only then ``skops.io.loads(data, trusted=trusted)`` builds the object (numpy arrays with
+5. only then ``skops.io.loads(data, trusted=trusted)`` builds the object (numpy arrays with
    ``allow_pickle=False``).
 
 What it returns is of a trusted type, but its values are the file's: the caller checks them
@@ -30,7 +32,7 @@ from typing import Any
 import numpy as np
 import skops.io
 
-from dvrk_gym.utils.bounded_zip import ArchiveLimitError, ArchiveLimits, open_archive, read_member
+from dvrk_gym.utils.bounded_zip import ArchiveLimitError, ArchiveLimits, check_npy_members, open_archive, read_member
 
 __all__ = ["ESTIMATOR_LIMITS", "EstimatorFileError", "dump_estimator", "load_estimator"]
 
@@ -189,6 +191,7 @@ def load_estimator(data: bytes, trusted: Sequence[str], limits: ArchiveLimits = 
     try:
         with open_archive(data, limits) as archive:
             schema = json.loads(read_member(archive, SCHEMA, limits))
+            check_npy_members(archive)
     except KeyError:
         raise EstimatorFileError(f"not a skops archive: no {SCHEMA}") from None
     except (ArchiveLimitError, ValueError, RecursionError) as error:

@@ -71,6 +71,20 @@ def test_the_policy_refuses_an_observation_with_a_nan_yaw():
         policy(observation)
 
 
+def test_the_policy_refuses_a_calibrator_answering_in_millimetres_and_a_round_yaw_that_is_not_a_bool():
+    """The env clamped 100 mm into its workspace and scored the touch 75 mm off, with no word."""
+
+    class Millimetres:
+        def predict(self, X):
+            return np.array([[10.0, 20.0, -150.0]])
+
+    observation = {"desired_goal": np.array([0.0, 0.0, 0.18], np.float32), "observation": np.array([0.0, 0.0, 0.0], np.float32)}
+    with pytest.raises(ValueError, match=r"Millimetres\.predict\(X\)'s positions reach 150; expected metres"):
+        CalibratedPolicy(Millimetres())(observation)
+    with pytest.raises(ValueError, match="round_yaw must be True or False"):
+        CalibratedPolicy(Millimetres(), round_yaw="no")
+
+
 @pytest.mark.parametrize("groups", [[0.0, 1.0], [True], [0, 0], [5], "01"])
 def test_residual_forest_groups_must_be_distinct_indices(groups):
     with pytest.raises(ValueError, match="groups"):

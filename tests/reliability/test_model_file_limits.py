@@ -135,6 +135,22 @@ def test_a_skops_member_whose_own_member_inflates_to_1_gb_is_refused_unread(fore
     assert "forest.skops" in text and "inflates to 1,073,741,824 bytes" in text and "at most 134,217,728" in text
 
 
+def test_a_skops_array_header_declaring_16_gib_over_64_bytes_is_refused_before_numpy_reserves_it(forest_file):
+    """numpy reserves what an ``.npy`` header declares before it reads the data: a 22 KB file
+    raised the process's address space by 16 GiB (untouched pages, so not its RSS) before
+    skops failed at the missing bytes; 2**32 elements gave a MemoryError."""
+
+    def declare_huge(schema: dict, files: dict[str, bytes]) -> None:
+        name = sorted(name for name in files if name.endswith(".npy"))[-1]
+        header = io.BytesIO()
+        np.lib.format.write_array_header_1_0(header, {"descr": "<f8", "fortran_order": False, "shape": (2**31,)})
+        files[name] = header.getvalue() + bytes(64)
+
+    edit_skops(forest_file, "forest.skops", declare_huge)
+    text = _bounded(ForestCalibrator.load, forest_file)
+    assert "declares (2147483648,) float64 (17,179,869,184 bytes) but holds 64 bytes" in text
+
+
 def test_a_safetensors_header_declaring_8_gb_over_32_bytes_is_refused_before_allocation(dnn_file):
     header = json.dumps({"x_mean": {"dtype": "F64", "shape": [10**9], "data_offsets": [0, 8 * 10**9]}}).encode()
     members = read_members(dnn_file)

@@ -27,7 +27,8 @@ CALIBRATOR_CLASSES: dict[str, type[SavableModel]] = {
 
 
 def make_calibrator(name: str, **params: Any) -> SavableModel:
-    """An untrained calibrator, ready for ``fit(X, y)``.
+    """An untrained calibrator, ready for ``fit(X, y)``; ``"dnn+rf"``'s fits its network only
+    (with a warning): its residual forests need ``fit_phase2`` on the Phase II touches.
 
     Args:
         name: one of :data:`CALIBRATOR_CLASSES` (``"rbt"``, ``"linear"``, ``"forest"``,

@@ -13,6 +13,7 @@ forest per yaw to the residual between that corrected position and the network's
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Mapping
 from typing import Any, Protocol
 
@@ -81,7 +82,7 @@ class TwoPhaseCalibrator(SavableModel):
     TRUSTED_TYPES = FOREST_TYPES
 
     def __init__(self, dnn: Regressor | None = None, forests: ResidualForests | None = None, seed: int = 0) -> None:
-        check_int("seed", seed, 0, 2**63 - 1)
+        check_int("seed", seed, 0, 2**32 - 1)  # the forests' (numpy's RandomState) bound
         if dnn is not None and not (callable(getattr(dnn, "fit", None)) and callable(getattr(dnn, "predict", None))):
             raise ValueError(f"dnn must be a regressor with fit and predict (or None for the paper's network), got {type(dnn).__name__}")
         if forests is not None and not isinstance(forests, ResidualForests):
@@ -101,7 +102,18 @@ class TwoPhaseCalibrator(SavableModel):
         self.phase2_fitted_ = False
         return self
 
-    fit = fit_phase1
+    def fit(self, X: np.ndarray, y: np.ndarray) -> TwoPhaseCalibrator:
+        """:meth:`fit_phase1`, with a warning: the forests need the Phase II touches
+        (:meth:`fit_phase2`), and until then the calibrator predicts as its Phase I model
+        (``make_calibrator("dnn+rf").fit(X, y)`` alone would score the DNN as DNN+RF)."""
+        self.fit_phase1(X, y)
+        warnings.warn(
+            "TwoPhaseCalibrator.fit(X, y) fits Phase I (the network) only; until fit_phase2 fits the residual forests on "
+            "the Phase II touches, it predicts as the network",
+            UserWarning,
+            stacklevel=2,
+        )
+        return self
 
     def fit_phase2(self, X_c_phase2: np.ndarray, y_corrected: np.ndarray) -> TwoPhaseCalibrator:
         """Fit the residual forests on Phase II data.
@@ -138,7 +150,13 @@ class TwoPhaseCalibrator(SavableModel):
 
     def _phase1_predict(self, X: np.ndarray) -> np.ndarray:
         """The Phase I model's base positions (N, 3), m, checked: a user's model may return anything."""
-        predicted = np.asarray(self.dnn.predict(X), dtype=float)
+        try:
+            predicted = np.asarray(self.dnn.predict(X), dtype=float)
+        except Exception as error:  # a user's model taken as fitted (it has no fitted attribute to ask) may not be
+            raise ValueError(
+                f"the Phase I model {type(self.dnn).__name__} could not predict ({type(error).__name__}: {str(error)[:200]}); "
+                "if it is not fitted, call fit_phase1 first"
+            ) from error
         return check_targets(predicted, X.shape[0], name=f"{type(self.dnn).__name__}.predict(X)")
 
     def layout(self) -> dict[str, Any]:
