@@ -7,12 +7,20 @@ With --steps 500 --picks 8 it took 4 minutes on the shared 2-core machine (load 
 
 Prints, for GridTouch-v0, CalibrationExploration-v0, Debridement-v0 (one step is one pick;
 and in delta mode, one step a 0.1 s motion of the arm and jaws, the RL interface),
-PandaReach-v3 and PandaPickAndPlace-v3: steps per wall second, the ratio to PandaReach-v3's,
-and the real-time factor (simulated seconds per wall second). Each env is made with
-``gym.make`` (so with Gymnasium's wrappers, as a user has it), reset with the seed, and
-stepped with random actions from its seeded action space; an episode that ends is reset, and
-the reset counts in the time. The envs take turns, ``--rounds`` times, and each figure is the
-median over the rounds, so a change in the machine's load hits all of them alike.
+PandaReach-v3 and PandaPickAndPlace-v3: steps per wall second; the ratio to PandaReach-v3's,
+taken round by round (each round's rate over PandaReach-v3's in the same round), as the
+median and the range over the rounds, by wall time and by the process's CPU time; and two
+real-time factors: the robot's clock (seconds of robot time per wall second: a GridTouch
+move or a Debridement move through free space is placed at once and advances the clock by
+its duration, with no physics stepped) and the physics integrated (``stepSimulation``'s
+seconds per wall second: GridTouch-v0 and CalibrationExploration-v0 step none, Debridement-v0
+about 600 steps of 1/240 s a pick; every Panda step integrates its 0.04 s). So GridTouch-v0's
+ratio compares a kinematic env (inverse kinematics, the cable model, the contact search, the
+stereo view of the touch) with a dynamics simulation of the same kind of reaching task.
+Each env is made with ``gym.make`` (so with Gymnasium's wrappers, as a user has it), reset
+with the seed, and stepped with random actions from its seeded action space; an episode that
+ends is reset, and the reset counts in the time. The envs take turns, ``--rounds`` times, in
+the reverse order every other round, so a change in the machine's load hits all of them alike.
 
 Targets (issue 18): GridTouch-v0 at least 2x PandaReach-v3's steps/s; Debridement-v0 toward
 10 picks/s.
@@ -162,12 +170,13 @@ trajectories 23.1 -> 19.1 s, the collected data byte for byte the same.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import cProfile
 import pstats
 import statistics
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 
 import gymnasium as gym
@@ -186,9 +195,10 @@ class Subject:
     kwargs: dict = field(default_factory=dict)
     steps: int = 1000
     label: str = ""
-    sim_seconds: Callable[[gym.Env, dict], float] | None = None
     rates: list[float] = field(default_factory=list)
+    cpu_rates: list[float] = field(default_factory=list)
     real_time_factors: list[float] = field(default_factory=list)
+    physics_factors: list[float] = field(default_factory=list)
 
 
 def ratio_text(ratio: float) -> str:
@@ -202,8 +212,28 @@ def clock_seconds(env: gym.Env) -> float:
     return env.unwrapped.world.clock.time_s
 
 
+@contextlib.contextmanager
+def counting_physics_steps() -> Iterator[list[int]]:
+    """Count our envs' ``stepSimulation`` calls (``Physics.step``) while inside; the count is the list's one item."""
+    from dvrk_gym.sim.physics.client import Physics
+
+    count = [0]
+    step = Physics.step
+
+    def counted(self: Physics, n: int = 1) -> None:
+        count[0] += n
+        step(self, n)
+
+    Physics.step = counted  # type: ignore[method-assign]
+    try:
+        yield count
+    finally:
+        Physics.step = step  # type: ignore[method-assign]
+
+
 def time_subject(subject: Subject, seed: int) -> None:
-    """Make, reset and step ``subject.env_id`` ``subject.steps`` times; append its steps/s and real-time factor."""
+    """Make, reset and step ``subject.env_id`` ``subject.steps`` times; append its steps per wall
+    and CPU second and its two real-time factors (robot clock, physics integrated)."""
     env = gym.make(subject.env_id, **subject.kwargs)
     env.reset(seed=seed)
     env.action_space.seed(seed)
@@ -211,17 +241,27 @@ def time_subject(subject: Subject, seed: int) -> None:
     env.reset(seed=seed)
     ours = subject.env_id.startswith("dvrk_gym/")
     simulated = 0.0
-    start = time.perf_counter()
-    for _ in range(subject.steps):
-        before = clock_seconds(env) if ours else 0.0
-        _, _, terminated, truncated, _ = env.step(env.action_space.sample())
-        simulated += clock_seconds(env) - before if ours else env.unwrapped.sim.dt
-        if terminated or truncated:
-            env.reset()
-    elapsed = time.perf_counter() - start
+    with counting_physics_steps() as physics_steps:
+        start, cpu_start = time.perf_counter(), time.process_time()
+        for _ in range(subject.steps):
+            before = clock_seconds(env) if ours else 0.0
+            _, _, terminated, truncated, _ = env.step(env.action_space.sample())
+            simulated += clock_seconds(env) - before if ours else env.unwrapped.sim.dt
+            if terminated or truncated:
+                env.reset()
+        elapsed, cpu = time.perf_counter() - start, time.process_time() - cpu_start
+        integrated = physics_steps[0] * env.unwrapped.world.physics.time_step_s if ours else simulated
     env.close()
     subject.rates.append(subject.steps / elapsed)
+    subject.cpu_rates.append(subject.steps / cpu)
     subject.real_time_factors.append(simulated / elapsed)
+    subject.physics_factors.append(integrated / elapsed)
+
+
+def round_ratios(rates: list[float], reference: list[float]) -> tuple[float, float, float]:
+    """Median, least and greatest of the round-by-round ratios ``rates[i] / reference[i]``."""
+    ratios = [rate / ref for rate, ref in zip(rates, reference, strict=True)]
+    return statistics.median(ratios), min(ratios), max(ratios)
 
 
 def profile_env(env_id: str, steps: int, picks: int, resolution: tuple[int, int], seed: int) -> int:
@@ -249,7 +289,7 @@ def main() -> int:
     parser.add_argument(
         "--delta-steps", type=int, default=100, help="Debridement-v0 steps per round in delta mode, 10 Hz (default: %(default)s)"
     )
-    parser.add_argument("--rounds", type=int, default=3, help="turns of every env; figures are medians (default: %(default)s)")
+    parser.add_argument("--rounds", type=int, default=5, help="turns of every env; figures are medians (default: %(default)s)")
     parser.add_argument("--seed", type=int, default=0, help="seeds every env and its actions (default: %(default)s)")
     parser.add_argument("--resolution", type=int, nargs=2, default=(1920, 1080), metavar=("W", "H"), help="our endoscope images")
     parser.add_argument("--profile", metavar="ENV_ID", default=None, help="instead: cProfile one of our envs' steps")
@@ -284,19 +324,23 @@ def main() -> int:
         Subject(REFERENCE, steps=args.steps),
         Subject("PandaPickAndPlace-v3", steps=args.steps),
     ]
-    for _ in range(args.rounds):
-        for subject in subjects:
+    for round_index in range(args.rounds):
+        for subject in subjects if round_index % 2 == 0 else subjects[::-1]:
             time_subject(subject, args.seed)
-    reference = statistics.median(next(s for s in subjects if s.env_id == REFERENCE).rates)
-    print(f"{'env (random actions, resets counted)':<36} {'steps/s':>9} {'x ' + REFERENCE:>17} {'sim s / wall s':>15}")
+    reference = next(s for s in subjects if s.env_id == REFERENCE)
+    header = f"{'x ' + REFERENCE + ' (wall: median, range)':>34} {'x (CPU)':>8} {'clock s/wall s':>15} {'physics s/wall s':>17}"
+    print(f"{'env (random actions, resets counted)':<36} {'steps/s':>9} {header}")
     for subject in subjects:
-        rate = statistics.median(subject.rates)
-        factor = statistics.median(subject.real_time_factors)
+        median, low, high = round_ratios(subject.rates, reference.rates)
+        cpu = round_ratios(subject.cpu_rates, reference.cpu_rates)[0]
+        wall = f"{ratio_text(median)} ({ratio_text(low)}-{ratio_text(high)})"
         name = subject.label or subject.env_id.removeprefix("dvrk_gym/")
-        print(f"{name:<36} {rate:>9.1f} {ratio_text(rate / reference):>17} {factor:>15.2f}")
+        clock, physics = statistics.median(subject.real_time_factors), statistics.median(subject.physics_factors)
+        print(f"{name:<36} {statistics.median(subject.rates):>9.1f} {wall:>34} {ratio_text(cpu):>8} {clock:>15.2f} {physics:>17.2f}")
     print(
-        f"medians of {args.rounds} rounds; Debridement-v0: one step is one pick ({args.picks} a round), in delta mode "
-        f"a 0.1 s motion ({args.delta_steps} a round); resolution {resolution}"
+        f"medians of {args.rounds} rounds, the ratios round by round (the range: least and greatest); Debridement-v0: one "
+        f"step is one pick ({args.picks} a round), in delta mode a 0.1 s motion ({args.delta_steps} a round); resolution "
+        f"{resolution}; clock: the robot's time, physics: stepSimulation's"
     )
     return 0
 
