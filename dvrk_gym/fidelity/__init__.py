@@ -21,7 +21,7 @@ __all__, __getattr__, __dir__ = lazy_exports(  # PEP 562: each name imported fro
         "FidelityStatistics": "statistics",
         "fidelity_statistics": "statistics",
         "rigid_residuals_camera": "statistics",
-        "bootstrap_sd": "uncertainty",
+        "statistic_standard_errors": "uncertainty",
         "FidelityRun": "comparison",
         "compare": "comparison",
         "run_fidelity": "comparison",

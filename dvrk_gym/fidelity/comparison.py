@@ -21,7 +21,7 @@ from dvrk_gym import paper
 from dvrk_gym.calibration.datasets import load_paper_phase1
 from dvrk_gym.calibration.phase1 import run_paper_phase1
 from dvrk_gym.fidelity.statistics import FidelityStatistics, fidelity_statistics, named_statistics
-from dvrk_gym.fidelity.uncertainty import BOOTSTRAP_BLOCK_ROWS, BOOTSTRAP_REPLICATES, MAX_BOOTSTRAP_REPLICATES, bootstrap_sd
+from dvrk_gym.fidelity.uncertainty import BOOTSTRAP_BLOCK_ROWS, BOOTSTRAP_REPLICATES, MAX_BOOTSTRAP_REPLICATES, statistic_standard_errors
 from dvrk_gym.sim.robot.bias import BIAS_PRESETS
 from dvrk_gym.utils.checks import check_int
 
@@ -130,7 +130,7 @@ def compare(
         real_kept_share: kept rows over raw rows of the real collection.
         sim_kept_share: the same for the simulated collection.
         real_sd, sim_sd: standard errors by statistic name
-            (:func:`~dvrk_gym.fidelity.uncertainty.bootstrap_sd`); a name missing has none.
+            (:func:`~dvrk_gym.fidelity.uncertainty.statistic_standard_errors`); a name missing has none.
     """
     sim_values = {name: value for name, value, _ in named_statistics(sim, sim_kept_share)}
     rows = []
@@ -206,7 +206,7 @@ def run_fidelity(
         camera_resolution: the endoscope's image size (width, height), pixels.
         progress: show a progress bar.
         bootstrap_replicates: replicates of each side's standard errors
-            (:func:`~dvrk_gym.fidelity.uncertainty.bootstrap_sd`, seeded by ``seed``; about
+            (:func:`~dvrk_gym.fidelity.uncertainty.statistic_standard_errors`, seeded by ``seed``; about
             1.5 s each side at 200); 0: none.
 
     Raises:
@@ -242,7 +242,9 @@ def run_fidelity(
     if bootstrap_replicates:
         sds = tuple(
             # at least four blocks a replicate: a short collection's blocks are shorter than a trajectory
-            bootstrap_sd(X, y, replicates=bootstrap_replicates, block=max(1, min(BOOTSTRAP_BLOCK_ROWS, len(X) // 4)), seed=seed)
+            statistic_standard_errors(
+                X, y, replicates=bootstrap_replicates, block=max(1, min(BOOTSTRAP_BLOCK_ROWS, len(X) // 4)), seed=seed
+            )
             for X, y in ((real_X, real_y), (kept.X, kept.y))
         )
     settings: dict[str, object] = {

@@ -2,7 +2,7 @@
 
 The real Phase I is one collection of 57 trajectories, and a simulated one is another; each
 statistic of :func:`~dvrk_gym.fidelity.statistics.fidelity_statistics` would come out
-otherwise from another collection of the same robot. :func:`bootstrap_sd` estimates that
+otherwise from another collection of the same robot. :func:`statistic_standard_errors` estimates that
 spread from the rows themselves: each replicate joins ``len(rows) // block`` blocks of
 ``block`` consecutive rows drawn with replacement (about one trajectory a block, so the
 order within a trajectory, which the jitter, the same-position share and the pitch
@@ -22,7 +22,7 @@ import numpy as np
 from dvrk_gym.fidelity.statistics import fidelity_statistics, named_statistics
 from dvrk_gym.utils.checks import check_int
 
-__all__ = ["BOOTSTRAP_BLOCK_ROWS", "BOOTSTRAP_REPLICATES", "MAX_BOOTSTRAP_REPLICATES", "bootstrap_sd"]
+__all__ = ["BOOTSTRAP_BLOCK_ROWS", "BOOTSTRAP_REPLICATES", "MAX_BOOTSTRAP_REPLICATES", "statistic_standard_errors"]
 
 BOOTSTRAP_BLOCK_ROWS = 34
 """Rows per block: the authors' kept rows per trajectory (1,939 over 57)."""
@@ -30,10 +30,10 @@ BOOTSTRAP_REPLICATES = 200
 """Replicates unless asked otherwise (about 5 ms each on 1,939 rows): the standard error of
 a standard deviation estimated from 200 draws is 5% of it."""
 MAX_BOOTSTRAP_REPLICATES = 100_000
-"""The most replicates :func:`bootstrap_sd` runs."""
+"""The most replicates :func:`statistic_standard_errors` runs."""
 
 
-def bootstrap_sd(
+def statistic_standard_errors(
     X: np.ndarray, y: np.ndarray, *, replicates: int = BOOTSTRAP_REPLICATES, block: int = BOOTSTRAP_BLOCK_ROWS, seed: int = 0
 ) -> dict[str, float]:
     """The standard error of each statistic of the fidelity table, by its name
