@@ -73,7 +73,7 @@ class ComparisonRow:
     source: str
 
 
-def benchmark_agent(agent: LoadedAgent, seed: int = BENCHMARK_SEED, progress: bool = False) -> dict[str, CircleErrors]:
+def benchmark_agent(agent: LoadedAgent, seed: int = BENCHMARK_SEED, *, progress: bool = False) -> dict[str, CircleErrors]:
     """The agent's errors at each of the six yaw settings (``table[setting]``).
 
     Raises:
@@ -254,7 +254,7 @@ def debridement_row(method: str, robot_moves: int, trials: Sequence[Trial], sour
 
 
 def benchmark_debridement(
-    agent: LoadedAgent, n_trials: int = DEBRIDEMENT_TRIALS, seed: int = 0, fragment: str = "pumpkin_seed", progress: bool = False
+    agent: LoadedAgent, n_trials: int = DEBRIDEMENT_TRIALS, seed: int = 0, fragment: str = "pumpkin_seed", *, progress: bool = False
 ) -> list[Trial]:
     """The agent's debridement trials (GridTouch agents transferred by :func:`pick_policy`), in its
     world: its instrument, the paper it learnt on (:func:`agent_contact`), and a pick agent's
@@ -281,6 +281,7 @@ def calibration_debridement_rows(
     fragment: str = "pumpkin_seed",
     camera_resolution: tuple[int, int] | None = None,
     calibrators: Sequence[str] = CALIBRATORS,
+    *,
     progress: bool = False,
 ) -> tuple[list[DebridementRow], PipelineConfig]:
     """The calibrators' debridement rows, run here as ``dvrk-gym debride`` runs them.

@@ -339,7 +339,7 @@ class LearningCurve(BaseCallback):
         self._bar.close()
 
 
-def train(config: TrainConfig, progress: bool = True, state_path: str | Path | None = None, save_every: int = SAVE_EVERY) -> TrainResult:
+def train(config: TrainConfig, *, progress: bool = True, state_path: str | Path | None = None, save_every: int = SAVE_EVERY) -> TrainResult:
     """Train ``config.agent`` for ``config.steps`` env steps, with its learning curve.
 
     Args:

@@ -56,7 +56,7 @@ class CircleErrors:
 
 
 def touch_grid_episodes(
-    env: gym.Env, policy: Any, yaw: float | str, seed: int = 0, progress: bool = False, order: Sequence[int] = TOUR
+    env: gym.Env, policy: Any, yaw: float | str, seed: int = 0, *, progress: bool = False, order: Sequence[int] = TOUR
 ) -> list[EpisodeResult]:
     """Touch all 35 circles once with ``policy`` at one yaw setting: the 35 episodes, each with
     its final info (GridTouch-v0's: the true tip and circle positions, m, and the errors).
@@ -81,7 +81,7 @@ def touch_grid_episodes(
     )
 
 
-def touch_grid(env: gym.Env, policy: Any, yaw: float | str, seed: int = 0, progress: bool = False) -> CircleErrors:
+def touch_grid(env: gym.Env, policy: Any, yaw: float | str, seed: int = 0, *, progress: bool = False) -> CircleErrors:
     """The errors of :func:`touch_grid_episodes` (the same pass), per circle in row-major order."""
     toured = touch_grid_episodes(env, policy, yaw, seed=seed, progress=progress)
     results = [toured[i] for i in np.argsort(TOUR)]  # episode i touched circle TOUR[i]
@@ -98,6 +98,7 @@ def calibration_table(
     env: gym.Env,
     calibrators: dict[str, Calibrator],
     seed: int = BENCHMARK_SEED,
+    *,
     progress: bool = True,
     rules: Mapping[str, Sequence[HeightRule]] | None = None,
 ) -> dict[str, dict[str, CircleErrors]]:

@@ -36,6 +36,7 @@ CALIBRATOR_LOADERS: dict[str, Any] = {"rbt": RigidBodyCalibrator, "dnn": DNNCali
 def load_calibrator(
     folder: str | os.PathLike,
     name: str,
+    *,
     bias: str = "paper",
     bias_seed: int = 0,
     camera_resolution: tuple[int, int] | None = None,

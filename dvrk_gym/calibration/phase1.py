@@ -254,7 +254,9 @@ def _or_nan(value: np.ndarray | None, size: int) -> np.ndarray:
     return np.full(size, np.nan) if value is None else np.asarray(value, dtype=float)
 
 
-def collect_phase1(env: gym.Env, policy: PaperExplorationPolicy, n_trajectories: int, seed: int = 0, progress: bool = True) -> Phase1Data:
+def collect_phase1(
+    env: gym.Env, policy: PaperExplorationPolicy, n_trajectories: int, seed: int = 0, *, progress: bool = True
+) -> Phase1Data:
     """Run the paper's Phase I: ``n_trajectories`` episodes of CalibrationExploration-v0.
 
     Args:
@@ -303,6 +305,7 @@ def run_paper_phase1(
     bias: str | BiasConfig = "paper",
     bias_seed: int = 0,
     camera_resolution: tuple[int, int] = paper.ENDOSCOPE_RESOLUTION_PX,
+    *,
     progress: bool = True,
 ) -> Phase1Data:
     """The paper's Phase I on a fresh CalibrationExploration-v0 (closed after).

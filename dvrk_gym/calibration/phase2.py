@@ -65,7 +65,7 @@ class Phase2Data(ArrayRecord):
 
 
 def collect_phase2(
-    env: gym.Env, calibrator: Calibrator, yaws: np.ndarray = PAPER_YAWS_RAD, seed: int = 0, progress: bool = True
+    env: gym.Env, calibrator: Calibrator, yaws: np.ndarray = PAPER_YAWS_RAD, seed: int = 0, *, progress: bool = True
 ) -> Phase2Data:
     """Run the paper's Phase II on GridTouch-v0: every yaw, every circle (in the authors' order,
     :data:`~dvrk_gym.envs.grid_touch.TOUR`), one correction each.

@@ -124,7 +124,7 @@ def _run_phase1(config: PipelineConfig, progress: bool) -> Phase1Data:
 
 
 def run_calibration(
-    out: Path, config: PipelineConfig = PipelineConfig(), progress: bool = True, benchmark: bool = True, protocol: str = "paper"
+    out: Path, config: PipelineConfig = PipelineConfig(), *, progress: bool = True, benchmark: bool = True, protocol: str = "paper"
 ) -> dict[str, Any]:
     """Run (or resume) the whole two-phase calibration and, if asked, its benchmark in ``out``.
 

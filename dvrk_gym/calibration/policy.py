@@ -75,7 +75,7 @@ class CalibratedPolicy:
         round_yaw: round the yaw to the nearest of the paper's five yaws.
     """
 
-    def __init__(self, calibrator: Calibrator, target: Callable[[Any], Target] = grid_touch_target, round_yaw: bool = True) -> None:
+    def __init__(self, calibrator: Calibrator, *, target: Callable[[Any], Target] = grid_touch_target, round_yaw: bool = True) -> None:
         if not hasattr(calibrator, "predict"):
             raise TypeError(f"calibrator must have a predict(X) method, got {type(calibrator).__name__}")
         if not isinstance(round_yaw, (bool, np.bool_)):

@@ -243,6 +243,7 @@ def run_search(
     folds: int = paper.SEARCH_FOLDS,
     seed: int = 0,
     quick: bool = False,
+    *,
     progress: bool = True,
     shuffle: bool = True,
 ) -> list[SearchResult]:

@@ -94,6 +94,7 @@ def run_episodes(
     n_episodes: int,
     seed: int = 0,
     options: Options = None,
+    *,
     progress: bool = True,
     description: str = "episodes",
 ) -> list[EpisodeResult]:
@@ -137,6 +138,7 @@ def evaluate_policy(
     n_episodes: int,
     seed: int = 0,
     options: Options = None,
+    *,
     progress: bool = True,
     **env_kwargs: Any,
 ) -> list[EpisodeResult]:

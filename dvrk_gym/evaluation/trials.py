@@ -68,7 +68,7 @@ def cell_label(method: str, fragment: str) -> str:
     return f"{paper.METHOD_LABELS.get(method, method)}, {paper.FRAGMENT_LABELS.get(fragment, fragment)}"
 
 
-def run_trials(env: gym.Env, policy: Any, n_trials: int, seed: int = 0, progress: bool = True) -> list[Trial]:
+def run_trials(env: gym.Env, policy: Any, n_trials: int, seed: int = 0, *, progress: bool = True) -> list[Trial]:
     """Run ``n_trials`` debridement episodes of ``policy`` (any policy) and collect the table.
 
     Args:
@@ -111,6 +111,7 @@ def run_debridement(
     bias_seed: int = 0,
     camera_resolution: tuple[int, int] = paper.ENDOSCOPE_RESOLUTION_PX,
     max_picks: int | None = None,
+    *,
     progress: bool = False,
     contact: str = DEFAULT_CONTACT,
     env_kwargs: Mapping[str, Any] | None = None,

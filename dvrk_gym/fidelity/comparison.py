@@ -190,6 +190,7 @@ def run_fidelity(
     n_trajectories: int = paper.PHASE1_TRAJECTORIES,
     seed: int = 0,
     camera_resolution: tuple[int, int] = paper.ENDOSCOPE_RESOLUTION_PX,
+    *,
     progress: bool = True,
     bootstrap_replicates: int = BOOTSTRAP_REPLICATES,
 ) -> FidelityRun:

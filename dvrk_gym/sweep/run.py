@@ -89,7 +89,7 @@ def _load_unit(folder: RunFolder, unit: Unit) -> dict[str, Any] | None:
     return result
 
 
-def run_sweep(settings: SweepSettings, out: str | os.PathLike, executor: Executor, progress: bool = True) -> SweepResult:
+def run_sweep(settings: SweepSettings, out: str | os.PathLike, executor: Executor, *, progress: bool = True) -> SweepResult:
     """Run (or resume) a sweep in ``out``: every unit not finished there, on ``executor``.
 
     Args:

@@ -109,6 +109,7 @@ class DNNCalibrator(SavableModel):
 
     def __init__(
         self,
+        *,
         hidden_layers: int = paper.DNN_HIDDEN_LAYERS,
         units: int = paper.DNN_UNITS,
         activation: str = paper.DNN_ACTIVATION,

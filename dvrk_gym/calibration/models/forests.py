@@ -172,7 +172,7 @@ class ForestCalibrator(SavableModel):
     KIND = "forest_calibrator"
     TRUSTED_TYPES = FOREST_TYPES
 
-    def __init__(self, trees: int = 100, max_depth: int | None = None, seed: int = 0) -> None:
+    def __init__(self, *, trees: int = 100, max_depth: int | None = None, seed: int = 0) -> None:
         _check_forest_params(trees, max_depth, seed)
         self.trees = int(trees)
         self.max_depth = None if max_depth is None else int(max_depth)
@@ -235,7 +235,7 @@ class ResidualForests(SavableModel):
     KIND = "residual_forests"
     TRUSTED_TYPES = FOREST_TYPES
 
-    def __init__(self, trees: int = paper.RESIDUAL_FOREST_TREES, max_depth: int | None = None, seed: int = 0) -> None:
+    def __init__(self, *, trees: int = paper.RESIDUAL_FOREST_TREES, max_depth: int | None = None, seed: int = 0) -> None:
         _check_forest_params(trees, max_depth, seed)
         self.trees = int(trees)
         self.max_depth = None if max_depth is None else int(max_depth)

@@ -81,7 +81,7 @@ class TwoPhaseCalibrator(SavableModel):
     KIND = "two_phase_calibrator"
     TRUSTED_TYPES = FOREST_TYPES
 
-    def __init__(self, dnn: Regressor | None = None, forests: ResidualForests | None = None, seed: int = 0) -> None:
+    def __init__(self, *, dnn: Regressor | None = None, forests: ResidualForests | None = None, seed: int = 0) -> None:
         check_int("seed", seed, 0, 2**32 - 1)  # the forests' (numpy's RandomState) bound
         if dnn is not None and not (callable(getattr(dnn, "fit", None)) and callable(getattr(dnn, "predict", None))):
             raise ValueError(f"dnn must be a regressor with fit and predict (or None for the paper's network), got {type(dnn).__name__}")
