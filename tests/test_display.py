@@ -275,11 +275,17 @@ def child(renderer):
     except RendererUnavailable as error:
         print("CHILD", renderer, "refused:", "forked" in str(error) and "spawn" in str(error), flush=True)
     os._exit(0)
-for renderer in ("auto", "egl"):
-    process = multiprocessing.get_context("fork").Process(target=child, args=(renderer,))
+def inherited():  # the parent's env, drawing with EGL since before the fork
+    frame = parent.render()
+    print("INHERITED", frame.shape, parent.unwrapped._display.renderer, flush=True)
+    parent.close()  # must leave the parent's client and mesh files alone
+    os._exit(0)
+for target, args in ((child, ("auto",)), (child, ("egl",)), (inherited, ())):
+    process = multiprocessing.get_context("fork").Process(target=target, args=args)
     process.start(); process.join(90)
     if process.is_alive():
-        process.kill(); print("CHILD", renderer, "hung", flush=True)
+        process.kill(); print("CHILD", target.__name__, args, "hung", flush=True)
+parent.reset(seed=1)
 print("PARENT", parent.render().shape, parent.unwrapped._display.renderer, flush=True)
 """
 
@@ -297,8 +303,9 @@ def test_a_process_forked_after_egl_drew_renders_with_tinyrenderer_instead_of_ha
         env={**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[1])},
     )
     assert done.returncode == 0, done.stderr[-2000:]
-    said = [line for line in done.stdout.splitlines() if line.startswith(("CHILD", "PARENT"))]
-    assert said == ["CHILD auto (96, 160, 3) tiny", "CHILD egl refused: True", "PARENT (96, 160, 3) egl"], done.stdout
+    said = [line for line in done.stdout.splitlines() if line.startswith(("CHILD", "INHERITED", "PARENT"))]
+    expected = ["CHILD auto (96, 160, 3) tiny", "CHILD egl refused: True", "INHERITED (96, 160, 3) tiny", "PARENT (96, 160, 3) egl"]
+    assert said == expected, done.stdout
 
 
 @pytest.mark.slow

@@ -167,6 +167,7 @@ def test_fidelity_command_writes_finite_numbers_with_the_real_rows_in_the_real_c
         "seed": 0,
         "camera_resolution": [640, 360],
         "bootstrap_replicates": 200,
+        "bootstrap_block_rows": {"real": 34, "sim": min(34, report["sim"]["rows"] // 4)},  # four blocks a replicate at least
     }
     assert "sd: standard error from a moving-block bootstrap" in printed
     real = fidelity_statistics(*load_paper_phase1()).to_dict()

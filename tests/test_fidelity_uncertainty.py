@@ -51,7 +51,7 @@ def test_z_is_the_difference_over_both_standard_errors_and_compare_carries_them(
     assert ComparisonRow("a (mm)", 2.0, 5.0, True, 3.0, True, 5.0, real_sd=3.0).z is None
     assert ComparisonRow("a (mm)", 2.0, 5.0, True, 3.0, True, 5.0, real_sd=0.0, sim_sd=0.0).z is None
     stats = fidelity_statistics(REAL_X, REAL_Y, cross_validation=False)
-    rows = compare(stats, stats, 0.37, 0.37, {"rigid residual RMS (mm)": 0.5}, {"rigid residual RMS (mm)": 0.25})
+    rows = compare(stats, stats, 0.37, 0.37, real_sd={"rigid residual RMS (mm)": 0.5}, sim_sd={"rigid residual RMS (mm)": 0.25})
     first = rows[0]
     assert (first.name, first.real_sd, first.sim_sd, first.z) == ("rigid residual RMS (mm)", 0.5, 0.25, 0.0)
     assert all(row.real_sd is None for row in rows[1:])

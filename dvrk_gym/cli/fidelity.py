@@ -7,7 +7,6 @@ from pathlib import Path
 
 from dvrk_gym import paper
 from dvrk_gym.cli.options import add_instrument_options, add_progress_option, writable_folder
-from dvrk_gym.utils.checks import check_int
 
 
 def _run_fidelity(args: argparse.Namespace) -> int:
@@ -15,8 +14,8 @@ def _run_fidelity(args: argparse.Namespace) -> int:
     from dvrk_gym.fidelity.report import format_table, write_report
     from dvrk_gym.fidelity.uncertainty import MAX_BOOTSTRAP_REPLICATES
 
-    if args.bootstrap != 0:
-        check_int("--bootstrap", args.bootstrap, 2, MAX_BOOTSTRAP_REPLICATES)
+    if args.bootstrap != 0 and not (isinstance(args.bootstrap, int) and 2 <= args.bootstrap <= MAX_BOOTSTRAP_REPLICATES):
+        raise ValueError(f"--bootstrap must be 0 (no standard errors) or an int in [2, {MAX_BOOTSTRAP_REPLICATES}], got {args.bootstrap}")
     writable_folder(args.out)  # before the collection: a folder that cannot hold the report is found now
     run = run_fidelity(
         bias=args.bias,

@@ -119,6 +119,7 @@ def compare(
     sim: FidelityStatistics,
     real_kept_share: float,
     sim_kept_share: float,
+    *,
     real_sd: Mapping[str, float] | None = None,
     sim_sd: Mapping[str, float] | None = None,
 ) -> list[ComparisonRow]:
@@ -239,14 +240,13 @@ def run_fidelity(
             f"no statistics of the simulated Phase I's {len(kept.y)} kept rows (of {len(data.y)}): {error}; "
             "with few rows kept, collect more trajectories or at a higher camera resolution"
         ) from error
+    # at least four blocks a replicate: a short collection's blocks are shorter than a trajectory
+    blocks = [max(1, min(BOOTSTRAP_BLOCK_ROWS, len(X) // 4)) for X in (real_X, kept.X)]
     sds: tuple[dict[str, float] | None, ...] = (None, None)
     if bootstrap_replicates:
         sds = tuple(
-            # at least four blocks a replicate: a short collection's blocks are shorter than a trajectory
-            statistic_standard_errors(
-                X, y, replicates=bootstrap_replicates, block=max(1, min(BOOTSTRAP_BLOCK_ROWS, len(X) // 4)), seed=seed
-            )
-            for X, y in ((real_X, real_y), (kept.X, kept.y))
+            statistic_standard_errors(X, y, replicates=bootstrap_replicates, block=block, seed=seed)
+            for X, y, block in ((real_X, real_y, blocks[0]), (kept.X, kept.y, blocks[1]))
         )
     settings: dict[str, object] = {
         "bias": bias,
@@ -256,6 +256,7 @@ def run_fidelity(
         "seed": int(seed),
         "camera_resolution": [int(v) for v in camera_resolution],
         "bootstrap_replicates": int(bootstrap_replicates),
+        "bootstrap_block_rows": {"real": blocks[0], "sim": blocks[1]} if bootstrap_replicates else None,
     }
     return FidelityRun(
         settings=settings,
@@ -266,5 +267,5 @@ def run_fidelity(
         sim_raw_rows=data.n_raw,
         real=real,
         sim=sim,
-        rows=compare(real, sim, REAL_KEPT_SHARE, data.n_kept / data.n_raw, *sds),
+        rows=compare(real, sim, REAL_KEPT_SHARE, data.n_kept / data.n_raw, real_sd=sds[0], sim_sd=sds[1]),
     )

@@ -23,7 +23,6 @@ from dvrk_gym.fidelity.comparison import (
     FidelityRun,
 )
 from dvrk_gym.fidelity.statistics import PAPER_YAWS_DEG, finite_or_none, rigid_residuals_camera
-from dvrk_gym.fidelity.uncertainty import BOOTSTRAP_BLOCK_ROWS
 from dvrk_gym.utils.atomic import atomic_savefig, atomic_write_text
 
 __all__ = ["JSON_NAME", "PNG_NAME", "format_table", "plot_fidelity", "report_dict", "write_report"]
@@ -68,11 +67,12 @@ def format_table(run: FidelityRun) -> str:
         f"(ratio within {RELATIVE_TOLERANCE:.0%}, shares within {SHARE_TOLERANCE:.2f} absolute, "
         f"the pitch autocorrelation within {CORRELATION_TOLERANCE:.1f}, median pitches within {PITCH_MEDIAN_TOLERANCE_DEG:.0f} degrees)"
     )
-    replicates = settings.get("bootstrap_replicates", 0)
-    if replicates:
+    replicates, blocks = settings.get("bootstrap_replicates", 0), settings.get("bootstrap_block_rows")
+    if replicates and isinstance(blocks, dict):
+        sizes = f"{blocks['real']} rows" + ("" if blocks["sim"] == blocks["real"] else f" real, {blocks['sim']} simulated")
         lines.append(
             f"sd: standard error from a moving-block bootstrap of each side's rows ({replicates} replicates, blocks of "
-            f"{BOOTSTRAP_BLOCK_ROWS} rows; none for the kept share and the CVs); z: (sim - real) over both sds combined"
+            f"{sizes}; none for the kept share and the CVs); z: (sim - real) over both sds combined"
         )
     return "\n".join(lines)
 

@@ -21,7 +21,7 @@ import numpy as np
 from dvrk_gym.sim.endoscope.camera import PixelWindow, StereoCamera
 from dvrk_gym.sim.endoscope.renderers import DISPLAY_RENDERERS
 from dvrk_gym.sim.physics.client import Physics
-from dvrk_gym.sim.physics.mirror import EGL_MAX_IMAGE_PX, EglMirror, RendererUnavailable
+from dvrk_gym.sim.physics.mirror import EGL_MAX_IMAGE_PX, EglMirror, RendererUnavailable, egl_forked, refuse_if_forked
 
 logger = logging.getLogger(__name__)
 
@@ -102,6 +102,11 @@ class EndoscopeDisplay:
 
     def image(self, physics: Physics, side: str = "left") -> np.ndarray:
         """What ``side`` ("left" or "right") of the endoscope sees in ``physics`` now: (h, w, 3) uint8 RGB."""
+        if self.renderer == "egl" and egl_forked():  # a display drawing with EGL before this process was forked
+            if self.requested == "egl":
+                refuse_if_forked()
+            logger.warning("rendering with TinyRenderer from now on: this process was forked after EGL started")
+            self._mirror, self._chosen = None, "tiny"  # the mirror is the parent's: dropped, not closed
         if self.renderer == "tiny":
             return self.camera.render(physics.client, side)
         mirror = self._mirror

@@ -87,6 +87,23 @@ class RendererUnavailable(RuntimeError):
     """PyBullet's EGL renderer cannot run here (no plugin, no libEGL, no EGL device)."""
 
 
+def egl_forked() -> bool:
+    """Whether this process was forked from one that had started PyBullet's EGL renderer
+    (:attr:`_SharedEglClient.started_in_pid`): its EGL state does not work here."""
+    return _SharedEglClient.started_in_pid not in (None, os.getpid())
+
+
+def refuse_if_forked() -> None:
+    """Raise RendererUnavailable (saying what to do) in a process forked after EGL started."""
+    if egl_forked():
+        raise RendererUnavailable(
+            f"PyBullet's EGL renderer was started in process {_SharedEglClient.started_in_pid} before this process "
+            "was forked from it, and its state does not survive a fork (drawing with it here would hang or crash); "
+            "start an async vector env's workers with 'spawn' or 'forkserver' "
+            "(gym.make_vec(..., vector_kwargs={'context': 'spawn'})), or render with renderer='tiny'"
+        )
+
+
 def egl_plugin_path() -> str | None:
     """Where pybullet's EGL renderer plugin is, or None if this pybullet has none."""
     spec = importlib.util.find_spec(EGL_PLUGIN_MODULE)
@@ -142,20 +159,14 @@ class EglMirror:
         path = egl_plugin_path() if plugin_path is None else plugin_path
         if path is None:
             raise RendererUnavailable(f"this pybullet has no EGL renderer plugin (module {EGL_PLUGIN_MODULE!r} not found)")
-        if _SharedEglClient.started_in_pid not in (None, os.getpid()):
-            raise RendererUnavailable(
-                f"PyBullet's EGL renderer was started in process {_SharedEglClient.started_in_pid} before this process "
-                "was forked from it, and its state does not survive a fork (drawing with it here would hang or crash); "
-                "start an async vector env's workers with 'spawn' or 'forkserver' "
-                "(gym.make_vec(..., vector_kwargs={'context': 'spawn'})), or render with renderer='tiny'"
-            )
+        refuse_if_forked()
         failure = egl_usable(path)
         if failure is not None:
             raise RendererUnavailable(f"PyBullet's EGL renderer ({path}) does not run here: {failure}")
         self._shared: _SharedEglClient | None = _SharedEglClient.acquire(path)
         self._folder: tempfile.TemporaryDirectory[str] | None = tempfile.TemporaryDirectory(prefix="dvrk_gym_display_")
         # Gives the client back and deletes the folder when closed, collected, or at exit (while the streams still work).
-        self._release = weakref.finalize(self, _release, self._shared, self._folder)
+        self._release = weakref.finalize(self, _release, self._shared, self._folder, os.getpid())
         self._layout: int | None = None  # the layout_version of the Physics copied
         self._copies: list[_Copy] = []
         self._written: list[str] = []  # the OBJ files written for the rebuild under way
@@ -166,6 +177,7 @@ class EglMirror:
         """The client the mirror draws in (its thread's one EGL client); raises RendererUnavailable once closed."""
         if self._shared is None:
             raise RendererUnavailable("this EGL mirror has been closed")
+        refuse_if_forked()  # a mirror made before the fork: its client is the parent's
         return self._shared.client
 
     @property
@@ -357,8 +369,11 @@ class _SharedEglClient:
                 logger.debug("the EGL mirror's server was already disconnected")
 
 
-def _release(shared: _SharedEglClient, folder: tempfile.TemporaryDirectory[str]) -> None:
-    """Give a mirror's share of the EGL client back and delete its mesh folder."""
+def _release(shared: _SharedEglClient, folder: tempfile.TemporaryDirectory[str], pid: int) -> None:
+    """Give a mirror's share of the EGL client back and delete its mesh folder; nothing in a
+    process forked from the one (``pid``) that made the mirror: both are that one's."""
+    if os.getpid() != pid:
+        return
     shared.give_back()
     folder.cleanup()
 
