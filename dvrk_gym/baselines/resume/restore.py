@@ -44,7 +44,7 @@ from dvrk_gym.baselines.resume.state_file import (
     stack_observations,
     training_envs,
 )
-from dvrk_gym.utils.bounded_zip import ArchiveLimitError, ArchiveLimits, open_archive, read_member
+from dvrk_gym.utils.bounded_zip import ArchiveLimitError, ArchiveLimits, open_archive, read_member, read_npy_header
 from dvrk_gym.utils.checks import check_int
 from dvrk_gym.utils.source_fingerprint import SourceFingerprint, source_fingerprint
 
@@ -201,11 +201,7 @@ def _read_array(archive: zipfile.ZipFile, name: str, shape: tuple[int, ...], dty
     expected = int(np.prod(shape)) * np.dtype(dtype).itemsize
     data = read_member(archive, name, ArchiveLimits(max_member_bytes=expected + NPY_HEADER_BYTES))
     stream = io.BytesIO(data)
-    version = np.lib.format.read_magic(stream)
-    if version not in ((1, 0), (2, 0)):
-        raise ValueError(f"{name}: .npy format version {version} is not read")
-    read_header = np.lib.format.read_array_header_1_0 if version == (1, 0) else np.lib.format.read_array_header_2_0
-    found_shape, fortran_order, found_dtype = read_header(stream)
+    found_shape, fortran_order, found_dtype = read_npy_header(stream, name)
     if tuple(found_shape) != tuple(shape) or found_dtype != np.dtype(dtype) or fortran_order:
         raise ValueError(f"{name} holds {found_dtype} {tuple(found_shape)}, expected {np.dtype(dtype)} {tuple(shape)} in C order")
     body = data[stream.tell() :]
