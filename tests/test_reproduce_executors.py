@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 from reproduction_files import files_that_differ
-from workers_for_tests import die_once, record, square_or_die
+from workers_for_tests import die_once, import_pybullet, record, square_or_die
 
 from dvrk_gym.cli.main import main
 from dvrk_gym.parallel.executors import InlineExecutor, LocalExecutor
@@ -98,6 +98,23 @@ def test_reproduce_on_a_dask_cluster_gives_what_a_local_process_gives(tmp_path, 
 def test_a_local_pool_refuses_worker_counts_out_of_bounds(workers):
     with pytest.raises(ValueError, match=r"expected an int in \[1, 1024\]"):
         LocalExecutor(workers=workers)
+
+
+def test_the_command_lines_workers_import_pybullet_without_its_banner(capfd):
+    """Each spawned worker printed "pybullet build time: ..." into the progress bar of
+    reproduce --quick (twice, two workers); the command line's pool imports it quietly."""
+    from dvrk_gym.sim.physics.quiet_import import import_pybullet_quietly
+
+    for setup, banner in ((None, True), (import_pybullet_quietly, False)):
+        with LocalExecutor(workers=1, setup=setup) as executor:
+            assert executor.submit(import_pybullet).result() is (setup is not None)  # the setup imported it first
+        assert ("pybullet build time" in capfd.readouterr().err) is banner
+    import argparse
+
+    from dvrk_gym.cli.options import make_executor
+
+    pool = make_executor(argparse.Namespace(scheduler=None, workers=2))
+    assert isinstance(pool, LocalExecutor) and pool.setup is import_pybullet_quietly
 
 
 def test_a_local_pool_takes_a_numpy_int():

@@ -31,3 +31,13 @@ def square_or_die(n: int) -> int:
     if n < 0:
         os.kill(os.getpid(), 9)
     return n * n
+
+
+def import_pybullet() -> bool:
+    """Import PyBullet in this (worker) process; whether it was imported before."""
+    import sys
+
+    before = "pybullet" in sys.modules
+    import pybullet  # noqa: F401
+
+    return before

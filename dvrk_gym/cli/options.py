@@ -149,8 +149,9 @@ def make_executor(args: argparse.Namespace) -> Executor:
             ) from None
         return DaskExecutor(args.scheduler, connect_timeout_s=args.connect_timeout)
     from dvrk_gym.parallel.executors import local_executor
+    from dvrk_gym.sim.physics.quiet_import import import_pybullet_quietly
 
-    return local_executor(args.workers)
+    return local_executor(args.workers, setup=import_pybullet_quietly)  # no banner from the workers into the progress bar
 
 
 _created: list[Path] = []

@@ -139,6 +139,13 @@ class FuturesExecutor:
         self.close()
 
 
+def _start_worker(parent_pid: int, setup: Callable[[], None] | None) -> None:
+    """A local worker's start: end with the parent, then the executor's ``setup``."""
+    end_with_parent(parent_pid)
+    if setup is not None:
+        setup()
+
+
 class LocalExecutor(FuturesExecutor):
     """A pool of ``workers`` spawned processes on this machine (``concurrent.futures``).
 
@@ -150,24 +157,27 @@ class LocalExecutor(FuturesExecutor):
 
     Args:
         workers: processes running calls side by side (at least 1).
+        setup: called once in each worker as it starts (a module-level function; the command
+            line's imports PyBullet there without its banner, which would cut into the
+            progress bar), or None.
 
     Raises:
         ValueError: ``workers`` below 1.
     """
 
-    def __init__(self, workers: int = 2) -> None:
+    def __init__(self, workers: int = 2, *, setup: Callable[[], None] | None = None) -> None:
         if isinstance(workers, bool) or not isinstance(workers, numbers.Integral) or not 1 <= workers <= MAX_LOCAL_WORKERS:
             raise ValueError(f"workers is {workers!r}; expected an int in [1, {MAX_LOCAL_WORKERS}]")
         self.workers: int = int(workers)
         self.description = f"{workers} local process{'es' if workers > 1 else ''}"
+        self.setup: Callable[[], None] | None = setup
         self._pool: cf.ProcessPoolExecutor | None = None
 
     def _new_pool(self) -> cf.ProcessPoolExecutor:
         return cf.ProcessPoolExecutor(
             max_workers=self.workers,
             mp_context=multiprocessing.get_context("spawn"),
-            initializer=end_with_parent,
-            initargs=(os.getpid(),),
+            initializer=functools.partial(_start_worker, os.getpid(), self.setup),
         )
 
     def submit(self, function: Callable[..., Any], /, *args: Any, **kwargs: Any) -> cf.Future:
@@ -273,6 +283,7 @@ class InlineExecutor(FuturesExecutor):
         """Nothing to release."""
 
 
-def local_executor(workers: int) -> FuturesExecutor:
-    """The executor for ``workers`` local workers: :class:`InlineExecutor` for 1, else :class:`LocalExecutor`."""
-    return InlineExecutor() if workers == 1 else LocalExecutor(workers)
+def local_executor(workers: int, *, setup: Callable[[], None] | None = None) -> FuturesExecutor:
+    """The executor for ``workers`` local workers: :class:`InlineExecutor` for 1, else
+    :class:`LocalExecutor` (whose workers call ``setup`` as they start)."""
+    return InlineExecutor() if workers == 1 else LocalExecutor(workers, setup=setup)
