@@ -278,5 +278,5 @@ def test_a_run_stopped_after_its_model_but_before_its_curve_resumes_and_writes_t
     assert (out / "model.zip").exists() and (out / TRAINING_STATE).exists() and not (out / "learning_curve.png").exists()
     monkeypatch.undo()
     assert args.func(args) == 0
-    assert "resuming the training saved in" in capsys.readouterr().out
+    assert "resumed the training saved in" in capsys.readouterr().out
     assert (out / "learning_curve.png").exists() and not (out / TRAINING_STATE).exists()

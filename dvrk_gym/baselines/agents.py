@@ -85,7 +85,7 @@ AGENTS: dict[str, AgentSpec] = {
     "sac_pick": _sac("sac_pick", False, wrap_debridement, {"fragment": "pumpkin_seed", "action_mode": "primitive"}, _PICK_SAC),
 }
 if set(AGENTS) != set(AGENT_DESCRIPTIONS):
-    raise RuntimeError(f"names.py lists {sorted(AGENT_DESCRIPTIONS)} but AGENTS has {sorted(AGENTS)}")
+    raise RuntimeError(f"budgets.py lists {sorted(AGENT_DESCRIPTIONS)} but AGENTS has {sorted(AGENTS)}")
 
 
 def get_agent(name: str) -> AgentSpec:

@@ -104,7 +104,7 @@ class GoalScaling(gym.ObservationWrapper):
     def step(self, action: Any) -> tuple[dict[str, np.ndarray], float, bool, bool, dict[str, Any]]:
         """Step; the reward is :meth:`compute_reward` of the scaled goals returned.
 
-        It equals the env's reward up to float32 rounding of the goals (about 1e-6 mm),
+        It equals the env's reward up to float32 rounding of the goals (up to about 2e-5 mm),
         and exactly what HER recomputes for the same goals, as stable-baselines3 checks.
         """
         observation, _, terminated, truncated, info = self.env.step(action)

@@ -32,6 +32,12 @@ LOAD_WARNING = (
 )
 
 
+def training_folder(args: argparse.Namespace) -> Path:
+    """Where ``baseline train`` writes: ``--out``, else ``dvrk_gym_out/baselines/<algo>_<budget or --steps>_seed<seed>``."""
+    label = args.budget if args.steps is None else args.steps
+    return args.out or Path("dvrk_gym_out/baselines") / f"{args.algo}_{label}_seed{args.seed}"
+
+
 def _run_train(args: argparse.Namespace) -> int:
     from dvrk_gym.baselines.budgets import AGENT_ENVS, DEBRIDEMENT_ID, resolve_budget
     from dvrk_gym.baselines.checkpoints import save_agent
@@ -71,7 +77,7 @@ def _run_train(args: argparse.Namespace) -> int:
         overrides=overrides,
         env_overrides=env_overrides,
     )
-    out = args.out or Path("dvrk_gym_out/baselines") / f"{args.algo}_{args.budget if args.steps is None else steps}_seed{args.seed}"
+    out = training_folder(args)
     writable_folder(out)  # before training: a folder that cannot hold the model is found now, not after the training
     state_path = out / TRAINING_STATE
     # The folder is this process's while it trains (a second training there is refused, naming
@@ -79,18 +85,21 @@ def _run_train(args: argparse.Namespace) -> int:
     with RunFolder(out):
         if args.force:
             state_path.unlink(missing_ok=True)  # train from the start: a saved state would be resumed
-        elif state_path.exists():
-            print(f"resuming the training saved in {state_path}")
-        elif all((out / name).exists() for name in OUTPUTS):
+        resuming = state_path.exists()
+        if not resuming and all((out / name).exists() for name in OUTPUTS):
             raise FileExistsError(
                 f"{out / 'model.zip'} exists: {out} holds a finished training; give --force to train again, or another --out"
             )
-        elif (out / "model.zip").exists():  # killed between its outputs before any save: the same training writes the same ones
+        if (
+            not resuming and (out / "model.zip").exists()
+        ):  # killed between its outputs before any save: the same training writes the same ones
             print(f"{out} holds a model but not all of {', '.join(OUTPUTS)}, and no saved state: training again from the start")
         try:
             result = train(config, progress=not args.no_progress, state_path=state_path, save_every=save_every)
         except TrainingStateError as error:
             raise TrainingStateError(f"{error} (--force trains from the start, replacing it)") from None
+        if resuming:  # said once the state was found to be this training's (a state of other settings is refused)
+            print(f"resumed the training saved in {state_path}")
         model_path = save_agent(result, out / "model.zip")  # the model first: nothing after it can lose it
         label = f"{args.algo}, seed {args.seed}"
         meta = {"agent": args.algo, "seed": args.seed, "env_steps": result.env_steps, "steps_per_second": result.steps_per_second}

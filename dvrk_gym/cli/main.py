@@ -9,6 +9,7 @@ import sys
 from collections.abc import Callable, Sequence
 
 from dvrk_gym import __version__
+from dvrk_gym.cli.baselines import TRAINING_STATE, training_folder
 from dvrk_gym.cli.baselines import add_commands as add_baseline_commands
 from dvrk_gym.cli.calibration import add_commands as add_calibration_commands
 from dvrk_gym.cli.debridement import add_commands as add_debridement_commands
@@ -56,14 +57,24 @@ def _one_line(error: BaseException, args: argparse.Namespace) -> str:
 def keeps_work_when_interrupted(args: argparse.Namespace) -> bool:
     """Whether an interrupted run of this command keeps finished stages that the same command
     picks up again: the calibration pipeline's cached stages (calibrate, evaluate without
-    --policy, debride --calibrate), reproduce's and sweep's tasks, a training's saved state."""
+    --policy, debride --calibrate), reproduce's and sweep's tasks (a training's saved state:
+    :func:`interrupted_note`)."""
     if args.command in ("calibrate", "reproduce", "sweep"):
         return True
     if args.command == "evaluate":
         return not args.policy
     if args.command == "debride":
         return bool(args.calibrate)
-    return args.command == "baseline" and args.baseline_command == "train"
+    return False
+
+
+def interrupted_note(args: argparse.Namespace) -> str:
+    """What an interrupted run of this command kept, and what running it again does."""
+    if args.command == "baseline" and args.baseline_command == "train":
+        if (training_folder(args) / TRAINING_STATE).exists():
+            return "its last saved training state is kept: the same command resumes from it"
+        return f"nothing is kept: no training state was saved yet (the first save comes after {args.save_every} env steps); run it again"
+    return "cached stages are kept: the same command resumes" if keeps_work_when_interrupted(args) else "nothing is kept: run it again"
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -105,8 +116,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     except KeyboardInterrupt:
         remove_empty_created_folders()
-        kept = "cached stages are kept: the same command resumes" if keeps_work_when_interrupted(args) else "nothing is kept: run it again"
-        print(f"dvrk-gym {_command(args)}: interrupted ({kept})", file=sys.stderr)
+        print(f"dvrk-gym {_command(args)}: interrupted ({interrupted_note(args)})", file=sys.stderr)
         return 130
 
 

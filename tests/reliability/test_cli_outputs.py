@@ -354,7 +354,7 @@ def test_debride_refuses_an_instrument_other_than_its_calibrations(small_calibra
         (["evaluate", "--policy", "x:y"], False),
         (["debride", "--calibrate"], True),
         (["debride"], False),
-        (["baseline", "train", "--algo", "sac", "--steps", "10"], True),
+        (["baseline", "train", "--algo", "sac", "--steps", "10"], False),  # before its first save: nothing kept
         (["search", "--quick"], False),
         (["collect", "--trajectories", "1"], False),
         (["demo", "--circles", "1"], False),
@@ -379,3 +379,32 @@ def test_ctrl_c_says_the_command_resumes_only_where_it_keeps_its_stages(capsys, 
     assert cli_main.main([*argv, "--out", str(tmp_path / "out")]) == 130
     err = capsys.readouterr().err
     assert ("the same command resumes" in err) is resumes and ("nothing is kept" in err) is not resumes, err
+
+
+def test_ctrl_c_of_a_training_says_it_resumes_only_once_a_state_was_saved(capsys, tmp_path, monkeypatch):
+    """It said "cached stages are kept: the same command resumes" before any save, and the
+    folder held nothing but its lock."""
+    from dvrk_gym.cli import main as cli_main
+    from dvrk_gym.cli.baselines import TRAINING_STATE
+
+    parser = cli_main.build_parser()
+    parse = parser.parse_args
+
+    def parse_and_interrupt(arguments=None):
+        args = parse(arguments)
+
+        def interrupted(args):
+            raise KeyboardInterrupt
+
+        args.func = interrupted
+        return args
+
+    monkeypatch.setattr(parser, "parse_args", parse_and_interrupt)
+    monkeypatch.setattr(cli_main, "build_parser", lambda: parser)
+    argv = ["baseline", "train", "--algo", "sac", "--steps", "10", "--out", str(tmp_path / "out")]
+    assert cli_main.main(argv) == 130
+    assert "no training state was saved yet (the first save comes after 500 env steps)" in capsys.readouterr().err
+    (tmp_path / "out").mkdir()
+    (tmp_path / "out" / TRAINING_STATE).write_bytes(b"saved")
+    assert cli_main.main(argv) == 130
+    assert "its last saved training state is kept: the same command resumes from it" in capsys.readouterr().err

@@ -66,7 +66,7 @@ def test_a_killed_training_resumes_to_the_model_of_one_never_stopped(tmp_path):
 
     again = run_cli(*TRAIN, "--save-every", "20", "--out", str(out))
     assert again.returncode == 0, again.stderr
-    assert f"resuming the training saved in {state}" in again.stdout
+    assert f"resumed the training saved in {state}" in again.stdout
     assert not state.exists()
     whole, resumed = load_agent(tmp_path / "whole" / "model.zip"), load_agent(out / "model.zip")
     a, b = whole.model.policy.state_dict(), resumed.model.policy.state_dict()

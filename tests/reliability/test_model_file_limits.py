@@ -292,4 +292,6 @@ def test_agent_weights_that_inflate_beyond_the_limit_or_hold_objects_are_refused
     stream = io.BytesIO()
     torch.save({"weights": torch.zeros(2), "note": Path("x")}, stream)  # an object only a full unpickler would rebuild
     _agent_files(tmp_path, {"policy.pth": stream.getvalue()})
-    assert "is not a plain tensor state dict" in _bounded(load_agent, path)
+    text = _bounded(load_agent, path)
+    assert "is not a plain tensor state dict (it holds objects other than tensors); refused, never unpickled" in text
+    assert "weights_only" not in text  # torch's advice would be to run the file's code
