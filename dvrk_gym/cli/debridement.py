@@ -25,13 +25,9 @@ def _calibration_instrument(args: argparse.Namespace, stamped: dict[str, Any]) -
     """The instrument and endoscope of the picks: the calibration folder's (``stamped``), else the flags', else the paper's.
 
     Raises:
-        ValueError: a flag out of range, or one that differs from the folder's (it would be ignored).
+        ValueError: a flag that differs from the folder's (it would be ignored), or a folder's value out of range.
     """
-    if args.bias_seed is not None:
-        check_int("--bias-seed", args.bias_seed, 0, 2**31 - 1)
-    if args.resolution is not None:
-        check_endoscope_resolution("--resolution", args.resolution)
-    given = {
+    given = {  # the flags' ranges were checked with every command's (cli.options.check_common_options)
         "bias": args.bias,
         "bias_seed": args.bias_seed,
         "camera_resolution": None if args.resolution is None else list(args.resolution),

@@ -43,6 +43,7 @@ from dvrk_gym.calibration.phase1 import MAX_TRAJECTORIES, PaperExplorationPolicy
 from dvrk_gym.envs.exploration import CalibrationExplorationEnv
 from dvrk_gym.fidelity.instrument_model import PARAMETERS, initial_vector, predict_camera_points, predict_pixels
 from dvrk_gym.fidelity.statistics import fidelity_statistics
+from dvrk_gym.fidelity.uncertainty import block_bootstrap_rows
 from dvrk_gym.sim.endoscope.camera import WORKSPACE_CENTER_M
 from dvrk_gym.sim.endoscope.noise import IDENTIFIED_MARKER_NOISE, DetectionNoise
 from dvrk_gym.sim.robot.bias import BIAS_PRESETS
@@ -192,10 +193,8 @@ def bootstrap_sd(
     if n < block:
         raise ValueError(f"a block bootstrap of blocks of {block} rows needs at least {block} rows, got {n}")
     rng = np.random.default_rng(check_int("seed", seed, 0))
-    starts = rng.integers(0, n - block + 1, size=(replicates, n // block))
     estimates = []
-    for k, row_starts in enumerate(starts):
-        rows = (row_starts[:, None] + np.arange(block)).ravel()
+    for k, rows in enumerate(block_bootstrap_rows(rng, n, block, replicates)):
         estimates.append(refit(fit, commands[rows], pixels[rows]).theta)
         logger.info("bootstrap replicate %d of %d done", k + 1, replicates)
     return np.std(np.array(estimates), axis=0, ddof=1)

@@ -17,12 +17,14 @@ pitch autocorrelation 0.03 and the rigid residual RMS 0.25 mm.
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+
 import numpy as np
 
 from dvrk_gym.fidelity.statistics import fidelity_statistics, named_statistics
 from dvrk_gym.utils.checks import check_int
 
-__all__ = ["BOOTSTRAP_BLOCK_ROWS", "BOOTSTRAP_REPLICATES", "MAX_BOOTSTRAP_REPLICATES", "statistic_standard_errors"]
+__all__ = ["BOOTSTRAP_BLOCK_ROWS", "BOOTSTRAP_REPLICATES", "MAX_BOOTSTRAP_REPLICATES", "block_bootstrap_rows", "statistic_standard_errors"]
 
 BOOTSTRAP_BLOCK_ROWS = 34
 """Rows per block: the authors' kept rows per trajectory (1,939 over 57)."""
@@ -31,6 +33,13 @@ BOOTSTRAP_REPLICATES = 200
 a standard deviation estimated from 200 draws is 5% of it."""
 MAX_BOOTSTRAP_REPLICATES = 100_000
 """The most replicates :func:`statistic_standard_errors` runs."""
+
+
+def block_bootstrap_rows(rng: np.random.Generator, rows: int, block: int, replicates: int) -> Iterator[np.ndarray]:
+    """Each replicate's row indices: ``rows // block`` blocks of ``block`` consecutive rows,
+    their starts drawn with replacement from ``rng``, joined in the drawn order."""
+    for starts in rng.integers(0, rows - block + 1, size=(replicates, rows // block)):
+        yield (starts[:, None] + np.arange(block)).ravel()
 
 
 def statistic_standard_errors(
@@ -62,8 +71,7 @@ def statistic_standard_errors(
     block = check_int("block", block, 1, len(X))
     rng = np.random.default_rng(check_int("seed", seed, 0))
     draws: dict[str, list[float]] = {}
-    for starts in rng.integers(0, len(X) - block + 1, size=(replicates, len(X) // block)):
-        rows = (starts[:, None] + np.arange(block)).ravel()
+    for rows in block_bootstrap_rows(rng, len(X), block, replicates):
         try:
             statistics = fidelity_statistics(X[rows], y[rows], cross_validation=False)
         except ValueError:  # a replicate without a consecutive pair for the jitter, say
