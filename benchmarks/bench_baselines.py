@@ -203,7 +203,9 @@ def comparison(args: argparse.Namespace, steps: int, pick_steps: int) -> None:
         print(format_comparison(rows, notes))
 
     start = time.perf_counter()
-    debridement, _ = calibration_debridement_rows(calibration_dir, args.trials, seed=0, camera_resolution=calibration.camera_resolution)
+    debridement, _ = calibration_debridement_rows(
+        calibration_dir, n_trials=args.trials, seed=0, camera_resolution=calibration.camera_resolution
+    )
     for agent in agents:
         label = agent.label + (" via pick_policy" if agent.config.spec.env_id == GRID_TOUCH_ID else "")
         debridement.append(debridement_row(label, agent.env_steps, benchmark_debridement(agent, args.trials, seed=0), str(agent.path)))

@@ -49,9 +49,9 @@ def bench_cell(
     start = time.perf_counter()
     results = run_debridement(
         CalibratedPolicy(calibrator, target=fragment_target),
-        trials,
-        seed,
-        fragment,
+        n_trials=trials,
+        seed=seed,
+        fragment=fragment,
         bias=settings["bias"],
         bias_seed=int(settings["bias_seed"]),
         camera_resolution=resolution,

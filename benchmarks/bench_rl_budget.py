@@ -143,7 +143,7 @@ def evaluate_grid_touch(model: Any, env: gym.Env, recorder: CommandedYaw) -> dic
     row: dict[str, float] = {}
     for name, options in sets.items():
         recorder.yaw_errors_rad.clear()
-        results = run_episodes(env, model, N_CIRCLES, seed=EVAL_SEED, options=options, progress=False)
+        results = run_episodes(env, model, n_episodes=N_CIRCLES, seed=EVAL_SEED, options=options, progress=False)
         row[f"{name}_mm"] = float(np.mean([r.metrics["mm_error"] for r in results]))
         row[f"{name}_success"] = float(np.mean([r.metrics["is_success"] for r in results]))
         row[f"{name}_yaw_error_deg"] = float(np.degrees(np.mean(recorder.yaw_errors_rad)))
@@ -154,7 +154,7 @@ def evaluate_debridement(model: Any, env: gym.Env, trials: int) -> dict[str, flo
     """Success rate and mean true grip offset (mm) over ``trials`` trials of eight picks."""
     from dvrk_gym.baselines.training import evaluate_pick_curve_point
 
-    point = evaluate_pick_curve_point(model, env, 0, seed=EVAL_SEED, n_trials=trials)
+    point = evaluate_pick_curve_point(model, env, env_steps=0, seed=EVAL_SEED, n_trials=trials)
     return {"success": point.success_rate, "grip_offset_mm": point.mm_error}
 
 

@@ -106,7 +106,7 @@ def _save_images(world: DvrkWorld, out: Path) -> dict[str, Path]:
 
 
 def run_demo(
-    out: Path, bias: str = "paper", bias_seed: int = 0, resolution: tuple[int, int] = paper.ENDOSCOPE_RESOLUTION_PX, n_circles: int = 7
+    out: Path, *, bias: str = "paper", bias_seed: int = 0, resolution: tuple[int, int] = paper.ENDOSCOPE_RESOLUTION_PX, n_circles: int = 7
 ) -> DemoResult:
     """Touch ``n_circles`` circles spread over the grid and write ``left.png``, ``right.png``
     and ``stereo.png`` (the last touch) into ``out``.

@@ -159,7 +159,7 @@ def _untrained_agent(tmp_path, **settings):
     config = TrainConfig(camera_resolution=TINY, overrides=FAST_NETWORK, **settings)
     env = make_training_vec_env(config)
     try:
-        model = build_model(config.spec, env, config.seed, config.overrides)
+        model = build_model(config.spec, env, seed=config.seed, overrides=config.overrides)
     finally:
         env.close()
     return save_agent(TrainResult(model, config, [], 0, 0.0, 0.0), tmp_path / "model.zip")

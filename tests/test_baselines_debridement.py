@@ -358,7 +358,7 @@ def test_run_debridement_refuses_env_keywords_that_repeat_its_arguments():
     from dvrk_gym.evaluation.trials import run_debridement
 
     with pytest.raises(ValueError, match=r"repeat run_debridement's own arguments: \['contact'\]"):
-        run_debridement(lambda observation: None, 1, 0, env_kwargs={"contact": "rigid"})
+        run_debridement(lambda observation: None, n_trials=1, seed=0, env_kwargs={"contact": "rigid"})
 
 
 def test_trials_on_an_env_without_a_trial_table_are_refused():

@@ -116,8 +116,8 @@ def test_run_episodes_is_reproducible_and_summaries_are_right():
     env = gym.make("dvrk_gym/GridTouch-v0", camera_resolution=SMALL)
     try:
         policy = lambda obs: np.array([0.04, 0.042, -0.154, 0.0], np.float32)  # noqa: E731
-        first = run_episodes(env, policy, 3, seed=4, options=lambda i: {"circle": 10 + i}, progress=False)
-        second = run_episodes(env, policy, 3, seed=4, options=lambda i: {"circle": 10 + i}, progress=False)
+        first = run_episodes(env, policy, n_episodes=3, seed=4, options=lambda i: {"circle": 10 + i}, progress=False)
+        second = run_episodes(env, policy, n_episodes=3, seed=4, options=lambda i: {"circle": 10 + i}, progress=False)
     finally:
         env.close()
     assert [r.metrics for r in first] == [r.metrics for r in second]

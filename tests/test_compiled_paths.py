@@ -54,7 +54,7 @@ def test_the_compiled_true_tip_is_the_python_float_paths_bit_for_bit(preset, set
             handed_over.append(True)
             return ik.inverse_kinematics_clamped_floats(position.tolist(), rotation, q_ref)
 
-        got = float_paths.true_tip(position, r6, float(q_ref[3]), state, constants, fallback)
+        got = float_paths.true_tip(position, r6, float(q_ref[3]), state, constants=constants, fallback_command=fallback)
         assert got.tobytes() == _python_tip(model, position, rotation, q_ref).tobytes()
         assert model.get_state().tobytes() == state.tobytes()  # a peek moves nothing
         python_solved = ik.inverse_kinematics_floats(position.tolist(), rotation, q_ref) is not None
@@ -224,11 +224,11 @@ def test_grid_touch_on_the_compiled_paths_is_grid_touch_on_the_python_float_path
 def _on_the_python_float_paths(monkeypatch, cable: cables.CableModel) -> None:
     """Send float_paths' functions back to the Python float paths they compile, for ``cable``."""
 
-    def true_tip(position, r6, roll, state, constants, fallback):
+    def true_tip(position, r6, roll, state, *, constants, fallback_command):
         q_ref = np.zeros(6)
         q_ref[3] = roll
         rotation = r6.reshape(3, 3) @ kin.TOOL_TIP_ROTATION  # r6 = rotation @ T.T, T a signed permutation: exact
-        command = ik.inverse_kinematics_floats(np.asarray(position).tolist(), rotation, q_ref) or list(fallback())
+        command = ik.inverse_kinematics_floats(np.asarray(position).tolist(), rotation, q_ref) or list(fallback_command())
         return ik.touch_point_floats(cable.peek_true_joints_floats(command), cable.true_dh)
 
     monkeypatch.setattr(float_paths, "true_tip", true_tip)

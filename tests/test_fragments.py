@@ -60,7 +60,7 @@ def _fragment_across_jaws(physics, kind, offset_across=0.0, offset_along=0.0, to
     yaw = math.atan2(closing[1], closing[0]) + math.pi / 2
     center = WORKSPACE_CENTER_M[:2]
     size = np.array(FRAGMENT_TYPES[kind].size_mean_m)
-    (fragment,) = spawn_fragments(physics, kind, size[None], center[None], [yaw])
+    (fragment,) = spawn_fragments(physics, kind=kind, sizes=size[None], positions=center[None], yaws=[yaw])
     length_axis = np.array([math.cos(yaw), math.sin(yaw)])
     return fragment, center + offset_across * closing + offset_along * length_axis
 
@@ -114,7 +114,7 @@ def test_layout_keeps_fragments_apart_and_on_the_phantom(kind):
     for seed in range(5):
         rng = np.random.default_rng(seed)
         sizes = sample_fragment_sizes(kind, rng, 8)
-        positions, yaws = sample_layout(rng, sizes)
+        positions, yaws = sample_layout(rng, sizes=sizes)
         assert positions.shape == (8, 2) and yaws.shape == (8,)
         for i in range(8):
             outline = ellipse_outline(sizes[i], positions[i], yaws[i], samples=512)
@@ -132,14 +132,14 @@ def test_layout_that_cannot_fit_says_so():
     sizes = sample_fragment_sizes("pumpkin_seed", rng, 8)
     tiny = (WORKSPACE_CENTER_M[:2] - 0.01, WORKSPACE_CENTER_M[:2] + 0.01)
     with pytest.raises(ValueError, match="could not place 8 fragments"):
-        sample_layout(rng, sizes, region=tiny, max_tries=50)
+        sample_layout(rng, sizes=sizes, region=tiny, max_tries=50)
 
 
 # ---------------------------------------------------------------------------- bodies
 def test_fragments_are_named_and_report_their_pose(world):
     physics, _ = world
     sizes = np.array([FRAGMENT_TYPES["raisin"].size_mean_m] * 2)
-    fragments = spawn_fragments(physics, "raisin", sizes, [[0.03, 0.04], [0.05, 0.04]], [0.3, -1.2])
+    fragments = spawn_fragments(physics, kind="raisin", sizes=sizes, positions=[[0.03, 0.04], [0.05, 0.04]], yaws=[0.3, -1.2])
     assert [f.name for f in fragments] == ["fragment_0", "fragment_1"]
     assert physics.body("fragment_1") == fragments[1].body_id
     np.testing.assert_allclose(fragments[0].position()[:2], [0.03, 0.04], atol=1e-9)
@@ -153,8 +153,8 @@ def test_fragments_rest_on_the_paper_without_drifting(world, kind):
     physics, _ = world
     rng = np.random.default_rng(7)
     sizes = sample_fragment_sizes(kind, rng, 8)
-    positions, yaws = sample_layout(rng, sizes)
-    fragments = spawn_fragments(physics, kind, sizes, positions, yaws)
+    positions, yaws = sample_layout(rng, sizes=sizes)
+    fragments = spawn_fragments(physics, kind=kind, sizes=sizes, positions=positions, yaws=yaws)
     physics.step(24)  # settle the 10 um spawn clearance
     start = np.array([f.position() for f in fragments])
     physics.step(480)  # 2 s
@@ -294,8 +294,8 @@ def _trial_positions(seed):
         robot = PSMBody(physics)
         rng = np.random.default_rng(seed)
         sizes = sample_fragment_sizes("pumpkin_seed", rng, 8)
-        positions, yaws = sample_layout(rng, sizes)
-        fragments = spawn_fragments(physics, "pumpkin_seed", sizes, positions, yaws)
+        positions, yaws = sample_layout(rng, sizes=sizes)
+        fragments = spawn_fragments(physics, kind="pumpkin_seed", sizes=sizes, positions=positions, yaws=yaws)
         gripper = Gripper(physics, robot, fragments)
         for fragment in fragments[:2]:
             p = fragment.position()

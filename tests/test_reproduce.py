@@ -125,10 +125,10 @@ def test_tasks_run_after_what_they_need_and_results_are_cached(tmp_path):
         Task("a", record, {"name": "a", "log": str(log)}, cost_s=1),
         Task("b", record, {"name": "b", "log": str(log)}, needs=("a",), cost_s=5),
     ]
-    results = run_tasks(graph, tmp_path / "cache", workers=1, progress=False)
+    results = run_tasks(graph, cache_dir=tmp_path / "cache", workers=1, progress=False)
     assert log.read_text().split() == ["a", "b", "c"]
     assert list(results) == ["c", "a", "b"] and results["c"]["name"] == "c" and not results["c"]["cached"]
-    again = run_tasks(graph, tmp_path / "cache", workers=1, progress=False)
+    again = run_tasks(graph, cache_dir=tmp_path / "cache", workers=1, progress=False)
     assert log.read_text().split() == ["a", "b", "c"]  # nothing ran twice
     assert all(r["cached"] for r in again.values())
 
@@ -136,15 +136,15 @@ def test_tasks_run_after_what_they_need_and_results_are_cached(tmp_path):
 def test_bad_graphs_and_failures_are_reported(tmp_path):
     log = str(tmp_path / "log.txt")
     with pytest.raises(ValueError, match="unknown"):
-        run_tasks([Task("a", record, {"name": "a", "log": log}, needs=("z",))], tmp_path, progress=False)
+        run_tasks([Task("a", record, {"name": "a", "log": log}, needs=("z",))], cache_dir=tmp_path, progress=False)
     with pytest.raises(ValueError, match="cycle"):
-        run_tasks([Task("a", record, needs=("b",)), Task("b", record, needs=("a",))], tmp_path, progress=False)
+        run_tasks([Task("a", record, needs=("b",)), Task("b", record, needs=("a",))], cache_dir=tmp_path, progress=False)
     with pytest.raises(ValueError, match="unique"):
-        run_tasks([Task("a", record), Task("a", record)], tmp_path, progress=False)
+        run_tasks([Task("a", record), Task("a", record)], cache_dir=tmp_path, progress=False)
     graph = [Task("ok", record, {"name": "ok", "log": log}), Task("bad", fail, {"message": "boom"})]
     for workers in (1, 2):
         with pytest.raises(TaskError, match="'bad' failed: RuntimeError: boom"):
-            run_tasks(graph, tmp_path / f"cache{workers}", workers=workers, progress=False)
+            run_tasks(graph, cache_dir=tmp_path / f"cache{workers}", workers=workers, progress=False)
         assert (tmp_path / f"cache{workers}" / "ok.json").exists()  # finished work stays cached
 
 
@@ -152,7 +152,7 @@ def test_the_task_that_unlocks_most_work_starts_first(tmp_path):
     log = tmp_path / "log.txt"
     step = lambda name, cost, needs=(): Task(name, record, {"name": name, "log": str(log)}, needs=needs, cost_s=cost)  # noqa: E731
     graph = [step("big", 50), step("root", 10), step("leaf1", 30, ("root",)), step("leaf2", 30, ("root",))]
-    run_tasks(graph, tmp_path / "cache", workers=1, progress=False)
+    run_tasks(graph, cache_dir=tmp_path / "cache", workers=1, progress=False)
     assert log.read_text().split() == ["root", "big", "leaf1", "leaf2"]  # root carries 70 s of work, big 50
 
 

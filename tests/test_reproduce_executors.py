@@ -27,7 +27,7 @@ def _graph(log: Path) -> list[Task]:
 @pytest.mark.parametrize("make_executor", [InlineExecutor, lambda: LocalExecutor(workers=2)], ids=["inline", "local-2"])
 def test_tasks_run_after_what_they_need_on_any_executor(tmp_path, make_executor):
     with make_executor() as executor:
-        results = run_tasks(_graph(tmp_path / "log.txt"), tmp_path / "cache", progress=False, executor=executor)
+        results = run_tasks(_graph(tmp_path / "log.txt"), cache_dir=tmp_path / "cache", progress=False, executor=executor)
     assert sorted((tmp_path / "log.txt").read_text().split()) == ["a", "b", "c", "free", "root"]  # each once, needs first
     assert list(results) == ["root", "a", "b", "c", "free"] and not any(r["cached"] for r in results.values())
     pids = {r["pid"] for r in results.values()}
@@ -37,7 +37,7 @@ def test_tasks_run_after_what_they_need_on_any_executor(tmp_path, make_executor)
 def test_a_task_that_does_not_see_the_shared_folder_fails_saying_so(tmp_path):
     graph = [Task("a", record, {"name": "a", "log": str(tmp_path / "log.txt")})]
     with pytest.raises(TaskError, match=r"task 'a' failed: FileNotFoundError: the run folder .*gone is not on this worker's disk"):
-        run_tasks(graph, tmp_path / "cache", progress=False, shared_folder=tmp_path / "gone")
+        run_tasks(graph, cache_dir=tmp_path / "cache", progress=False, shared_folder=tmp_path / "gone")
     assert not (tmp_path / "log.txt").exists()  # refused before it ran
 
 

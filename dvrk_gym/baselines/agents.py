@@ -95,7 +95,7 @@ def get_agent(name: str) -> AgentSpec:
     return AGENTS[name]
 
 
-def build_model(spec: AgentSpec, env: VecEnv, seed: int, overrides: dict[str, Any] | None = None, device: str = "cpu") -> BaseAlgorithm:
+def build_model(spec: AgentSpec, env: VecEnv, *, seed: int, overrides: dict[str, Any] | None = None, device: str = "cpu") -> BaseAlgorithm:
     """A fresh, seeded model of ``spec`` on ``env`` (``overrides`` replace hyperparameters).
 
     With ``env.num_envs`` > 1, an off-policy agent's ``gradient_steps`` (per vector-env

@@ -124,8 +124,8 @@ def calibration_rows(folder: Path) -> tuple[list[ComparisonRow], PipelineConfig]
         protocol = table.get("protocol") or "raw"  # a table written before the protocol was recorded sent its predictions raw
         for method, stats in table["summary"].items():
             every = stats["all settings"]
-            mm = check_float(f"{method}'s mean error (mm)", every["mm"]["mean"], 0.0)
-            px = check_float(f"{method}'s mean error (px)", every["pixel"]["mean"], 0.0)
+            mm = check_float(f"{method}'s mean error (mm)", every["mm"]["mean"], low=0.0)
+            px = check_float(f"{method}'s mean error (px)", every["pixel"]["mean"], low=0.0)
             rows.append(ComparisonRow(str(method), moves.get(method, -1), mm, px, f"{table_path} (protocol {protocol})"))
     except (KeyError, TypeError, AttributeError, ValueError) as error:
         raise ValueError(f"{table_path} is not a calibration table 'dvrk-gym evaluate' writes ({type(error).__name__}: {error})") from None
@@ -262,9 +262,9 @@ def benchmark_debridement(
     config = agent.config
     return run_debridement(
         pick_policy(agent),
-        n_trials,
-        seed,
-        fragment,
+        n_trials=n_trials,
+        seed=seed,
+        fragment=fragment,
         bias=config.bias,
         bias_seed=config.bias_seed,
         camera_resolution=config.camera_resolution,
@@ -276,12 +276,12 @@ def benchmark_debridement(
 
 def calibration_debridement_rows(
     folder: Path,
+    *,
     n_trials: int = DEBRIDEMENT_TRIALS,
     seed: int = 0,
     fragment: str = "pumpkin_seed",
     camera_resolution: tuple[int, int] | None = None,
     calibrators: Sequence[str] = CALIBRATORS,
-    *,
     progress: bool = False,
 ) -> tuple[list[DebridementRow], PipelineConfig]:
     """The calibrators' debridement rows, run here as ``dvrk-gym debride`` runs them.
@@ -312,7 +312,16 @@ def calibration_debridement_rows(
             raise FileNotFoundError(f"{path} not found: run 'dvrk-gym calibrate --out {folder}' first")
         calibrator, _ = load_calibrator(folder, name)
         policy = CalibratedPolicy(calibrator, target=fragment_target)
-        trials = run_debridement(policy, n_trials, seed, fragment, config.bias, config.bias_seed, resolution, progress=progress)
+        trials = run_debridement(
+            policy,
+            n_trials=n_trials,
+            seed=seed,
+            fragment=fragment,
+            bias=config.bias,
+            bias_seed=config.bias_seed,
+            camera_resolution=resolution,
+            progress=progress,
+        )
         label = paper.METHOD_LABELS[name]
         rows.append(debridement_row(label, moves[label], trials, str(path)))
     return rows, config

@@ -175,7 +175,7 @@ class CurvePoint:
             if isinstance(item, bool) or not isinstance(item, (int, float)) or math.isinf(item):
                 raise ValueError(f"a curve point's {name} must be a real number or null, got {item!r}")
         if point.time_per_fragment_s is not None:
-            check_float("a curve point's time_per_fragment_s", point.time_per_fragment_s, 0.0)
+            check_float("a curve point's time_per_fragment_s", point.time_per_fragment_s, low=0.0)
         return point
 
 
@@ -229,12 +229,12 @@ def curve_options(index: int) -> dict[str, Any]:
 
 def evaluate_curve_point(model: BaseAlgorithm, env: gym.Env, env_steps: int, seed: int) -> CurvePoint:
     """Touch the 35 circles with the deterministic policy; mean errors."""
-    results = run_episodes(env, model, N_CIRCLES, seed=seed, options=curve_options, progress=False)
+    results = run_episodes(env, model, n_episodes=N_CIRCLES, seed=seed, options=curve_options, progress=False)
     mean = lambda key: float(np.mean([r.metrics[key] for r in results]))  # noqa: E731
     return CurvePoint(env_steps, mean("mm_error"), mean("pixel_error"), mean("is_success"))
 
 
-def evaluate_pick_curve_point(model: BaseAlgorithm, env: gym.Env, env_steps: int, seed: int, n_trials: int = CURVE_TRIALS) -> CurvePoint:
+def evaluate_pick_curve_point(model: BaseAlgorithm, env: gym.Env, *, env_steps: int, seed: int, n_trials: int = CURVE_TRIALS) -> CurvePoint:
     """Run ``n_trials`` debridement trials with the deterministic policy; success, grip offset, time."""
     log = GripOffsetLog(env)
     total = totals(run_trials(log, model, n_trials, seed=seed, progress=False))
@@ -249,7 +249,9 @@ CurveEvaluator = Callable[[BaseAlgorithm, gym.Env, int, int], CurvePoint]
 def curve_evaluator(config: TrainConfig) -> CurveEvaluator:
     """The learning-curve measurement of an agent's env: touch error, or debridement trials."""
     if config.spec.env_id == DEBRIDEMENT_ID:
-        return lambda model, env, env_steps, seed: evaluate_pick_curve_point(model, env, env_steps, seed, config.curve_trials)
+        return lambda model, env, env_steps, seed: evaluate_pick_curve_point(
+            model, env, env_steps=env_steps, seed=seed, n_trials=config.curve_trials
+        )
     return evaluate_curve_point
 
 
@@ -270,7 +272,7 @@ class LearningCurve(BaseCallback):
     """
 
     def __init__(
-        self, env: gym.Env, total_steps: int, n_points: int, seed: int, progress: bool, evaluate: CurveEvaluator = evaluate_curve_point
+        self, env: gym.Env, *, total_steps: int, n_points: int, seed: int, progress: bool, evaluate: CurveEvaluator = evaluate_curve_point
     ) -> None:
         super().__init__()
         self.eval_env = env
@@ -299,7 +301,7 @@ class LearningCurve(BaseCallback):
         try:
             points = [CurvePoint.from_json(point) for point in record["points"]]
             marks = [check_int("a mark", mark, 0) for mark in record["marks"]]
-            eval_seconds = check_float("eval_seconds", record["eval_seconds"], 0.0)
+            eval_seconds = check_float("eval_seconds", record["eval_seconds"], low=0.0)
         except (TypeError, ValueError) as error:
             raise ValueError(f"a learning curve's record is malformed ({error})") from None
         if not points or any(mark <= env_steps for mark in marks):
@@ -365,9 +367,14 @@ def _train(config: TrainConfig, progress: bool, state_path: Path | None, save_ev
     train_env = make_training_vec_env(config)  # seeded by the model (env i: seed + i)
     eval_env = make_agent_env(config, training=False)
     try:
-        model = build_model(config.spec, train_env, config.seed, config.overrides)
+        model = build_model(config.spec, train_env, seed=config.seed, overrides=config.overrides)
         curve = LearningCurve(
-            eval_env, config.steps, config.eval_points, seed=config.seed + 10_000, progress=progress, evaluate=curve_evaluator(config)
+            eval_env,
+            total_steps=config.steps,
+            n_points=config.eval_points,
+            seed=config.seed + 10_000,
+            progress=progress,
+            evaluate=curve_evaluator(config),
         )
         wall_before = _resume(state_path, model, curve, config) if state_path is not None and state_path.exists() else 0.0
         callbacks: list[BaseCallback] = [curve]
@@ -393,7 +400,7 @@ def _resume(state_path: Path, model: BaseAlgorithm, curve: LearningCurve, config
         if not 0 < model.num_timesteps < config.steps:
             raise ValueError(f"it was saved at {model.num_timesteps} env steps, outside the run's (0, {config.steps})")
         curve.restore(record.get("curve"), model.num_timesteps)
-        wall_seconds = check_float("wall_seconds", record["wall_seconds"], 0.0)
+        wall_seconds = check_float("wall_seconds", record["wall_seconds"], low=0.0)
     except (KeyError, TypeError, ValueError) as error:
         raise TrainingStateError(f"{state_path}: not a training state these settings can resume ({error})") from None
     logger.info("resuming %s at %d of %d env steps from %s", config.agent, model.num_timesteps, config.steps, state_path)

@@ -73,7 +73,7 @@ def touch_grid_episodes(
     return run_episodes(
         env,
         policy,
-        N_CIRCLES,
+        n_episodes=N_CIRCLES,
         seed=seed,
         options=lambda i: {"yaw": yaw, "circle": int(order[i]), "relax": i == 0},
         progress=progress,

@@ -73,7 +73,7 @@ class PaperExplorationPolicy:
     def __init__(
         self, seed: int | None = None, step_m: float = paper.PHASE1_STEP_M, rotations_per_pause: int = paper.PHASE1_ROTATIONS_PER_PAUSE
     ) -> None:
-        check_float("step_m", step_m, 0.0, 1.0, low_open=True, unit="m")  # not 0, not inf: the pauses must come
+        check_float("step_m", step_m, low=0.0, high=1.0, low_open=True, unit="m")  # not 0, not inf: the pauses must come
         check_int("rotations_per_pause", rotations_per_pause, 1, 1000)  # 2.7 was truncated to 2
         self.rng = np.random.default_rng(seed)
         self.step_m = float(step_m)
@@ -299,13 +299,13 @@ def collect_phase1(
 
 
 def run_paper_phase1(
+    *,
     n_trajectories: int = paper.PHASE1_TRAJECTORIES,
     seed: int = 0,
     steps_per_trajectory: int = paper.PHASE1_POSES_PER_TRAJECTORY,
     bias: str | BiasConfig = "paper",
     bias_seed: int = 0,
     camera_resolution: tuple[int, int] = paper.ENDOSCOPE_RESOLUTION_PX,
-    *,
     progress: bool = True,
 ) -> Phase1Data:
     """The paper's Phase I on a fresh CalibrationExploration-v0 (closed after).

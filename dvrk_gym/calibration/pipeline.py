@@ -120,7 +120,13 @@ def _save(value: Any, path: Path) -> None:
 
 
 def _run_phase1(config: PipelineConfig, progress: bool) -> Phase1Data:
-    return run_paper_phase1(config.n_trajectories, config.seed, config.steps_per_trajectory, **config.env_kwargs(), progress=progress)
+    return run_paper_phase1(
+        n_trajectories=config.n_trajectories,
+        seed=config.seed,
+        steps_per_trajectory=config.steps_per_trajectory,
+        **config.env_kwargs(),
+        progress=progress,
+    )
 
 
 def run_calibration(
@@ -148,17 +154,21 @@ def _run_stages(out: Path, folder: RunFolder, config: PipelineConfig, progress: 
     """The stages; ``protocol`` is the benchmark's, or None for no benchmark."""
     grid = gym.make("dvrk_gym/GridTouch-v0", **config.env_kwargs())
     try:
-        phase1 = folder.cached("phase1.npz", lambda: _run_phase1(config, progress), Phase1Data.load, _save)
+        phase1 = folder.cached("phase1.npz", make=lambda: _run_phase1(config, progress), load=Phase1Data.load, save=_save)
         clean = phase1.cleaned()
         logger.info("Phase I: %d raw samples, %d kept (%.0f%%)", phase1.n_raw, phase1.n_kept, 100 * phase1.n_kept / max(phase1.n_raw, 1))
-        rbt = folder.cached(CALIBRATOR_FILES["rbt"], lambda: RigidBodyCalibrator().fit(clean.X, clean.y), RigidBodyCalibrator.load, _save)
+        rbt = folder.cached(
+            CALIBRATOR_FILES["rbt"], make=lambda: RigidBodyCalibrator().fit(clean.X, clean.y), load=RigidBodyCalibrator.load, save=_save
+        )
         dnn = folder.cached(
             CALIBRATOR_FILES["dnn"],
-            lambda: DNNCalibrator(epochs=config.dnn_epochs, seed=config.seed, progress=progress).fit(clean.X, clean.y),
-            DNNCalibrator.load,
-            _save,
+            make=lambda: DNNCalibrator(epochs=config.dnn_epochs, seed=config.seed, progress=progress).fit(clean.X, clean.y),
+            load=DNNCalibrator.load,
+            save=_save,
         )
-        phase2 = folder.cached("phase2.npz", lambda: collect_phase2(grid, dnn, seed=config.seed, progress=progress), Phase2Data.load, _save)
+        phase2 = folder.cached(
+            "phase2.npz", make=lambda: collect_phase2(grid, dnn, seed=config.seed, progress=progress), load=Phase2Data.load, save=_save
+        )
         if not phase2.in_authors_tour:  # cached before the tour: its forests learned another order's hysteresis
             raise ValueError(
                 f"{folder.file('phase2.npz')} touched the circles in another order than the authors' tour (a run made before "
@@ -166,9 +176,9 @@ def _run_stages(out: Path, folder: RunFolder, config: PipelineConfig, progress: 
             )
         two_phase = folder.cached(
             CALIBRATOR_FILES["dnn+rf"],
-            lambda: TwoPhaseCalibrator(dnn=dnn, seed=config.seed).fit_phase2(phase2.X, phase2.corrected),
-            TwoPhaseCalibrator.load,
-            _save,
+            make=lambda: TwoPhaseCalibrator(dnn=dnn, seed=config.seed).fit_phase2(phase2.X, phase2.corrected),
+            load=TwoPhaseCalibrator.load,
+            save=_save,
             stage="forests",
         )
         models = {"RBT": rbt, "DNN": dnn, "DNN+RF": two_phase}

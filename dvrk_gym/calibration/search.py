@@ -193,6 +193,7 @@ def cross_validate(
     make: Callable[[int], Calibrator],
     X: np.ndarray,
     y: np.ndarray,
+    *,
     folds: int = paper.SEARCH_FOLDS,
     seed: int = 0,
     max_folds: int | None = None,
@@ -239,11 +240,11 @@ def cross_validate(
 def run_search(
     X: np.ndarray,
     y: np.ndarray,
+    *,
     models: Iterable[ModelSpec] | None = None,
     folds: int = paper.SEARCH_FOLDS,
     seed: int = 0,
     quick: bool = False,
-    *,
     progress: bool = True,
     shuffle: bool = True,
 ) -> list[SearchResult]:

@@ -216,7 +216,7 @@ def _evaluate_debridement(agents: list, args: argparse.Namespace) -> list[Path]:
     calibrators_resolution = None
     if args.calibration is not None:  # the calibrators run at the resolution they were calibrated at; agents at others are noted
         calibrators, calibration = calibration_debridement_rows(
-            args.calibration, args.trials, seed, args.fragment, progress=not args.no_progress
+            args.calibration, n_trials=args.trials, seed=seed, fragment=args.fragment, progress=not args.no_progress
         )
         calibrators_resolution = list(calibration.camera_resolution)
         rows = calibrators + rows

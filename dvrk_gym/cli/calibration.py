@@ -63,7 +63,11 @@ def _run_collect(args: argparse.Namespace) -> int:
         if path.exists() and not args.force:
             raise FileExistsError(f"{path} exists; give --force to replace it, or another --out")
         data = run_paper_phase1(
-            config.n_trajectories, config.seed, config.steps_per_trajectory, **config.env_kwargs(), progress=not args.no_progress
+            n_trajectories=config.n_trajectories,
+            seed=config.seed,
+            steps_per_trajectory=config.steps_per_trajectory,
+            **config.env_kwargs(),
+            progress=not args.no_progress,
         )
         data.save(path)
     raw, kept = paper.PHASE1_RAW_SAMPLES, paper.PHASE1_KEPT_SAMPLES
@@ -137,7 +141,9 @@ def _evaluate_policy(args: argparse.Namespace) -> int:
             raise ValueError(f"--policy {args.policy} made no policy: {error}") from None
         return policy
 
-    results = evaluate_policy(checked, args.env, args.episodes, seed=args.seed, options=options, progress=not args.no_progress, **world)
+    results = evaluate_policy(
+        checked, args.env, n_episodes=args.episodes, seed=args.seed, options=options, progress=not args.no_progress, **world
+    )
     names = sorted({name for r in results for name in r.metrics})
     print(f"{args.policy} on {args.env}, {args.episodes} episodes (seed {args.seed})")
     print(f"{'metric':<22}{'mean':>10}{'s.e.':>9}{'median':>10}{'min':>10}{'max':>10}")

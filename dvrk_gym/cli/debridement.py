@@ -76,7 +76,9 @@ def _run_debride(args: argparse.Namespace) -> int:
     writable_folder(args.out)
     calibrator, _ = load_calibrator(args.calibration, args.calibrator, **world, calibrate_if_missing=args.calibrate)
     policy = CalibratedPolicy(calibrator, target=fragment_target)
-    trials = run_debridement(policy, args.trials, args.seed, args.fragment, **world, progress=not args.no_progress, contact=args.contact)
+    trials = run_debridement(
+        policy, n_trials=args.trials, seed=args.seed, fragment=args.fragment, **world, progress=not args.no_progress, contact=args.contact
+    )
     text = format_trial_table(trials, args.calibrator, args.fragment, args.seed)
     print(text)
     meta = {
@@ -91,7 +93,7 @@ def _run_debride(args: argparse.Namespace) -> int:
     other_paper = args.contact != DEFAULT_CONTACT
     stem = cell_name(args.calibrator, args.fragment) + (f"_{args.contact}" if other_paper else "")
     label = cell_label(args.calibrator, args.fragment) + (f", {args.contact} paper" if other_paper else "")
-    written = save_cell(trials, args.out / stem, meta, label, text)
+    written = save_cell(trials, stem=args.out / stem, meta=meta, label=label, text=text)
     print(f"wrote {written['json']}, {written['txt']}, {written['png']}")
     return 0
 

@@ -46,7 +46,7 @@ def check_common_options(args: argparse.Namespace) -> None:
     if getattr(args, "resolution", None) is not None:
         check_endoscope_resolution("--resolution", args.resolution)
     if getattr(args, "connect_timeout", None) is not None:
-        check_float("--connect-timeout", args.connect_timeout, 0.0, MAX_CONNECT_TIMEOUT_S, low_open=True, unit="s")
+        check_float("--connect-timeout", args.connect_timeout, low=0.0, high=MAX_CONNECT_TIMEOUT_S, low_open=True, unit="s")
     if getattr(args, "trials", None) is not None:
         check_int("--trials", args.trials, 1, MAX_TRIALS)
 
@@ -67,7 +67,7 @@ def check_flag_bounds(
                 check_endoscope_resolution(flag, value)
             elif value is not None:
                 for item in value if isinstance(value, (list, tuple)) else (value,):
-                    check_float(flag, item, low, high)
+                    check_float(flag, item, low=low, high=high)
         except ValueError as error:
             parser.error(str(error))
 

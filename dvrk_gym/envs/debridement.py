@@ -260,7 +260,7 @@ class DebridementEnv(DvrkEnv[DebridementConfig]):
         target, yaw = action[:3].astype(float), float(action[3])
         candidates = self._on_paper()
         episode = self._episode
-        run = self.picker.run(target, yaw, self.np_random, len(episode.outcomes), episode.sizes, candidates)
+        run = self.picker.run(target, yaw, rng=self.np_random, pick=len(episode.outcomes), sizes=episode.sizes, candidates=candidates)
         return self._judge(run)
 
     def _judge(self, run: PickRun) -> tuple[float, dict[str, Any]]:
@@ -302,7 +302,9 @@ class DebridementEnv(DvrkEnv[DebridementConfig]):
         self._jaw_target = float(np.clip(self._jaw_target + action[3], CLOSED_JAW_RAD, kin.JAW_FULLY_OPEN_RAD))
         table.command_jaws(self._jaw_target)
         pose = tool_pose(target, config.delta_yaw_rad)
-        move = table.move_stepped(pose, self.np_random, GRASP_TIP_CLEARANCE_M, duration_s=config.control_period_s)
+        move = table.move_stepped(
+            pose, noise_rng=self.np_random, min_tip_clearance_m=GRASP_TIP_CLEARANCE_M, duration_s=config.control_period_s
+        )
         table.dwell(config.control_period_s - move.duration_s)
         delivered = self._delivered()
         new = delivered - self._episode.rewarded  # each fragment once: one lifted out and dropped back in scores no more

@@ -292,8 +292,10 @@ class GridTouchEnv(DvrkEnv[GridTouchConfig]):
                 r6,
                 roll,
                 state,
-                constants,
-                lambda: ik.inverse_kinematics_clamped_floats(np.asarray(position, dtype=float).tolist(), rotation, world.q_cmd),
+                constants=constants,
+                fallback_command=lambda: ik.inverse_kinematics_clamped_floats(
+                    np.asarray(position, dtype=float).tolist(), rotation, world.q_cmd
+                ),
             )
 
         return probe

@@ -116,7 +116,9 @@ class PickPrimitive:
         cable.set_state(state)
         return command
 
-    def run(self, target: np.ndarray, yaw: float, rng: np.random.Generator, pick: int, sizes: np.ndarray, candidates: list[int]) -> PickRun:
+    def run(
+        self, target: np.ndarray, yaw: float, *, rng: np.random.Generator, pick: int, sizes: np.ndarray, candidates: list[int]
+    ) -> PickRun:
         """Pick at ``target`` (commanded position, base frame, m) with tool yaw ``yaw`` (rad).
 
         Args:
@@ -138,10 +140,15 @@ class PickPrimitive:
                 self.on_phase()
 
         above = tool_pose(target + [0.0, 0.0, timing.approach_height_m], yaw)
-        move = world.move_to(above, kin.JAW_FULLY_OPEN_RAD, rng, True, timing.travel)
+        move = world.move_to(above, jaw_angle_rad=kin.JAW_FULLY_OPEN_RAD, noise_rng=rng, clamp_to_limits=True, limits=timing.travel)
         joints_clamped |= move.joints_clamped
         phase_done()
-        move = table.move_stepped(tool_pose(target - [0.0, 0.0, timing.grip_depth_m], yaw), rng, GRASP_TIP_CLEARANCE_M, timing.descend)
+        move = table.move_stepped(
+            tool_pose(target - [0.0, 0.0, timing.grip_depth_m], yaw),
+            noise_rng=rng,
+            min_tip_clearance_m=GRASP_TIP_CLEARANCE_M,
+            limits=timing.descend,
+        )
         joints_clamped |= move.joints_clamped
         tip = world.true_touch_point()
         phase_done()
@@ -153,13 +160,15 @@ class PickPrimitive:
         record = judge.grip_record(tip, poses_before, sizes, taken or candidates)
         phase_done()
         lifted = world.reported_pose()[:3, 3] + [0.0, 0.0, timing.raise_height_m]
-        table.move_stepped(tool_pose(lifted, yaw), rng, limits=timing.descend)
+        table.move_stepped(tool_pose(lifted, yaw), noise_rng=rng, limits=timing.descend)
         phase_done()
         drop = self.drop_command(pick, yaw)
-        world.move_to(tool_pose(drop, yaw), None, rng, True, timing.carry)
+        world.move_to(tool_pose(drop, yaw), jaw_angle_rad=None, noise_rng=rng, clamp_to_limits=True, limits=timing.carry)
         phase_done()
         spent = table.actuate_jaws(kin.JAW_FULLY_OPEN_RAD, timing.drop_fall_s)
-        spent += world.move_to(tool_pose(drop, 0.0), None, rng, True, timing.travel).duration_s
+        spent += world.move_to(
+            tool_pose(drop, 0.0), jaw_angle_rad=None, noise_rng=rng, clamp_to_limits=True, limits=timing.travel
+        ).duration_s
         table.dwell(timing.drop_dwell_s - spent, step_physics=False)
         phase_done()  # a raisin pierced as it drops counts too
         return PickRun(record, pierced, np.diff(marks), joints_clamped)

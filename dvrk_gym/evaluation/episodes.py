@@ -91,10 +91,10 @@ def load_policy_factory(spec: str) -> Callable[[gym.Env], Any]:
 def run_episodes(
     env: gym.Env,
     policy: Any,
+    *,
     n_episodes: int,
     seed: int = 0,
     options: Options = None,
-    *,
     progress: bool = True,
     description: str = "episodes",
 ) -> list[EpisodeResult]:
@@ -135,10 +135,10 @@ def run_episodes(
 def evaluate_policy(
     factory: str | Callable[[gym.Env], Any],
     env_id: str,
+    *,
     n_episodes: int,
     seed: int = 0,
     options: Options = None,
-    *,
     progress: bool = True,
     **env_kwargs: Any,
 ) -> list[EpisodeResult]:
@@ -165,7 +165,7 @@ def evaluate_policy(
     env = gym.make(env_id, **env_kwargs)
     try:
         policy = make_policy(env)  # an error inside the factory is the factory's, raised as it is
-        return run_episodes(env, policy, n_episodes, seed=seed, options=options, progress=progress)
+        return run_episodes(env, policy, n_episodes=n_episodes, seed=seed, options=options, progress=progress)
     finally:
         env.close()
 

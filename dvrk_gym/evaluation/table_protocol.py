@@ -62,7 +62,7 @@ class HeightRule:
             if not low < high:
                 raise ValueError(f"band_m must be (lowest, highest) with lowest < highest, got {band!r}")
             object.__setattr__(self, "band_m", (low, high))
-        object.__setattr__(self, "lift_m", check_float("lift_m", self.lift_m, -MAX_LIFT_M, MAX_LIFT_M, unit="m"))
+        object.__setattr__(self, "lift_m", check_float("lift_m", self.lift_m, low=-MAX_LIFT_M, high=MAX_LIFT_M, unit="m"))
 
     def clipped(self, z_m: float) -> float:
         """The height ``z_m`` (m) clipped into the band (as it is without one), metres."""

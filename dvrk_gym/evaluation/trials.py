@@ -83,7 +83,7 @@ def run_trials(env: gym.Env, policy: Any, n_trials: int, seed: int = 0, *, progr
         mode = f" in {base.config.action_mode!r} mode" if isinstance(base, DebridementEnv) else ""
         raise ValueError(f"debridement trials need a Debridement-v0 env in primitive mode, got {type(base).__name__}{mode}")
     check_int("n_trials", n_trials, 1, 10**6)
-    results = run_episodes(env, policy, n_trials, seed=seed, progress=progress, description="debridement trials")
+    results = run_episodes(env, policy, n_episodes=n_trials, seed=seed, progress=progress, description="debridement trials")
     trials = []
     for result in results:
         info = result.final_info
@@ -104,6 +104,7 @@ def run_trials(env: gym.Env, policy: Any, n_trials: int, seed: int = 0, *, progr
 
 def run_debridement(
     policy: Any,
+    *,
     n_trials: int,
     seed: int,
     fragment: str = "pumpkin_seed",
@@ -111,7 +112,6 @@ def run_debridement(
     bias_seed: int = 0,
     camera_resolution: tuple[int, int] = paper.ENDOSCOPE_RESOLUTION_PX,
     max_picks: int | None = None,
-    *,
     progress: bool = False,
     contact: str = DEFAULT_CONTACT,
     env_kwargs: Mapping[str, Any] | None = None,
@@ -279,7 +279,7 @@ def plot_outcome_grid(trials: list[Trial], path: str | Path, title: str) -> Path
         plt.close(fig)
 
 
-def save_cell(trials: list[Trial], stem: str | Path, meta: dict[str, Any], label: str, text: str | None = None) -> dict[str, Path]:
+def save_cell(trials: list[Trial], *, stem: str | Path, meta: dict[str, Any], label: str, text: str | None = None) -> dict[str, Path]:
     """Write one cell of the table beside ``stem``: ``.json`` (:func:`save_trials`), ``.png``
     (the outcome grid, titled with ``label``) and, given ``text``, ``.txt``.
 

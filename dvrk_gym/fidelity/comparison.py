@@ -185,13 +185,13 @@ class FidelityRun:
 
 
 def run_fidelity(
+    *,
     bias: str = "paper",
     bias_seed: int = 0,
     wrist_settle_lag: float | None = None,
     n_trajectories: int = paper.PHASE1_TRAJECTORIES,
     seed: int = 0,
     camera_resolution: tuple[int, int] = paper.ENDOSCOPE_RESOLUTION_PX,
-    *,
     progress: bool = True,
     bootstrap_replicates: int = BOOTSTRAP_REPLICATES,
 ) -> FidelityRun:
@@ -223,8 +223,8 @@ def run_fidelity(
     if wrist_settle_lag is not None:
         config = dataclasses.replace(config, wrist_settle_lag=wrist_settle_lag)
     data = run_paper_phase1(
-        n_trajectories,
-        seed,
+        n_trajectories=n_trajectories,
+        seed=seed,
         bias=config,
         bias_seed=bias_seed,
         camera_resolution=(int(camera_resolution[0]), int(camera_resolution[1])),

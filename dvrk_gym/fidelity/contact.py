@@ -141,7 +141,7 @@ def fit_contact(runs: PaperTableRuns, methods: tuple[str, ...], camera: StereoCa
     unknown = set(methods) - set(paper.METHOD_LABELS.values())
     if not methods or unknown or len(set(methods)) != len(methods):
         raise ValueError(f"methods must be some of {sorted(paper.METHOD_LABELS.values())}, each once, got {methods}")
-    dead_zone = check_float("dead_zone_m", dead_zone_m, 0.0, MAX_DEAD_ZONE_M, unit="m")
+    dead_zone = check_float("dead_zone_m", dead_zone_m, low=0.0, high=MAX_DEAD_ZONE_M, unit="m")
     camera = StereoCamera() if camera is None else camera
     slide_rows, offsets, rise_rows, rises = [], [], [], []
     runs_total = len(methods) * FIXED_SETTINGS

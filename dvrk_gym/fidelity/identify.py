@@ -175,7 +175,7 @@ def camera_residual_rms_mm(theta: np.ndarray, commands: np.ndarray, X: np.ndarra
 
 
 def bootstrap_sd(
-    fit: InstrumentFit, commands: np.ndarray, pixels: np.ndarray, replicates: int, seed: int = 0, block: int = BOOTSTRAP_BLOCK
+    fit: InstrumentFit, commands: np.ndarray, pixels: np.ndarray, *, replicates: int, seed: int = 0, block: int = BOOTSTRAP_BLOCK
 ) -> np.ndarray:
     """sd of each parameter over a moving-block bootstrap of the rows, (n_parameters,).
 
@@ -311,7 +311,7 @@ def _check_lag_grid(lags: tuple[float, ...]) -> tuple[float, ...]:
     """``lags`` as floats, if they are one or more increasing settle lags, each in [0, 1)."""
     if not lags:
         raise ValueError("expected at least one settle lag, got none")
-    values = tuple(check_float("settle lag", lag, 0.0, 1.0) for lag in lags)
+    values = tuple(check_float("settle lag", lag, low=0.0, high=1.0) for lag in lags)
     if values[-1] >= 1.0:
         raise ValueError(f"a settle lag is a fraction in [0, 1), got {values[-1]}")
     if any(b <= a for a, b in zip(values, values[1:])):
@@ -362,7 +362,7 @@ def match_settle_lag(
     shares, correlations = [], []
     for lag in lags:
         config = dataclasses.replace(BIAS_PRESETS["paper"], wrist_settle_lag=float(lag))
-        kept = run_paper_phase1(n_trajectories, seed, bias=config, progress=False).cleaned()
+        kept = run_paper_phase1(n_trajectories=n_trajectories, seed=seed, bias=config, progress=False).cleaned()
         statistics = fidelity_statistics(kept.X, kept.y, cross_validation=False)
         shares.append(statistics.same_position_share)
         correlations.append(statistics.pitch_autocorrelation)

@@ -49,7 +49,7 @@ class DaskExecutor(FuturesExecutor):
     """
 
     def __init__(self, address: str, connect_timeout_s: float = CONNECT_TIMEOUT_S) -> None:
-        connect_timeout_s = check_float("connect_timeout_s", connect_timeout_s, 0.0, 3600.0, low_open=True, unit="s")
+        connect_timeout_s = check_float("connect_timeout_s", connect_timeout_s, low=0.0, high=3600.0, low_open=True, unit="s")
         if not isinstance(address, str):
             raise ValueError(f"the scheduler address must be a string such as tcp://host:8786, got {address!r}")
         try:

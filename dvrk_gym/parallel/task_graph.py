@@ -142,6 +142,7 @@ def _priorities(tasks: list[Task]) -> dict[str, float]:
 
 def run_tasks(
     tasks: list[Task],
+    *,
     cache_dir: Path,
     workers: int = 1,
     progress: bool = True,

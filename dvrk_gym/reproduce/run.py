@@ -217,7 +217,7 @@ def _reproduce(config: ReproduceConfig, folder: RunFolder, executor: Executor) -
     (config.out / "figures").mkdir(parents=True, exist_ok=True)
     graph = build_tasks(config, nested_progress=isinstance(executor, InlineExecutor))
     task_results = run_tasks(
-        graph, config.out / "tasks", progress=config.progress, executor=executor, shared_folder=config.out, label="reproduce"
+        graph, cache_dir=config.out / "tasks", progress=config.progress, executor=executor, shared_folder=config.out, label="reproduce"
     )
     # Everything the outputs hold is made before any is written: a cached result that was
     # edited or damaged fails here, clearly, and leaves the outputs of the last good call.

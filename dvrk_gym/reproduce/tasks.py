@@ -41,7 +41,7 @@ from dvrk_gym.utils.checks import check_endoscope_resolution
 MM_PER_M = 1e3
 
 
-def bias_field(figure: str, bias: str, bias_seed: int, seed: int, samples: int = 2000) -> dict[str, Any]:
+def bias_field(figure: str, *, bias: str, bias_seed: int, seed: int, samples: int = 2000) -> dict[str, Any]:
     """The cable model's error statistics and its rigid-residual field figure."""
     model = CableModel(resolve_bias(bias), bias_seed=bias_seed)
     stats = bias_statistics(model, np.random.default_rng(seed + 1), samples)
@@ -90,7 +90,7 @@ def search_model(calibration_folder: str, model: str, search: str, seed: int) ->
     if model not in specs:
         raise ValueError(f"unknown model {model!r}; the {search} search has {sorted(specs)}")
     data = Phase1Data.load(Path(calibration_folder) / "phase1.npz").cleaned()
-    (result,) = run_search(data.X, data.y, [specs[model]], seed=seed, quick=quick, progress=False)
+    (result,) = run_search(data.X, data.y, models=[specs[model]], seed=seed, quick=quick, progress=False)
     return dataclasses.asdict(result)
 
 
@@ -100,7 +100,7 @@ def search_models(search: str) -> list[str]:
 
 
 def debridement(
-    calibration_folder: str, calibrator: str, fragment: str, trials: int, picks: int, seed: int, resolution: tuple[int, int], out: str
+    calibration_folder: str, *, calibrator: str, fragment: str, trials: int, picks: int, seed: int, resolution: tuple[int, int], out: str
 ) -> dict[str, Any]:
     """One cell of the paper's debridement table: ``trials`` trials with a calibrator."""
     try:
@@ -134,7 +134,7 @@ def _debridement_env(fragment: str, picks: int, bias: str, bias_seed: int, resol
 
 
 def rl_debridement(
-    model: str, fragment: str, trials: int, picks: int, seed: int, bias: str, bias_seed: int, resolution: tuple[int, int], out: str
+    model: str, *, fragment: str, trials: int, picks: int, seed: int, bias: str, bias_seed: int, resolution: tuple[int, int], out: str
 ) -> dict[str, Any]:
     """One debridement cell with a trained GridTouch agent aiming the picks
     (:func:`~dvrk_gym.baselines.transfer.pick_policy`), as the calibrators aim theirs, on the
@@ -162,7 +162,7 @@ def _debridement_cell(env: Any, policy: Any, title: str, trials: int, seed: int,
         wall = time.perf_counter() - start
     finally:
         env.close()
-    figure = save_cell(results, out, {**meta, "seed": seed}, title)["png"]
+    figure = save_cell(results, stem=out, meta={**meta, "seed": seed}, label=title)["png"]
     return {
         **meta,
         **totals(results),
@@ -175,6 +175,7 @@ def _debridement_cell(env: Any, policy: Any, title: str, trials: int, seed: int,
 
 def rl_agent(
     agent: str,
+    *,
     steps: int,
     seed: int,
     eval_points: int,

@@ -205,6 +205,7 @@ class DvrkWorld:
     def move_to(
         self,
         pose: np.ndarray,
+        *,
         jaw_angle_rad: float | None = None,
         noise_rng: np.random.Generator | None = None,
         clamp_to_limits: bool = False,

@@ -29,7 +29,7 @@ def check_jaw_angle(value: float) -> float:
     Raises:
         ValueError: naming ``jaw_angle_rad`` and the range.
     """
-    return check_float("jaw_angle_rad", value, kin.JAW_LOWER_RAD, kin.JAW_UPPER_RAD, unit="rad")
+    return check_float("jaw_angle_rad", value, low=kin.JAW_LOWER_RAD, high=kin.JAW_UPPER_RAD, unit="rad")
 
 
 def check_joints(q: np.ndarray) -> np.ndarray:

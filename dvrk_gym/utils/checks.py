@@ -37,7 +37,7 @@ def check_int(name: str, value: Any, low: int | None = None, high: int | None = 
 
 
 def check_float(
-    name: str, value: Any, low: float | None = None, high: float | None = None, low_open: bool = False, unit: str = ""
+    name: str, value: Any, *, low: float | None = None, high: float | None = None, low_open: bool = False, unit: str = ""
 ) -> float:
     """``value`` as a float, if it is a finite real number (not a bool) in ``[low, high]``
     (``(low, high]`` with ``low_open``).
@@ -125,7 +125,9 @@ def check_float_fields(owner: str, config: Any, bounds: Mapping[str, Bounds], un
         units: ``{field: unit}`` shown after the range.
     """
     for name, (low, high, low_open) in bounds.items():
-        value = check_float(f"{owner}.{name}", getattr(config, name), low, high, low_open, (units or {}).get(name, ""))
+        value = check_float(
+            f"{owner}.{name}", getattr(config, name), low=low, high=high, low_open=low_open, unit=(units or {}).get(name, "")
+        )
         object.__setattr__(config, name, value)
 
 

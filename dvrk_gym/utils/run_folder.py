@@ -368,7 +368,7 @@ class RunFolder:
             return None
 
     def cached(
-        self, name: str, make: Callable[[], T], load: Callable[[Path], T], save: Callable[[T, Path], Any], stage: str | None = None
+        self, name: str, *, make: Callable[[], T], load: Callable[[Path], T], save: Callable[[T, Path], Any], stage: str | None = None
     ) -> T:
         """The result ``name``: loaded from the folder if there and readable, else made, saved (atomically) and timed.
 

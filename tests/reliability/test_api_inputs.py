@@ -118,7 +118,7 @@ def test_the_dnn_refuses_what_overflows_it_instead_of_predicting_nan():
 
 def test_a_huge_int_is_refused_as_a_float_clearly():
     with pytest.raises(ValueError, match="x must be a finite number in \\[-1, 1\\], got a number too large for a float"):
-        check_float("x", 10**400, -1, 1)
+        check_float("x", 10**400, low=-1, high=1)
 
 
 @pytest.mark.parametrize("seeds", [range(40_000), range(3 * 10**9), 5])
@@ -284,9 +284,9 @@ def test_task_names_are_file_stems_and_a_result_that_is_not_json_is_a_task_error
 
     for name in ("../escaped", "sub/x", ".hidden", ""):
         with pytest.raises(ValueError, match="task name"):
-            run_tasks([Task(name, dict)], tmp_path / "cache", workers=1)
+            run_tasks([Task(name, dict)], cache_dir=tmp_path / "cache", workers=1)
     with pytest.raises(TaskError, match="cannot be saved as JSON"):
-        run_tasks([Task("bad", _not_json)], tmp_path / "cache", workers=1)
+        run_tasks([Task("bad", _not_json)], cache_dir=tmp_path / "cache", workers=1)
     assert not (tmp_path / "escaped.json").exists()
 
 

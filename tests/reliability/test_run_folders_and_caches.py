@@ -58,7 +58,7 @@ def test_reproduce_and_the_scheduler_refuse_a_folder_in_use(held_folder):
         run_reproduce(ReproduceConfig(out=folder, progress=False))
     assert not (folder / "tasks").exists()  # refused before anything ran
     with pytest.raises(RunFolderBusy):
-        run_tasks([Task("a", dict)], folder, progress=False)
+        run_tasks([Task("a", dict)], cache_dir=folder, progress=False)
 
 
 def test_a_killed_owners_lock_is_taken_over_with_a_message(held_folder, caplog):
@@ -176,10 +176,10 @@ def _record(name: str, log: str) -> dict:
 def test_a_damaged_task_result_is_named_moved_aside_and_run_again(tmp_path, caplog, content):
     log = str(tmp_path / "log.txt")
     graph = [Task("a", _record, {"name": "a", "log": log}), Task("b", _record, {"name": "b", "log": log}, needs=("a",))]
-    run_tasks(graph, tmp_path / "cache", progress=False)
+    run_tasks(graph, cache_dir=tmp_path / "cache", progress=False)
     (tmp_path / "cache" / "a.json").write_text(content)
     with caplog.at_level(logging.WARNING, logger="dvrk_gym.utils.run_folder"):
-        results = run_tasks(graph, tmp_path / "cache", progress=False)
+        results = run_tasks(graph, cache_dir=tmp_path / "cache", progress=False)
     assert "a.json is unreadable" in caplog.text
     assert Path(log).read_text().split() == ["a", "b", "a"]  # only the damaged task ran again
     assert results["a"]["name"] == "a" and not results["a"]["cached"] and results["b"]["cached"]
@@ -343,8 +343,8 @@ def test_a_worker_killed_mid_task_fails_the_run_with_its_name_and_the_rerun_comp
     log = str(tmp_path / "log.txt")
     graph = [Task("fine", _record, {"name": "fine", "log": log}), Task("doomed", _die_once, {"flag": str(tmp_path / "flag")}, cost_s=9)]
     with pytest.raises(TaskError, match=r"a worker process died while running \[[^]]*'doomed'"):
-        run_tasks(graph, tmp_path / "cache", workers=2, progress=False)
-    results = run_tasks(graph, tmp_path / "cache", workers=2, progress=False)
+        run_tasks(graph, cache_dir=tmp_path / "cache", workers=2, progress=False)
+    results = run_tasks(graph, cache_dir=tmp_path / "cache", workers=2, progress=False)
     assert results["doomed"] == {**results["doomed"], "survived": True, "cached": False}
 
 

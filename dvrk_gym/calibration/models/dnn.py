@@ -124,7 +124,7 @@ class DNNCalibrator(SavableModel):
         self.activation = check_choice("activation", activation, sorted(ACTIVATIONS))
         self.epochs = check_int("epochs", epochs, 1, MAX_EPOCHS)
         self.batch_size = check_int("batch_size", batch_size, 1, MAX_BATCH_SIZE)
-        self.learning_rate = check_float("learning_rate", learning_rate, 0.0, 1.0, low_open=True)
+        self.learning_rate = check_float("learning_rate", learning_rate, low=0.0, high=1.0, low_open=True)
         self.seed = check_int("seed", seed, 0, 2**63 - 1)
         self.progress = check_bool("progress", progress)
         parameters = network_parameters(self.hidden_layers, self.units)

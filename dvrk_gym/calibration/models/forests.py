@@ -68,7 +68,7 @@ def _unfitted(trees: int, max_depth: int | None, seed: int) -> RandomForestRegre
     return RandomForestRegressor(n_estimators=trees, max_depth=max_depth, random_state=seed)
 
 
-def fit_forest(X: np.ndarray, y: np.ndarray, trees: int, max_depth: int | None, seed: int) -> RandomForestRegressor:
+def fit_forest(X: np.ndarray, y: np.ndarray, *, trees: int, max_depth: int | None, seed: int) -> RandomForestRegressor:
     """A seeded ``RandomForestRegressor`` fitted on features X (N, F) and targets y (N, K)."""
     return _unfitted(trees, max_depth, seed).fit(X, y)
 
@@ -122,7 +122,9 @@ def _check_tree(tree: Any, index: int, n_features: int, n_outputs: int) -> None:
         raise ValueError(f"tree {index} holds non-finite thresholds or values")
 
 
-def check_forest(forest: Any, trees: int, max_depth: int | None, seed: int, n_features: int, name: str = "forest") -> RandomForestRegressor:
+def check_forest(
+    forest: Any, *, trees: int, max_depth: int | None, seed: int, n_features: int, name: str = "forest"
+) -> RandomForestRegressor:
     """A forest read from a file, checked to be the one these parameters fit, with sound trees.
 
     Raises:
@@ -183,7 +185,7 @@ class ForestCalibrator(SavableModel):
         """Fit on inputs X (N, 6: metres, radians) and base positions y (N, 3, metres)."""
         X = check_inputs(X)
         y = check_targets(y, X.shape[0])
-        self.forest_ = fit_forest(encode_euler(X), y, self.trees, self.max_depth, self.seed)
+        self.forest_ = fit_forest(encode_euler(X), y, trees=self.trees, max_depth=self.max_depth, seed=self.seed)
         return self
 
     def predict(self, X: np.ndarray) -> np.ndarray:
@@ -212,7 +214,9 @@ class ForestCalibrator(SavableModel):
     def _load_parts(self, parts: ModelParts) -> None:
         require_names(parts.arrays, set())
         require_names(parts.estimators, {"forest"}, "estimators")
-        self.forest_ = check_forest(parts.estimators["forest"], self.trees, self.max_depth, self.seed, len(EULER_FEATURES))
+        self.forest_ = check_forest(
+            parts.estimators["forest"], trees=self.trees, max_depth=self.max_depth, seed=self.seed, n_features=len(EULER_FEATURES)
+        )
 
 
 def _group_name(group: int) -> str:
@@ -256,7 +260,7 @@ class ResidualForests(SavableModel):
         predicted_base, groups = self._check(predicted_base, yaw)
         residual = check_targets(residual, predicted_base.shape[0], name="residual")
         self.forests_ = [
-            fit_forest(predicted_base[groups == g], residual[groups == g], self.trees, self.max_depth, self.seed)
+            fit_forest(predicted_base[groups == g], residual[groups == g], trees=self.trees, max_depth=self.max_depth, seed=self.seed)
             if np.any(groups == g)
             else None
             for g in range(len(PAPER_YAWS_RAD))
@@ -318,7 +322,14 @@ class ResidualForests(SavableModel):
         require_names(parts.arrays, set())
         require_names(parts.estimators, {_group_name(g) for g in groups}, "estimators")
         self.forests_ = [
-            check_forest(parts.estimators[_group_name(g)], self.trees, self.max_depth, self.seed, len(_POSITION_FEATURES), _group_name(g))
+            check_forest(
+                parts.estimators[_group_name(g)],
+                trees=self.trees,
+                max_depth=self.max_depth,
+                seed=self.seed,
+                n_features=len(_POSITION_FEATURES),
+                name=_group_name(g),
+            )
             if g in groups
             else None
             for g in range(len(PAPER_YAWS_RAD))

@@ -96,6 +96,7 @@ def true_tip(
     r6: np.ndarray,
     q_ref_roll: float,
     state: np.ndarray,
+    *,
     constants: CableConstants,
     fallback_command: Callable[[], Sequence[float]],
 ) -> np.ndarray:

@@ -127,10 +127,10 @@ class BiasConfig:
         """
         for name in self.magnitude_names():
             unit = name.rsplit("_", 1)[-1] if name.endswith(("_rad", "_m")) else ""
-            value = check_float(f"BiasConfig.{name}", getattr(self, name), 0.0, MAX_MAGNITUDE[unit], unit=unit)
+            value = check_float(f"BiasConfig.{name}", getattr(self, name), low=0.0, high=MAX_MAGNITUDE[unit], unit=unit)
             object.__setattr__(self, name, value)
         object.__setattr__(self, "around_identified", check_bool("BiasConfig.around_identified", self.around_identified))
-        lag = check_float("BiasConfig.wrist_settle_lag", self.wrist_settle_lag, 0.0, 1.0)
+        lag = check_float("BiasConfig.wrist_settle_lag", self.wrist_settle_lag, low=0.0, high=1.0)
         if lag >= 1.0:
             raise ValueError(f"BiasConfig.wrist_settle_lag = {lag}; expected a value in [0, 1)")
         object.__setattr__(self, "wrist_settle_lag", lag)

@@ -59,9 +59,11 @@ class PaperContact:
         ):
             raise ValueError(f"slide_per_depth must be two numbers (x, y) in m/m, got {self.slide_per_depth!r}")
         bound = MAX_SLIDE_PER_DEPTH
-        slide = tuple(check_float(f"slide_per_depth[{i}]", v, -bound, bound, unit="m/m") for i, v in enumerate(self.slide_per_depth))
+        slide = tuple(
+            check_float(f"slide_per_depth[{i}]", v, low=-bound, high=bound, unit="m/m") for i, v in enumerate(self.slide_per_depth)
+        )
         object.__setattr__(self, "slide_per_depth", slide)
-        object.__setattr__(self, "give", check_float("give", self.give, 0.0, 1.0))
+        object.__setattr__(self, "give", check_float("give", self.give, low=0.0, high=1.0))
 
     def command_height(self, contact_z_m: float, target_z_m: float) -> float:
         """Where the arm's command ends, metres: ``target_z_m`` if the jaws would not reach

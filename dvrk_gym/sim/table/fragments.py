@@ -132,7 +132,7 @@ class Fragment:
         yaw: angle of its length axis from base x, radians.
     """
 
-    def __init__(self, physics: Physics, name: str, kind: FragmentType, size_m: np.ndarray, position: np.ndarray, yaw: float) -> None:
+    def __init__(self, physics: Physics, *, name: str, kind: FragmentType, size_m: np.ndarray, position: np.ndarray, yaw: float) -> None:
         self.physics = physics
         self.name = name
         self.kind = kind
@@ -229,6 +229,7 @@ class Fragment:
 
 def spawn_fragments(
     physics: Physics,
+    *,
     kind: str | FragmentType,
     sizes: np.ndarray,
     positions: np.ndarray,
@@ -252,6 +253,6 @@ def spawn_fragments(
     if not (len(sizes) == len(positions) == len(yaws)):
         raise ValueError(f"sizes, positions and yaws must have one row per fragment; got {len(sizes)}, {len(positions)}, {len(yaws)}")
     return [
-        Fragment(physics, f"{name_prefix}_{i}", spec, size, position, yaw)
+        Fragment(physics, name=f"{name_prefix}_{i}", kind=spec, size_m=size, position=position, yaw=yaw)
         for i, (size, position, yaw) in enumerate(zip(sizes, positions, yaws))
     ]

@@ -134,7 +134,7 @@ class Gripper:
         Raises:
             ValueError: an opening that is not finite or beyond ``kin.JAW_UPPER_RAD``.
         """
-        self.jaw_target = check_float("jaw_angle_rad", jaw_angle_rad, None, kin.JAW_UPPER_RAD, unit="rad")
+        self.jaw_target = check_float("jaw_angle_rad", jaw_angle_rad, low=None, high=kin.JAW_UPPER_RAD, unit="rad")
 
     def step(self, q_next: np.ndarray | None = None) -> None:
         """One physics step: the arm moves to ``q_next`` (None: stays), the jaws move.
@@ -305,7 +305,9 @@ class Gripper:
         jaw_points = [self._touches[i][body].jaw_point for i in range(2)]
         capacity = fragment.kind.friction * self.config.jaw_friction * 2.0 * self.config.grip_force_n
         first_touch = np.maximum(self._first_touch.pop(name), self.half_angles)
-        self.holds[name] = holding.grasp_hold(self.physics.client, self.robot, fragment, jaw_points, first_touch, capacity)
+        self.holds[name] = holding.grasp_hold(
+            self.physics.client, self.robot, fragment, jaw_points=jaw_points, contact_half_angles=first_touch, capacity_n=capacity
+        )
 
     def _antipodal(self, fragment: Fragment) -> bool:
         a, b = (self._touches[i][fragment.body_id] for i in range(2))
@@ -321,8 +323,12 @@ class Gripper:
             if touch is None or touch.depth_m < depth:
                 continue
             jaw_pose = self.robot.link_pose(link)
-            if holding.tip_presses_end_on(jaw_pose, touch, fragment, self.config.pierce_tip_zone_m, self.config.pierce_max_angle_rad):
-                self.holds[fragment.name] = holding.pierce_hold(self.physics.client, self.robot.body_id, link, fragment, touch.jaw_point)
+            if holding.tip_presses_end_on(
+                jaw_pose, touch, fragment, tip_zone_m=self.config.pierce_tip_zone_m, max_angle_rad=self.config.pierce_max_angle_rad
+            ):
+                self.holds[fragment.name] = holding.pierce_hold(
+                    self.physics.client, self.robot.body_id, link=link, fragment=fragment, jaw_point=touch.jaw_point
+                )
                 return True
         return False
 
@@ -344,4 +350,6 @@ class Gripper:
         return holding.pose_in_link(self.physics.client, self.robot.body_id, self.holds[name].link, self._by_name[name].body_id)
 
     def _restore_pose_in_link(self, name: str, relative: holding.Transform) -> None:
-        holding.restore_pose_in_link(self.physics.client, self.robot.body_id, self.holds[name].link, self._by_name[name].body_id, relative)
+        holding.restore_pose_in_link(
+            self.physics.client, self.robot.body_id, link=self.holds[name].link, body=self._by_name[name].body_id, relative=relative
+        )

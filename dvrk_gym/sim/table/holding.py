@@ -112,7 +112,7 @@ def antipodal(fragment: Fragment, a: Touch, b: Touch, jaw_friction: float) -> bo
     return bool(line @ inward[0] >= cos_limit and -line @ inward[1] >= cos_limit)
 
 
-def tip_presses_end_on(jaw_pose: np.ndarray, touch: Touch, fragment: Fragment, tip_zone_m: float, max_angle_rad: float) -> bool:
+def tip_presses_end_on(jaw_pose: np.ndarray, touch: Touch, fragment: Fragment, *, tip_zone_m: float, max_angle_rad: float) -> bool:
     """Whether a jaw (its link pose ``jaw_pose``, 4x4, m) touches ``fragment`` with its tip
     (within ``tip_zone_m`` of its end, m), pointing into the surface within ``max_angle_rad``."""
     along = jaw_pose[:3, :3].T @ (touch.jaw_point - jaw_pose[:3, 3])
@@ -124,7 +124,7 @@ def tip_presses_end_on(jaw_pose: np.ndarray, touch: Touch, fragment: Fragment, t
 
 # ---------------------------------------------------------------------------- constraints
 def grasp_hold(
-    client: Any, robot: PSMBody, fragment: Fragment, jaw_points: Sequence[np.ndarray], contact_half_angles: np.ndarray, capacity_n: float
+    client: Any, robot: PSMBody, fragment: Fragment, *, jaw_points: Sequence[np.ndarray], contact_half_angles: np.ndarray, capacity_n: float
 ) -> Hold:
     """Hold ``fragment`` squeezed between the jaws: fixed to the wrist by a constraint that
     bears at most ``capacity_n`` N, with collisions between it and the jaws off.
@@ -155,7 +155,7 @@ def grasp_hold(
     return Hold("grasp", constraint, WRIST_YAW_INDEX, contact_half_angles, np.array(levers), np.zeros(3), np.zeros(3))
 
 
-def pierce_hold(client: Any, robot_id: int, link: int, fragment: Fragment, jaw_point: np.ndarray) -> Hold:
+def pierce_hold(client: Any, robot_id: int, *, link: int, fragment: Fragment, jaw_point: np.ndarray) -> Hold:
     """Hold ``fragment`` pierced by jaw ``link`` at ``jaw_point`` (world frame, m): a point
     constraint at the tip bearing at most the fragment's ``pierce_hold_n``."""
     position, orientation = link_com(client, robot_id, link)
@@ -208,7 +208,7 @@ def pose_in_link(client: Any, robot_id: int, link: int, body: int) -> Transform:
     return client.multiplyTransforms(*client.invertTransform(position, orientation), *client.getBasePositionAndOrientation(body))
 
 
-def restore_pose_in_link(client: Any, robot_id: int, link: int, body: int, relative: Transform) -> None:
+def restore_pose_in_link(client: Any, robot_id: int, *, link: int, body: int, relative: Transform) -> None:
     """Put ``body`` back at ``relative`` in ``link``'s frame (from :func:`pose_in_link`), at rest."""
     position, orientation = link_com(client, robot_id, link)
     world = client.multiplyTransforms(position, orientation, *relative)

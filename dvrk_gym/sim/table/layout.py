@@ -79,6 +79,7 @@ def _inside_ellipse(points, size, position, yaw) -> np.ndarray:
 
 def sample_layout(
     rng: np.random.Generator,
+    *,
     sizes: np.ndarray,
     n: int | None = None,
     min_gap_m: float = MIN_GAP_M,

@@ -96,8 +96,8 @@ class DebridementTable:
         if self.gripper is not None or world.jaw_driver is not None:
             raise RuntimeError("this world already has fragments; call world.rebuild() first")
         sizes = sample_fragment_sizes(kind, rng, n)
-        positions, yaws = sample_layout(rng, sizes)
-        self.fragments = spawn_fragments(world.physics, kind, sizes, positions, yaws)
+        positions, yaws = sample_layout(rng, sizes=sizes)
+        self.fragments = spawn_fragments(world.physics, kind=kind, sizes=sizes, positions=positions, yaws=yaws)
         self.gripper = Gripper(world.physics, world.robot, self.fragments, self.gripper_config)
         world.jaw_driver = self
         for _ in range(FRAGMENT_SETTLE_STEPS):
@@ -139,6 +139,7 @@ class DebridementTable:
     def move_stepped(
         self,
         pose: np.ndarray,
+        *,
         noise_rng: np.random.Generator | None = None,
         min_tip_clearance_m: float | None = None,
         limits: MotionLimits | None = None,
@@ -172,10 +173,10 @@ class DebridementTable:
             ValueError: a duration or a clearance out of range (``MAX_TIP_CLEARANCE_M``).
         """
         if duration_s is not None:
-            duration_s = check_float("duration_s", duration_s, 0.0, MAX_STEPPED_S, low_open=True, unit="s")
+            duration_s = check_float("duration_s", duration_s, low=0.0, high=MAX_STEPPED_S, low_open=True, unit="s")
         if min_tip_clearance_m is not None:
             min_tip_clearance_m = check_float(
-                "min_tip_clearance_m", min_tip_clearance_m, -MAX_TIP_CLEARANCE_M, MAX_TIP_CLEARANCE_M, unit="m"
+                "min_tip_clearance_m", min_tip_clearance_m, low=-MAX_TIP_CLEARANCE_M, high=MAX_TIP_CLEARANCE_M, unit="m"
             )
         world = self.world
         gripper = self._require_gripper()
@@ -253,7 +254,7 @@ class DebridementTable:
         taken (also added to the clock). ValueError for a duration outside [0, ``MAX_STEPPED_S``] s.
         """
         if duration_s is not None:
-            duration_s = check_float("duration_s", duration_s, 0.0, MAX_STEPPED_S, unit="s")
+            duration_s = check_float("duration_s", duration_s, low=0.0, high=MAX_STEPPED_S, unit="s")
         gripper = self._require_gripper()
         gripper.command_jaw(jaw_angle_rad)
         dt = self.world.physics.time_step_s
@@ -277,7 +278,7 @@ class DebridementTable:
         fragments); returns the simulated seconds taken (also added to the clock). A wait of
         zero or less (what is left of a phase another step overran) takes none; ValueError
         for one that is not finite or above ``MAX_STEPPED_S``."""
-        seconds = check_float("seconds", seconds, None, MAX_STEPPED_S, unit="s")
+        seconds = check_float("seconds", seconds, low=None, high=MAX_STEPPED_S, unit="s")
         dt = self.world.physics.time_step_s
         steps = max(0, int(round(seconds / dt)))
         if step_physics and self.gripper is not None:
