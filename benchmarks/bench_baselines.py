@@ -50,9 +50,9 @@ from dvrk_gym.baselines.comparison import (
     format_debridement_comparison,
     setting_mismatches,
 )
-from dvrk_gym.baselines.curves import load_curve, plot_curves, save_curve
+from dvrk_gym.baselines.curves import CurvePoint, load_curve, plot_curves, save_curve
 from dvrk_gym.baselines.resume import STATE_FILE_NAME
-from dvrk_gym.baselines.training import CurvePoint, TrainConfig, train
+from dvrk_gym.baselines.training import TrainConfig, train
 from dvrk_gym.calibration.benchmark import format_table
 from dvrk_gym.calibration.loading import load_calibrator
 from dvrk_gym.calibration.pipeline import PipelineConfig, run_calibration

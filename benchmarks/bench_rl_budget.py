@@ -152,9 +152,9 @@ def evaluate_grid_touch(model: Any, env: gym.Env, recorder: CommandedYaw) -> dic
 
 def evaluate_debridement(model: Any, env: gym.Env, trials: int) -> dict[str, float]:
     """Success rate and mean true grip offset (mm) over ``trials`` trials of eight picks."""
-    from dvrk_gym.baselines.training import evaluate_pick_curve_point
+    from dvrk_gym.baselines.curves import evaluate_pick_curve_point
 
-    point = evaluate_pick_curve_point(model, env, env_steps=0, seed=EVAL_SEED, n_trials=trials)
+    point = evaluate_pick_curve_point(model, env, 0, EVAL_SEED, n_trials=trials)
     return {"success": point.success_rate, "grip_offset_mm": point.mm_error}
 
 

@@ -5,11 +5,13 @@ from __future__ import annotations
 import argparse
 import hashlib
 import json
+import warnings
 from types import SimpleNamespace
 
 import gymnasium as gym
 import numpy as np
 import pytest
+from gymnasium.envs.registration import EnvSpec
 from gymnasium.wrappers import RescaleAction
 from stable_baselines3.common.env_checker import check_env
 
@@ -92,6 +94,32 @@ def test_wrapped_env_passes_stable_baselines3_check_env(grid_env):
     check_env(env, warn=False)
 
 
+@pytest.mark.parametrize("agent_env", ["grid_touch", "debridement"])
+def test_wrapped_envs_pass_gymnasiums_check_env_and_are_made_again_from_their_spec(agent_env):
+    """The wrappers record their constructor's arguments, as gymnasium's own do: the wrapped
+    env's spec is JSON and ``gym.make(spec)`` builds the same stack (they were refused)."""
+    from gymnasium.utils.env_checker import check_env as gymnasium_check_env
+
+    from dvrk_gym.baselines.picking import wrap_debridement
+
+    if agent_env == "grid_touch":
+        env = wrap_grid_touch(gym.make("dvrk_gym/GridTouch-v0", camera_resolution=TINY), "paper")
+    else:
+        env = wrap_debridement(gym.make("dvrk_gym/Debridement-v0", camera_resolution=TINY, action_mode="primitive"))
+    again = gym.make(EnvSpec.from_json(env.spec.to_json()))
+    try:
+        with warnings.catch_warnings():
+            warnings.filterwarnings("ignore", message=".*different from the unwrapped version")
+            gymnasium_check_env(env, skip_render_check=True)
+        assert str(again) == str(env) and again.spec.to_json() == env.spec.to_json()
+        first, _ = env.reset(seed=4)
+        second, _ = again.reset(seed=4)
+        assert all(np.array_equal(first[key], second[key]) for key in first)
+    finally:
+        env.close()
+        again.close()
+
+
 def test_unknown_agent_and_training_yaws_are_refused():
     with pytest.raises(ValueError, match="sac_her"):
         TrainConfig(agent="dqn")
@@ -103,7 +131,7 @@ def test_unknown_agent_and_training_yaws_are_refused():
 def test_the_learning_curve_ends_on_the_model_the_training_returns(learning_starts):
     """The last mark is measured before the gradient updates of the last step: measured
     again, it is the saved model's (before, 43 mm on the curve against 45 for the model)."""
-    from dvrk_gym.baselines.training import evaluate_curve_point
+    from dvrk_gym.baselines.curves import evaluate_curve_point
 
     config = TrainConfig(
         agent="sac", steps=30, camera_resolution=TINY, eval_points=1, overrides={**FAST_NETWORK, "learning_starts": learning_starts}

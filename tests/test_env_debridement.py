@@ -112,7 +112,7 @@ def test_jaws_squeeze_a_raisin_more_than_a_seed_in_the_envs_world(make):
         world, table = env.unwrapped.world, env.unwrapped.table
         fragment = _first_on_paper(env)
         action = oracle_action(fragment)
-        world.move_to(tool_pose(action[:3] + [0, 0, 0.01], float(action[3])), kin.JAW_FULLY_OPEN_RAD)
+        world.move_to(tool_pose(action[:3] + [0, 0, 0.01], float(action[3])), jaw_angle_rad=kin.JAW_FULLY_OPEN_RAD)
         table.move_stepped(tool_pose(action[:3] - [0, 0, 0.002], float(action[3])), min_tip_clearance_m=GRASP_TIP_CLEARANCE_M)
         assert fragment.compression() == 0.0
         table.actuate_jaws(-0.3)

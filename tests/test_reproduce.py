@@ -166,7 +166,10 @@ def test_a_run_folder_makes_each_result_once_and_refuses_other_settings(tmp_path
 
     def cached(folder):
         return folder.cached(
-            "result.json", make, lambda path: json.loads(path.read_text()), lambda value, path: path.write_text(json.dumps(value))
+            "result.json",
+            make=make,
+            load=lambda path: json.loads(path.read_text()),
+            save=lambda value, path: path.write_text(json.dumps(value)),
         )
 
     settings = {"seed": 0, "profile": {"name": "tiny", "camera_resolution": (480, 270)}}

@@ -48,7 +48,7 @@ __all__, __getattr__, __dir__ = lazy_exports(  # PEP 562: each name imported fro
         "LoadedAgent": "checkpoints",
         "load_agent": "checkpoints",
         "save_agent": "checkpoints",
-        "CurvePoint": "training",
+        "CurvePoint": "curves",
         "TrainConfig": "training",
         "TrainResult": "training",
         "train": "training",

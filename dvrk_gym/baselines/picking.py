@@ -60,7 +60,7 @@ def pick_action(action: np.ndarray, yaw_rad: float) -> np.ndarray:
     return np.append(unit_to_pick_box(action), yaw_rad).astype(np.float32)
 
 
-class PickTargetAgentView(gym.Wrapper):
+class PickTargetAgentView(gym.Wrapper, gym.utils.RecordConstructorArgs):
     """Debridement-v0 in primitive mode seen through :func:`pick_observation` and :func:`pick_action`.
 
     Observation: a Dict with one key, ``"observation"`` (4,): the scaled target (x, y, z)
@@ -70,7 +70,8 @@ class PickTargetAgentView(gym.Wrapper):
     def __init__(self, env: gym.Env) -> None:
         if getattr(env.unwrapped, "primitive", None) is not True:
             raise ValueError("the pick agents need Debridement-v0 in primitive mode (action_mode='primitive')")
-        super().__init__(env)
+        gym.utils.RecordConstructorArgs.__init__(self)
+        gym.Wrapper.__init__(self, env)
         self.action_space = spaces.Box(-1.0, 1.0, shape=(3,), dtype=np.float32)
         self.observation_space = spaces.Dict({"observation": spaces.Box(-10.0, 10.0, shape=(len(OBSERVATION_NAMES),), dtype=np.float32)})
         self._yaw = 0.0
@@ -99,8 +100,12 @@ def shaped_pick_reward(delivered: float, info: dict[str, Any]) -> float:
     return float(delivered) - (offset_mm + above_mm) / OFFSET_SCALE_MM
 
 
-class ShapedPickReward(gym.Wrapper):
+class ShapedPickReward(gym.Wrapper, gym.utils.RecordConstructorArgs):
     """Replace the env's reward of a pick by :func:`shaped_pick_reward` (the env's kept in ``info["delivered"]``)."""
+
+    def __init__(self, env: gym.Env) -> None:
+        gym.utils.RecordConstructorArgs.__init__(self)
+        gym.Wrapper.__init__(self, env)
 
     def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
         observation, reward, terminated, truncated, info = self.env.step(action)
@@ -119,11 +124,12 @@ def wrap_debridement(env: gym.Env, training_yaws: str | None = None) -> gym.Env:
     return PickTargetAgentView(ShapedPickReward(env))
 
 
-class GripOffsetLog(gym.Wrapper):
+class GripOffsetLog(gym.Wrapper, gym.utils.RecordConstructorArgs):
     """Record each pick's true grip offset in the paper's plane, mm (None when no grip was recorded)."""
 
     def __init__(self, env: gym.Env) -> None:
-        super().__init__(env)
+        gym.utils.RecordConstructorArgs.__init__(self)
+        gym.Wrapper.__init__(self, env)
         self.offsets_mm: list[float | None] = []
 
     def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:

@@ -2,22 +2,20 @@
 
 Every training env step is one robot move of the budget: a commanded touch (GridTouch-v0)
 or a pick (Debridement-v0). The learning curve evaluates the deterministic policy on a
-separate env (same instrument) at evenly spaced points. GridTouch agents: the 35 circles
-once, the yaw cycling through the benchmark's six settings (touch error). Pick agents:
-CURVE_TRIALS debridement trials of eight picks (success rate, grip offset, time per
-fragment). These evaluation moves are measurements and are not counted in the budget.
+separate env (same instrument) at evenly spaced points (:mod:`dvrk_gym.baselines.curves`
+says how a point is measured). These evaluation moves are measurements and are not counted
+in the budget.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import logging
-import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, ClassVar
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -29,21 +27,15 @@ from tqdm.auto import tqdm
 from dvrk_gym import paper
 from dvrk_gym.baselines.agents import AgentSpec, build_model, get_agent
 from dvrk_gym.baselines.budgets import CALIBRATOR_MOVES, DEBRIDEMENT_ID, DEFAULT_EVAL_POINTS, MAX_EVAL_POINTS
-from dvrk_gym.baselines.picking import GripOffsetLog
+from dvrk_gym.baselines.curves import CURVE_TRIALS, CurveEvaluator, CurvePoint, evaluate_curve_point, evaluate_pick_curve_point
 from dvrk_gym.baselines.resume import ResetRecorder, TrainingStateError, TrainingStateWriter, restore_training_state
 from dvrk_gym.baselines.wrappers import TRAINING_YAWS
-from dvrk_gym.calibration.benchmark import YAW_SETTINGS
-from dvrk_gym.envs.grid_touch import N_CIRCLES, TOUR
-from dvrk_gym.evaluation.episodes import run_episodes
-from dvrk_gym.evaluation.trials import run_trials, totals
 from dvrk_gym.utils.checks import check_choice, check_endoscope_resolution, check_float, check_int, check_int_fields
 from dvrk_gym.utils.torch_threads import torch_threads
 
 logger = logging.getLogger(__name__)
 
 VEC_ENVS = ("dummy", "subproc")
-CURVE_TRIALS = 2
-"""Debridement trials (of eight picks) per learning-curve point of a pick agent."""
 SAVE_EVERY = 500
 """Env steps between two saves of a training's state (a GridTouch agent makes them in about
 40 s, a pick agent in about 4 minutes, on this project's 2-core machine)."""
@@ -130,55 +122,6 @@ class TrainConfig:
         return dataclasses.asdict(self)
 
 
-@dataclass(frozen=True)
-class CurvePoint:
-    """How the deterministic policy does after ``env_steps`` training moves.
-
-    Attributes:
-        env_steps: training env steps so far.
-        mm_error: GridTouch: mean touch error in the workspace plane; pick agents: mean
-            true grip offset in the paper's plane from the fragment's centre; millimetres.
-        pixel_error: mean touch error in the left image, pixels (NaN for pick agents).
-        success_rate: fraction of touches within the env's success radius, or of picks
-            that delivered their fragment.
-        time_per_fragment_s: pick agents: mean simulated seconds per pick (None otherwise).
-    """
-
-    env_steps: int
-    mm_error: float
-    pixel_error: float
-    success_rate: float
-    time_per_fragment_s: float | None = None
-    NAN_FIELDS: ClassVar[tuple[str, ...]] = ("mm_error", "pixel_error", "success_rate")
-    """The fields that may be NaN (written as JSON null)."""
-
-    def to_json(self) -> dict[str, Any]:
-        """The point as JSON values: NaN errors (a pick agent's pixel error) as null."""
-        return {key: None if isinstance(value, float) and np.isnan(value) else value for key, value in dataclasses.asdict(self).items()}
-
-    @classmethod
-    def from_json(cls, value: Any) -> CurvePoint:
-        """A point from :meth:`to_json` (null errors back to NaN).
-
-        Raises:
-            TypeError: ``value`` is not a dict of this class's fields.
-            ValueError: a field is not a number of its kind (a non-negative int of env
-                steps; real errors and rate, null for NaN; a finite, non-negative time or null).
-        """
-        if not isinstance(value, dict):
-            raise TypeError(f"a curve point must be a dict, got {value!r}")
-        fields: dict[str, Any] = {key: float("nan") if item is None and key in cls.NAN_FIELDS else item for key, item in value.items()}
-        point = cls(**fields)
-        check_int("a curve point's env_steps", point.env_steps, 0)
-        for name in cls.NAN_FIELDS:
-            item = getattr(point, name)
-            if isinstance(item, bool) or not isinstance(item, (int, float)) or math.isinf(item):
-                raise ValueError(f"a curve point's {name} must be a real number or null, got {item!r}")
-        if point.time_per_fragment_s is not None:
-            check_float("a curve point's time_per_fragment_s", point.time_per_fragment_s, low=0.0)
-        return point
-
-
 @dataclass
 class TrainResult:
     """A trained model and how its training went.
@@ -221,37 +164,10 @@ def make_training_vec_env(config: TrainConfig) -> VecEnv:
     return DummyVecEnv(factories)
 
 
-def curve_options(index: int) -> dict[str, Any]:
-    """Reset options of the learning curve's ``index``-th touch: the ``index``-th circle of the
-    authors' tour (:data:`~dvrk_gym.envs.grid_touch.TOUR`), a cycling yaw setting."""
-    return {"circle": TOUR[index % N_CIRCLES], "yaw": YAW_SETTINGS[index % len(YAW_SETTINGS)][1]}
-
-
-def evaluate_curve_point(model: BaseAlgorithm, env: gym.Env, env_steps: int, seed: int) -> CurvePoint:
-    """Touch the 35 circles with the deterministic policy; mean errors."""
-    results = run_episodes(env, model, n_episodes=N_CIRCLES, seed=seed, options=curve_options, progress=False)
-    mean = lambda key: float(np.mean([r.metrics[key] for r in results]))  # noqa: E731
-    return CurvePoint(env_steps, mean("mm_error"), mean("pixel_error"), mean("is_success"))
-
-
-def evaluate_pick_curve_point(model: BaseAlgorithm, env: gym.Env, *, env_steps: int, seed: int, n_trials: int = CURVE_TRIALS) -> CurvePoint:
-    """Run ``n_trials`` debridement trials with the deterministic policy; success, grip offset, time."""
-    log = GripOffsetLog(env)
-    total = totals(run_trials(log, model, n_trials, seed=seed, progress=False))
-    offsets = [mm for mm in log.offsets_mm if mm is not None]
-    mean_offset = float(np.mean(offsets)) if offsets else float("nan")
-    return CurvePoint(env_steps, mean_offset, float("nan"), total["success"] / max(total["picks"], 1), total["time_per_fragment_s"])
-
-
-CurveEvaluator = Callable[[BaseAlgorithm, gym.Env, int, int], CurvePoint]
-
-
 def curve_evaluator(config: TrainConfig) -> CurveEvaluator:
     """The learning-curve measurement of an agent's env: touch error, or debridement trials."""
     if config.spec.env_id == DEBRIDEMENT_ID:
-        return lambda model, env, env_steps, seed: evaluate_pick_curve_point(
-            model, env, env_steps=env_steps, seed=seed, n_trials=config.curve_trials
-        )
+        return lambda model, env, env_steps, seed: evaluate_pick_curve_point(model, env, env_steps, seed, n_trials=config.curve_trials)
     return evaluate_curve_point
 
 

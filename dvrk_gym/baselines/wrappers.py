@@ -39,14 +39,15 @@ def scale_goal(goal_m: np.ndarray, center_m: ArrayLike = GOAL_CENTER_M, half_ran
     return ((np.asarray(goal_m, dtype=np.float64) - np.asarray(center_m, dtype=np.float64)) / half_range_m).astype(np.float32)
 
 
-class TargetYawAction(gym.ActionWrapper):
+class TargetYawAction(gym.ActionWrapper, gym.utils.RecordConstructorArgs):
     """Action ``(bx, by, bz)`` in metres; the yaw (rad) is the one the episode asks for.
 
     The yaw is read from the last observation (``observation[-1]`` of GridTouch-v0).
     """
 
     def __init__(self, env: gym.Env) -> None:
-        super().__init__(env)
+        gym.utils.RecordConstructorArgs.__init__(self)
+        gym.ActionWrapper.__init__(self, env)
         box = env.action_space
         if not isinstance(box, spaces.Box):
             raise TypeError(f"TargetYawAction wraps a Box action space, got {box}")
@@ -62,7 +63,7 @@ class TargetYawAction(gym.ActionWrapper):
         return np.append(np.asarray(action, dtype=np.float32), np.float32(self._yaw))
 
 
-class GoalScaling(gym.ObservationWrapper):
+class GoalScaling(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
     """Goals mapped from camera-frame metres to ``(goal - center) / half_range``.
 
     Args:
@@ -73,7 +74,8 @@ class GoalScaling(gym.ObservationWrapper):
     """
 
     def __init__(self, env: gym.Env, center_m: tuple[float, float, float] = GOAL_CENTER_M, half_range_m: float = GOAL_HALF_RANGE_M) -> None:
-        super().__init__(env)
+        gym.utils.RecordConstructorArgs.__init__(self, center_m=tuple(center_m), half_range_m=half_range_m)
+        gym.ObservationWrapper.__init__(self, env)
         if not (np.isfinite(half_range_m) and half_range_m > 0):
             raise ValueError(f"half_range_m must be finite and > 0, got {half_range_m}")
         self.center_m = np.asarray(center_m, dtype=np.float64)
@@ -118,7 +120,7 @@ class GoalScaling(gym.ObservationWrapper):
         return goal_env.compute_reward(self.unscale(achieved_goal), self.unscale(desired_goal), info)
 
 
-class TrainingYaws(gym.Wrapper):
+class TrainingYaws(gym.Wrapper, gym.utils.RecordConstructorArgs):
     """Choose the yaw of each training episode (reset options given by the caller win).
 
     Args:
@@ -134,7 +136,8 @@ class TrainingYaws(gym.Wrapper):
     def __init__(self, env: gym.Env, mode: str = "paper") -> None:
         if mode not in TRAINING_YAWS:
             raise ValueError(f"training yaw mode must be one of {TRAINING_YAWS}, got {mode!r}")
-        super().__init__(env)
+        gym.utils.RecordConstructorArgs.__init__(self, mode=mode)
+        gym.Wrapper.__init__(self, env)
         self.mode = mode
         self._episodes = 0
 
@@ -169,6 +172,7 @@ def wrap_grid_touch(env: gym.Env, training_yaws: str | None = None) -> gym.Env:
     if training_yaws is not None:
         env = TrainingYaws(env, training_yaws)
     env = TargetYawAction(env)
-    unit = np.ones(env.action_space.shape or (), dtype=np.float32)
-    env = RescaleAction(env, min_action=-unit, max_action=unit)
+    # Plain ints, not arrays: the wrapped env's spec stays JSON (a Python float would draw
+    # Box's float64-to-float32 warning; the float32 bounds are the same either way).
+    env = RescaleAction(env, min_action=cast(Any, -1), max_action=cast(Any, 1))
     return GoalScaling(env)  # outermost, so that ``env.compute_reward`` is found (SB3's check_env)

@@ -302,10 +302,9 @@ class DebridementEnv(DvrkEnv[DebridementConfig]):
         self._jaw_target = float(np.clip(self._jaw_target + action[3], CLOSED_JAW_RAD, kin.JAW_FULLY_OPEN_RAD))
         table.command_jaws(self._jaw_target)
         pose = tool_pose(target, config.delta_yaw_rad)
-        move = table.move_stepped(
-            pose, noise_rng=self.np_random, min_tip_clearance_m=GRASP_TIP_CLEARANCE_M, duration_s=config.control_period_s
-        )
-        table.dwell(config.control_period_s - move.duration_s)
+        clearance, period = GRASP_TIP_CLEARANCE_M, config.control_period_s
+        move = table.move_stepped(pose, noise_rng=self.np_random, min_tip_clearance_m=clearance, duration_s=period)
+        table.dwell(period - move.duration_s)
         delivered = self._delivered()
         new = delivered - self._episode.rewarded  # each fragment once: one lifted out and dropped back in scores no more
         self._episode.rewarded |= new

@@ -13,8 +13,7 @@ from typing import Any
 import numpy as np
 
 from dvrk_gym import paper
-from dvrk_gym.baselines.curves import plot_curves
-from dvrk_gym.baselines.training import CurvePoint
+from dvrk_gym.baselines.curves import CurvePoint, plot_curves
 from dvrk_gym.calibration.benchmark import YAW_SETTINGS
 from dvrk_gym.calibration.search import SearchResult, plot_search
 from dvrk_gym.evaluation.trials import unpicked_note

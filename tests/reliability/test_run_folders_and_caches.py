@@ -127,7 +127,7 @@ def _made_again(folder, name, load, value, save, caplog):
     """Load ``name`` from ``folder`` after it was damaged: the value made again, the warning and the file set aside."""
     made = []
     with caplog.at_level(logging.WARNING, logger="dvrk_gym.utils.run_folder"):
-        result = folder.cached(name, lambda: made.append(1) or value, load, save)
+        result = folder.cached(name, make=lambda: made.append(1) or value, load=load, save=save)
     assert made == [1]
     assert name in caplog.text and "moved it to" in caplog.text
     assert folder.file(name + ".corrupt").exists() and folder.file(name).exists()
