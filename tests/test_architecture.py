@@ -46,12 +46,14 @@ LAYER_RANKS = {
     "dvrk_gym.reproduce": 10,
     "dvrk_gym.sweep": 10,
     "dvrk_gym.cli": 11,
+    "dvrk_gym.__main__": 11,
 }
 # Package faces, ranked by what they may re-export: ``dvrk_gym`` itself registers the envs
 # and exports the public API of every layer below the CLI; ``dvrk_gym.sim`` may re-export all of sim/.
 # These ranks apply only to the package's own ``__init__`` and to importing it by that name.
 FACE_RANKS = {"dvrk_gym": LAYER_RANKS["dvrk_gym.reproduce"], "dvrk_gym.sim": LAYER_RANKS["dvrk_gym.sim.table"]}
 CLI = "dvrk_gym.cli"
+MAIN = "dvrk_gym.__main__"
 
 
 @dataclass(frozen=True)
@@ -138,7 +140,8 @@ def rank(module: str) -> int | None:
 
 
 def _in_cli(module: str) -> bool:
-    return module == CLI or module.startswith(CLI + ".")
+    """dvrk_gym/cli/, and ``python -m dvrk_gym``'s ``__main__``, which only runs it."""
+    return module in (CLI, MAIN) or module.startswith(CLI + ".")
 
 
 def _listing(offenders: list[str]) -> str:

@@ -3,6 +3,7 @@
 import dataclasses
 import json
 import sys
+from pathlib import Path
 from unittest import mock
 
 import gymnasium as gym
@@ -273,6 +274,16 @@ def test_cli_evaluates_any_policy_from_a_factory(tmp_path, capsys):
     assert "mm_error" in out and "pixel_error" in out
     rows = json.loads((tmp_path / "evaluation.json").read_text())
     assert len(rows) == 2 and "mm_error" in rows[0]["metrics"]
+
+
+def test_cli_evaluation_of_a_policy_leaves_the_calibrations_default_folder_alone(tmp_path, capsys, monkeypatch):
+    """Its evaluation.json went into dvrk_gym_out/calibration, which calibrate then refused
+    as a folder of files without a settings stamp."""
+    monkeypatch.chdir(tmp_path)
+    policy = ["evaluate", "--policy", "policies_for_tests:middle_of_the_grid", "--episodes", "1", "--resolution", "640", "360"]
+    assert main([*policy, "--no-progress"]) == 0
+    assert f"wrote {Path('dvrk_gym_out/evaluation/evaluation.json')}" in capsys.readouterr().out
+    assert not (tmp_path / "dvrk_gym_out" / "calibration").exists()
 
 
 def test_cli_reports_bad_arguments_clearly(tmp_path, capsys):

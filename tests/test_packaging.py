@@ -46,3 +46,14 @@ def test_citation_file_names_the_paper_and_this_version():
     text = (ROOT / "CITATION.cff").read_text()
     assert f"version: {__version__}" in text
     assert "Two-Phase Calibration Procedure" in text and re.search(r"year: 2018", text)
+
+
+def test_python_m_dvrk_gym_is_the_command():
+    """``python -m dvrk_gym`` runs the ``dvrk-gym`` command (there was no ``__main__``)."""
+    from dvrk_gym import __version__
+
+    result = subprocess.run([sys.executable, "-m", "dvrk_gym", "--version"], capture_output=True, text=True, check=False, timeout=120)
+    assert result.returncode == 0, result.stderr
+    assert __version__ in result.stdout
+    refused = subprocess.run([sys.executable, "-m", "dvrk_gym", "nonsense"], capture_output=True, text=True, check=False, timeout=120)
+    assert refused.returncode == 2 and "invalid choice: 'nonsense'" in refused.stderr

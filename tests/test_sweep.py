@@ -4,7 +4,12 @@ import csv
 import dataclasses
 import json
 import math
+import os
+import subprocess
+import sys
+import tempfile
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -28,6 +33,7 @@ from dvrk_gym.sweep import (
 )
 from dvrk_gym.sweep.run import SETTINGS_STAMP
 from dvrk_gym.sweep.table import TIME_COLUMNS
+from dvrk_gym.sweep.unit import SCRATCH_PREFIX
 from dvrk_gym.utils.run_folder import SOURCE_KEY
 from dvrk_gym.utils.source_fingerprint import source_fingerprint
 from dvrk_gym.utils.torch_threads import torch_threads
@@ -279,9 +285,16 @@ def test_local_processes_and_a_dask_cluster_give_identical_numbers_and_a_resumed
 
 
 @pytest.mark.slow
-def test_a_unit_gives_the_calibration_table_of_the_pipeline(tmp_path):
+def test_a_unit_gives_the_calibration_table_of_the_pipeline(tmp_path, monkeypatch):
     config = dataclasses.replace(TINY, bias_seed=2, seed=1)
+    scratch = tmp_path / "scratch"
+    scratch.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(scratch))
+    orphan = scratch / f"{SCRATCH_PREFIX}{_ended_pid()}_abc"  # a unit's folder, its worker killed with SIGKILL
+    (orphan / "phase1.npz").parent.mkdir()
+    (orphan / "phase1.npz").write_bytes(b"x")
     unit = run_unit(config)
+    assert not orphan.exists() and list(scratch.glob(f"{SCRATCH_PREFIX}*")) == []  # the orphan deleted, its own folder too
     # The unit runs under torch_threads(1), the pipeline with the caller's count: the same
     # network, because DNNCalibrator trains on one thread whatever the caller's.
     with torch_threads(2):
@@ -291,6 +304,33 @@ def test_a_unit_gives_the_calibration_table_of_the_pipeline(tmp_path):
         assert unit["calibrators"][name]["settings"]["yaw -45"]["mean_px"] == table[method]["yaw -45"]["pixel"]["mean"]
     assert unit["config"] == {"bias_seed": 2, "seed": 1} and unit["phase1"]["kept"] > 0
     assert np.isfinite(unit["wall_s"])
+
+
+def _ended_pid() -> int:
+    """The pid of a process that has ended (and been reaped)."""
+    process = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True, check=True)
+    return int(process.stdout)
+
+
+def test_scratch_folders_of_ended_processes_are_deleted_and_no_other(tmp_path):
+    from dvrk_gym.utils.parent_watch import remove_orphaned_scratch, scratch_folder
+
+    ended, prefix = _ended_pid(), "dvrk_gym_test_"
+    orphan, live, unnamed = tmp_path / f"{prefix}{ended}_a", tmp_path / f"{prefix}{os.getpid()}_b", tmp_path / f"{prefix}abc_c"
+    for folder in (orphan, live, unnamed):
+        folder.mkdir()
+        (folder / "kept.txt").write_text("x")
+    outside = tmp_path / "elsewhere"
+    outside.mkdir()
+    (tmp_path / f"{prefix}{ended}_link").symlink_to(outside, target_is_directory=True)
+    (tmp_path / f"{prefix}{ended}_file").write_text("x")
+    assert remove_orphaned_scratch(prefix, tmp_path) == [orphan]
+    assert live.exists() and unnamed.exists() and outside.exists() and (tmp_path / f"{prefix}{ended}_file").exists()
+    with scratch_folder(prefix) as folder:
+        assert Path(folder).name.startswith(f"{prefix}{os.getpid()}_")
+    assert not Path(folder).exists()
+    with pytest.raises(ValueError, match="plain name"):
+        remove_orphaned_scratch("a/b", tmp_path)
 
 
 # --- the command ------------------------------------------------------------------------
@@ -304,7 +344,7 @@ def test_a_unit_gives_the_calibration_table_of_the_pipeline(tmp_path):
         (["--seeds", ""], "not a non-negative number"),
         (["--scheduler", "localhost"], "the scheduler address 'localhost' is malformed (missing port"),
         (["--scheduler", "tcp://127.0.0.1:9", "--connect-timeout", "0.5"], "cannot reach a Dask scheduler at 'tcp://127.0.0.1:9'"),
-        (["--workers", "0"], "workers is 0; expected an int in [1, 1024]"),
+        (["--workers", "0"], "--workers must be an int in [1, 1024], got 0"),
     ],
 )
 def test_the_command_refuses_bad_input_in_one_line_with_status_2(tmp_path, capsys, arguments, message):

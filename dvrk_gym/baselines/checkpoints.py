@@ -55,6 +55,12 @@ MAX_SETTINGS_BYTES = 2**20
 MAX_LAYERS = 16
 MAX_LAYER_UNITS = 4096
 """Bounds of the networks a settings file may describe: hidden layers, and units per layer."""
+MAX_POLICY_PARAMETERS = 2**25
+"""The most weights (about 128 MB of float32) that the networks of a settings file may hold
+together, counted before any is built (a 256 x 256 SAC's: about 0.4 million)."""
+_IO_UNITS = 64
+"""Units counted for a network's input and output layers: more than any agent's observation
+or action has, so the count is an upper bound."""
 _POLICY_KEYS = {"net_arch", "use_sde", "n_critics"}
 DISPLAY_ONLY = ("render_resolution", "renderer")
 """Env keywords that change only what ``render()`` shows, left out of :attr:`LoadedAgent.env_changes`."""
@@ -263,7 +269,26 @@ def check_policy_kwargs(kwargs: Any) -> dict[str, Any]:
         check_bool("use_sde", kwargs["use_sde"])
     if "n_critics" in kwargs:
         check_int("n_critics", kwargs["n_critics"], 1, 10)
+    parameters = policy_parameters_bound(arch, kwargs.get("n_critics", 2))
+    if parameters > MAX_POLICY_PARAMETERS:
+        raise ValueError(
+            f"policy_kwargs describe networks of up to {parameters:,} weights, more than {MAX_POLICY_PARAMETERS:,} "
+            f"(net_arch {arch!r}); refused before building them"
+        )
     return kwargs
+
+
+def policy_parameters_bound(arch: list[int] | dict[str, list[int]], n_critics: int) -> int:
+    """An upper bound on the weights of an actor-critic's networks with hidden layers ``arch``:
+    the actor and ``n_critics`` critics, each with a target copy, inputs and outputs of
+    :data:`_IO_UNITS` units."""
+
+    def one(layers: list[int]) -> int:
+        sizes = [_IO_UNITS, *layers, _IO_UNITS]
+        return sum(a * b + b for a, b in zip(sizes, sizes[1:]))
+
+    actor, critic = (arch.get("pi", []), arch.get("qf", arch.get("vf", []))) if isinstance(arch, dict) else (arch, arch)
+    return 2 * one(actor) + 2 * n_critics * one(critic)
 
 
 def _read_settings(path: Path) -> dict[str, Any]:

@@ -17,6 +17,11 @@ DEFAULT_POLICY_ENV = "dvrk_gym/GridTouch-v0"
 """The env ``evaluate --policy`` runs on without ``--env``."""
 DEFAULT_POLICY_EPISODES = 35
 """Episodes ``evaluate --policy`` runs without ``--episodes`` (one per printed circle)."""
+DEFAULT_CALIBRATION_OUT = Path("dvrk_gym_out/calibration")
+"""The calibration's run folder without ``--out`` (``collect``, ``calibrate``, ``evaluate``)."""
+DEFAULT_POLICY_OUT = Path("dvrk_gym_out/evaluation")
+"""Where ``evaluate --policy`` writes ``evaluation.json`` without ``--out``: not the
+calibration's folder, which a file of its own there would keep ``calibrate`` from taking."""
 
 
 def _add_world_options(parser: argparse.ArgumentParser) -> None:
@@ -91,6 +96,8 @@ def _run_calibrate(args: argparse.Namespace) -> int:
 
 
 def _run_evaluate(args: argparse.Namespace) -> int:
+    if args.out is None:
+        args.out = DEFAULT_POLICY_OUT if args.policy else DEFAULT_CALIBRATION_OUT
     if args.policy:
         if args.protocol is not None:
             raise ValueError("--protocol is how the calibrators' predictions are sent; a --policy sends its own actions as they are")
@@ -207,7 +214,7 @@ def add_commands(subparsers: argparse._SubParsersAction) -> None:
         "folder is stamped as calibrate stamps it, so `dvrk-gym calibrate --out` with the same options (and its default --epochs) "
         "resumes from it.",
     )
-    collect.add_argument("--out", type=Path, default=Path("dvrk_gym_out/calibration"), help="output folder (default: %(default)s)")
+    collect.add_argument("--out", type=Path, default=DEFAULT_CALIBRATION_OUT, help="output folder (default: %(default)s)")
     collect.add_argument("--trajectories", type=int, default=paper.PHASE1_TRAJECTORIES, help="trajectories (the paper: %(default)s)")
     collect.add_argument("--force", action="store_true", help="replace a phase1.npz already in --out")
     _add_world_options(collect)
@@ -222,7 +229,7 @@ def add_commands(subparsers: argparse._SubParsersAction) -> None:
         "the residual forests. Every stage is cached in --out, so the same command resumes; a folder made with other "
         "settings or by another dvrk_gym is refused.",
     )
-    calibrate.add_argument("--out", type=Path, default=Path("dvrk_gym_out/calibration"), help="output folder (default: %(default)s)")
+    calibrate.add_argument("--out", type=Path, default=DEFAULT_CALIBRATION_OUT, help="output folder (default: %(default)s)")
     _add_budget_options(calibrate)
     _add_world_options(calibrate)
     add_progress_option(calibrate)
@@ -235,7 +242,11 @@ def add_commands(subparsers: argparse._SubParsersAction) -> None:
         "'Calibration Error Results' with per-circle error maps. With --policy module:factory: run that policy "
         "(factory(env) -> policy) on --env and summarise every metric.",
     )
-    evaluate.add_argument("--out", type=Path, default=Path("dvrk_gym_out/calibration"), help="output folder (default: %(default)s)")
+    evaluate.add_argument(
+        "--out",
+        type=Path,
+        help=f"output folder (default: {DEFAULT_CALIBRATION_OUT}; with --policy, {DEFAULT_POLICY_OUT}, where it writes evaluation.json)",
+    )
     evaluate.add_argument("--policy", help="evaluate another policy: 'package.module:factory', factory(env) returns the policy")
     evaluate.add_argument("--env", help=f"environment for --policy (default: {DEFAULT_POLICY_ENV})")
     evaluate.add_argument("--episodes", type=int, help=f"episodes for --policy (default: {DEFAULT_POLICY_EPISODES})")

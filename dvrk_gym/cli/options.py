@@ -148,9 +148,10 @@ def make_executor(args: argparse.Namespace) -> Executor:
                 f"--scheduler needs dask.distributed ({error}); install it with: pip install -e '.[dask]' in a checkout of dvrk-gym"
             ) from None
         return DaskExecutor(args.scheduler, connect_timeout_s=args.connect_timeout)
-    from dvrk_gym.parallel.executors import local_executor
+    from dvrk_gym.parallel.executors import MAX_LOCAL_WORKERS, local_executor
     from dvrk_gym.sim.physics.quiet_import import import_pybullet_quietly
 
+    check_int("--workers", args.workers, 1, MAX_LOCAL_WORKERS)
     return local_executor(args.workers, setup=import_pybullet_quietly)  # no banner from the workers into the progress bar
 
 

@@ -47,7 +47,7 @@ def add_commands(subparsers: argparse._SubParsersAction) -> None:
         "its calibrators on the 35 circles in the six settings. Writes sweep.csv (one row per instrument, "
         "calibrator and seed), sweep_errors.png (error per instrument) and units/<unit>.json into --out. Each "
         "unit is kept as it finishes: the same command resumes, and a larger grid reuses the finished units. "
-        "The budget defaults to the paper's (about 2.5 minutes a unit on one core); --trajectories 3 --epochs 20 "
+        "The budget defaults to the paper's (a minute or more a unit on one core); --trajectories 3 --epochs 20 "
         "--resolution 640 360 makes a unit take seconds.",
     )
     parser.add_argument("--bias-seeds", default="0-4", help="instruments: numbers and ranges, e.g. 0-4 or 0,3,7-9 (default: %(default)s)")

@@ -25,7 +25,6 @@ import functools
 import graphlib
 import logging
 import os
-import re
 import socket
 import time
 from collections.abc import Callable
@@ -38,6 +37,7 @@ from tqdm.auto import tqdm
 
 from dvrk_gym.parallel.executors import Executor, local_executor, outcome_of
 from dvrk_gym.utils.atomic import read_json
+from dvrk_gym.utils.checks import check_file_stem
 from dvrk_gym.utils.run_folder import RunFolder, locate_in_folder
 from dvrk_gym.utils.torch_threads import torch_threads
 
@@ -111,9 +111,8 @@ def _read_result(path: Path, files: tuple[str, ...], root: Path) -> dict[str, An
 def _sorter(tasks: list[Task]) -> graphlib.TopologicalSorter:
     """The graph's sorter, prepared; ValueError for repeated names, unknown needs or a cycle."""
     names = [task.name for task in tasks]
-    for name in names:  # the name is its cache file's stem: no folders, no hidden or partial files
-        if not isinstance(name, str) or not re.fullmatch(r"[A-Za-z0-9_+\-][A-Za-z0-9_+.\-]*", name):
-            raise ValueError(f"task name {name!r} must be letters, digits and _ + - . (not starting with '.'), no folders")
+    for name in names:  # the name is its cache file's stem
+        check_file_stem("task name", name)
     if len(set(names)) != len(names):
         raise ValueError(f"task names must be unique: {sorted(n for n in set(names) if names.count(n) > 1)}")
     for task in tasks:

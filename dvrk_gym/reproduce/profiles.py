@@ -12,7 +12,7 @@ from dvrk_gym.baselines.budgets import AGENT_ENVS, GRID_TOUCH_ID, MAX_EVAL_POINT
 from dvrk_gym.calibration.phase1 import MAX_STEPS_PER_TRAJECTORY, MAX_TRAJECTORIES
 from dvrk_gym.envs.debridement_config import MAX_PICKS
 from dvrk_gym.utils.atomic import read_json
-from dvrk_gym.utils.checks import check_choice, check_endoscope_resolution, check_int
+from dvrk_gym.utils.checks import check_choice, check_endoscope_resolution, check_file_stem, check_int
 
 SEARCHES = ("paper", "quick")
 _MAX_COUNT = 10**7
@@ -56,8 +56,7 @@ class Profile:
     camera_resolution: tuple[int, int] = paper.ENDOSCOPE_RESOLUTION_PX
 
     def __post_init__(self) -> None:
-        if not isinstance(self.name, str) or not self.name:
-            raise ValueError(f"name must be a non-empty string, got {self.name!r}")
+        check_file_stem("name", self.name)  # it names the run folder, dvrk_gym_out/reproduce-<name>
         object.__setattr__(self, "camera_resolution", check_endoscope_resolution("camera_resolution", self.camera_resolution))
         if isinstance(self.rl_agents, str) or not isinstance(self.rl_agents, (list, tuple)):
             raise ValueError(f"rl_agents must be a list of agent names, got {self.rl_agents!r}")

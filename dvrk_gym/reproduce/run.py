@@ -25,7 +25,7 @@ from dvrk_gym.baselines.budgets import resolve_budget
 from dvrk_gym.calibration.pipeline import BENCHMARK_SEED_OFFSET
 from dvrk_gym.calibration.search import CHOSEN_NET, SWEEP_FOLDS
 from dvrk_gym.evaluation.trials import cell_name
-from dvrk_gym.parallel.executors import Executor, InlineExecutor, local_executor
+from dvrk_gym.parallel.executors import MAX_LOCAL_WORKERS, Executor, InlineExecutor, local_executor
 from dvrk_gym.parallel.task_graph import Task, run_tasks
 from dvrk_gym.reproduce import tasks
 from dvrk_gym.reproduce.profiles import QUICK, Profile
@@ -70,7 +70,7 @@ class ReproduceConfig:
         object.__setattr__(self, "out", Path(self.out))
         if not isinstance(self.profile, Profile):
             raise ValueError(f"ReproduceConfig.profile must be a Profile, got {type(self.profile).__name__}")
-        check_int("ReproduceConfig.workers", self.workers, 1, 256)
+        check_int("ReproduceConfig.workers", self.workers, 1, MAX_LOCAL_WORKERS)
         check_int("ReproduceConfig.seed", self.seed, 0, 2**31 - 1)
         check_int("ReproduceConfig.bias_seed", self.bias_seed, 0, 2**31 - 1)
         check_bool("ReproduceConfig.progress", self.progress)

@@ -7,6 +7,7 @@ All lengths in the summaries are in the units their keys name (``_mm``, ``_px``,
 from __future__ import annotations
 
 import dataclasses
+import logging
 import time
 from collections.abc import Sequence
 from pathlib import Path
@@ -19,7 +20,7 @@ from dvrk_gym import paper
 from dvrk_gym.baselines.checkpoints import load_agent, save_agent
 from dvrk_gym.baselines.comparison import agent_contact, agent_row, benchmark_agent
 from dvrk_gym.baselines.curves import save_curve
-from dvrk_gym.baselines.resume import STATE_FILE_NAME
+from dvrk_gym.baselines.resume import STATE_FILE_NAME, TrainingStateError
 from dvrk_gym.baselines.training import TrainConfig, train
 from dvrk_gym.baselines.transfer import pick_policy
 from dvrk_gym.calibration.benchmark import table_summary
@@ -37,6 +38,9 @@ from dvrk_gym.sim.robot.bias_statistics import bias_statistics
 from dvrk_gym.sim.robot.cables import CableModel
 from dvrk_gym.sim.table.contact import DEFAULT_CONTACT
 from dvrk_gym.utils.checks import check_endoscope_resolution
+from dvrk_gym.utils.run_folder import CORRUPT_SUFFIX
+
+logger = logging.getLogger(__name__)
 
 MM_PER_M = 1e3
 
@@ -198,7 +202,12 @@ def rl_agent(
     folder = Path(out)
     folder.mkdir(parents=True, exist_ok=True)
     state_path = folder / STATE_FILE_NAME  # a killed run resumes its training where the last save left it
-    result = train(config, progress=False, state_path=state_path)
+    try:
+        result = train(config, progress=False, state_path=state_path)
+    except TrainingStateError as error:  # damaged, or unreadable by these libraries: as any cached result, set aside and made again
+        aside = state_path.replace(state_path.with_name(state_path.name + CORRUPT_SUFFIX))
+        logger.warning("%s; moved it to %s and trained %s from the start", error, aside, agent)
+        result = train(config, progress=False, state_path=state_path)
     path = save_agent(result, folder / "model.zip")
     save_curve(result.curve, folder / "learning_curve.json", {"agent": agent, "steps_per_second": result.steps_per_second})
     loaded = load_agent(path)

@@ -1,7 +1,7 @@
 """What one unit of a sweep computes: the paper's calibration on one instrument, and its table.
 
 :func:`run_unit` runs the calibration pipeline (Phase I, the rigid body fit, the DNN,
-Phase II, the residual forests) in a temporary folder and benchmarks each calibrator on
+Phase II, the residual forests) in a temporary folder (:data:`SCRATCH_PREFIX`) and benchmarks each calibrator on
 the 35 circles in the paper's six settings, exactly as ``dvrk-gym evaluate`` does with the
 same settings. It returns plain numbers, so a worker on another machine needs no shared
 disk: the process that runs the sweep writes them. It seeds itself and runs with one torch
@@ -10,7 +10,6 @@ thread, so its numbers do not depend on where it runs.
 
 from __future__ import annotations
 
-import tempfile
 import time
 from pathlib import Path
 from typing import Any
@@ -20,7 +19,12 @@ import gymnasium as gym
 from dvrk_gym.calibration.benchmark import calibration_table, paper_table_rules, table_summary
 from dvrk_gym.calibration.pipeline import BENCHMARK_SEED_OFFSET, PipelineConfig, run_calibration
 from dvrk_gym.sweep.grid import CALIBRATORS, METHOD_NAMES
+from dvrk_gym.utils.parent_watch import scratch_folder
 from dvrk_gym.utils.torch_threads import torch_threads
+
+SCRATCH_PREFIX = "dvrk_gym_sweep_"
+"""The unit's pipeline folders, in the worker's temporary folder: ``dvrk_gym_sweep_<pid>_*``
+(those of a worker killed meanwhile are deleted by the next unit on that machine)."""
 
 
 def _errors(summary: dict[str, Any]) -> dict[str, Any]:
@@ -49,7 +53,7 @@ def run_unit(config: PipelineConfig) -> dict[str, Any]:
     """
     start = time.perf_counter()
     calibrators: dict[str, Any] = {}
-    with torch_threads(1), tempfile.TemporaryDirectory(prefix="dvrk_gym_sweep_") as folder:
+    with torch_threads(1), scratch_folder(SCRATCH_PREFIX) as folder:
         result = run_calibration(Path(folder), config, progress=False, benchmark=False)
         grid = gym.make("dvrk_gym/GridTouch-v0", **config.env_kwargs())
         try:

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 import numbers
+import re
 from collections.abc import Mapping, Sequence
 from typing import Any
 
@@ -74,6 +75,21 @@ def check_choice(name: str, value: Any, choices: Sequence[Any]) -> Any:
     """``value`` if it is one of ``choices`` (compared by type and value), else ValueError listing them."""
     if not any(type(value) is type(choice) and value == choice for choice in choices):
         raise ValueError(f"{name} must be one of {list(choices)}, got {_shown(value)}")
+    return value
+
+
+FILE_STEM = r"[A-Za-z0-9_+\-][A-Za-z0-9_+.\-]*"
+"""What :func:`check_file_stem` takes: letters, digits and ``_ + - .``, not first a ``.``."""
+
+
+def check_file_stem(name: str, value: Any) -> str:
+    """``value`` if it can name a file or folder by itself: no folders, no hidden or partial files.
+
+    Raises:
+        ValueError: anything else (``"../x"``, ``"a b/c"``, ``".hidden"``, ``""``), naming ``name``.
+    """
+    if not isinstance(value, str) or not re.fullmatch(FILE_STEM, value):
+        raise ValueError(f"{name} {value!r} must be letters, digits and _ + - . (not starting with '.'), no folders")
     return value
 
 

@@ -1,4 +1,5 @@
-"""Worker processes that end when their parent does, however the parent ends.
+"""Worker processes that end when their parent does, however the parent ends, and scratch
+folders that do not outlive the process that made them.
 
 A pool's workers outlive a parent killed with SIGKILL: nothing tells them, and they go on
 running and writing into the run folder. :func:`end_with_parent`, run first in each
@@ -10,7 +11,9 @@ worker (a pool's ``initializer``), makes sure they do not:
   runs (the same process: its pid and start time) and ends the worker at once if not.
 
 Files the worker was writing are written atomically (:mod:`dvrk_gym.utils.atomic`), so
-ending it mid-write loses nothing that was finished.
+ending it mid-write loses nothing that was finished. A process ended with SIGKILL cannot
+delete its temporary folders, so :func:`scratch_folder` names each for its process and first
+deletes those of processes that are gone.
 """
 
 from __future__ import annotations
@@ -18,8 +21,11 @@ from __future__ import annotations
 import ctypes
 import logging
 import os
+import shutil
 import sys
+import tempfile
 import threading
+from pathlib import Path
 
 import psutil
 
@@ -68,3 +74,38 @@ def end_with_parent(parent_pid: int, poll_s: float = DEFAULT_POLL_S) -> None:
     if os.getppid() != parent_pid:  # it died between the start and the prctl above
         os._exit(ORPHAN_EXIT_STATUS)
     threading.Thread(target=_watch, args=(parent, poll_s), name="parent-watch", daemon=True).start()
+
+
+def scratch_folder(prefix: str) -> tempfile.TemporaryDirectory[str]:
+    """A temporary folder ``{prefix}{pid}_...`` for this process, deleted when it is closed;
+    first the folders of ``prefix`` that ended processes of this user left are deleted
+    (:func:`remove_orphaned_scratch`).
+
+    Args:
+        prefix: names the folder's owner, e.g. ``"dvrk_gym_sweep_"`` (no path separator).
+    """
+    remove_orphaned_scratch(prefix)
+    return tempfile.TemporaryDirectory(prefix=f"{prefix}{os.getpid()}_")
+
+
+def remove_orphaned_scratch(prefix: str, root: Path | None = None) -> list[Path]:
+    """Delete the folders ``{prefix}{pid}_*`` in ``root`` (default: the temporary folder)
+    whose process ``pid`` no longer runs and that belong to this user; the deleted folders.
+
+    A folder whose pid now names another process is kept (until that one ends too).
+    """
+    if not prefix or os.sep in prefix:
+        raise ValueError(f"a scratch prefix must be a plain name, got {prefix!r}")
+    removed = []
+    for folder in Path(root or tempfile.gettempdir()).glob(f"{prefix}*_*"):
+        pid = folder.name[len(prefix) :].split("_", 1)[0]
+        try:
+            if not pid.isdigit() or folder.is_symlink() or not folder.is_dir() or folder.stat().st_uid != os.getuid():
+                continue
+        except OSError:  # gone meanwhile
+            continue
+        if not psutil.pid_exists(int(pid)):
+            shutil.rmtree(folder, ignore_errors=True)
+            logger.info("deleted %s, left by process %s, which ended", folder, pid)
+            removed.append(folder)
+    return removed

@@ -3,6 +3,7 @@ ValueError naming what is wrong, never a silent NaN, a silent coercion or a raw 
 
 import csv
 import io
+import json
 import zipfile
 
 import numpy as np
@@ -302,6 +303,24 @@ def test_a_scheduler_address_the_options_cannot_reach_is_refused_up_front():
         DaskExecutor("tls://127.0.0.1:9")
     with pytest.raises(ValueError, match="connect_timeout_s"):
         DaskExecutor("tcp://127.0.0.1:9", connect_timeout_s=float("nan"))
+
+
+@pytest.mark.parametrize("name", ["../../x", "a b/c", ".hidden", "", 3])
+def test_a_profile_name_that_is_not_a_file_stem_is_refused(name, tmp_path, capsys, monkeypatch):
+    """The name makes the run folder dvrk_gym_out/reproduce-<name>: "../../x" put the run
+    outside dvrk_gym_out and left an empty folder behind."""
+    from dvrk_gym.cli.main import main
+    from dvrk_gym.reproduce.profiles import Profile
+
+    with pytest.raises(ValueError, match="must be letters, digits"):
+        Profile.from_dict({"name": name})
+    (tmp_path / "profile.json").write_text(json.dumps({"name": name}))
+    out = tmp_path / "work"
+    out.mkdir()
+    monkeypatch.chdir(out)
+    assert main(["reproduce", "--profile", str(tmp_path / "profile.json"), "--workers", "1"]) == 2
+    assert "must be letters, digits" in capsys.readouterr().err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["profile.json", "work"] and not any(out.iterdir())
 
 
 def test_a_profile_with_agents_that_are_not_names_is_a_clear_error():

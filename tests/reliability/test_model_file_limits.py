@@ -257,6 +257,9 @@ def _agent_files(folder: Path, members: dict[str, bytes], **settings) -> Path:
     [
         ({"policy_kwargs": {"net_arch": [30_000_000]}}, r"net_arch\[0\] must be an int in \[1, 4096\]"),
         ({"policy_kwargs": {"net_arch": [8] * 40}}, "at most 16 layer sizes"),
+        # each layer within bounds, together gigabytes of weights (1.5 KB of JSON made torch reserve 7 GB)
+        ({"policy_kwargs": {"net_arch": [4096] * 16, "n_critics": 10}}, "more than 33,554,432"),
+        ({"policy_kwargs": {"net_arch": {"pi": [64], "qf": [4096] * 4}}}, "refused before building them"),
         ({"policy_kwargs": {"net_arch": [8], "activation_fn": "os.system"}}, "policy_kwargs must be an object with keys among"),
         ({"env_steps": -5}, r"env_steps must be an int in \[0, inf\]"),
         ({"goal_scaling": None}, "lacks or mangles a setting"),

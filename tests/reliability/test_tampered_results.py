@@ -209,3 +209,23 @@ def test_opening_a_run_folder_leaves_the_temporary_files_of_runs_in_its_subfolde
     with RunFolder(tmp_path):
         pass
     assert theirs.exists() and not ours.exists()
+
+
+@pytest.mark.parametrize("damage", [b"PK\x03\x04 cut short", b""], ids=["cut", "empty"])
+def test_reproduces_rl_task_sets_a_damaged_training_state_aside_and_trains_from_the_start(tmp_path, caplog, damage):
+    """It failed the task, and every rerun the same way, while saying the same command resumes."""
+    import logging
+
+    from dvrk_gym.reproduce import tasks
+
+    settings = {"steps": 20, "seed": 0, "eval_points": 1, "bias": "paper", "bias_seed": 0, "resolution": (320, 180), "benchmark_seed": 1000}
+    damaged, clean = tmp_path / "damaged", tmp_path / "clean"
+    damaged.mkdir()
+    (damaged / "training_state.zip").write_bytes(damage)
+    with caplog.at_level(logging.WARNING, logger="dvrk_gym.reproduce.tasks"):
+        result = tasks.rl_agent("sac", out=str(damaged), **settings)
+    assert "moved it to" in caplog.text and "training_state.zip.corrupt" in caplog.text
+    assert (damaged / "training_state.zip.corrupt").read_bytes() == damage and not (damaged / "training_state.zip").exists()
+    fresh = tasks.rl_agent("sac", out=str(clean), **settings)
+    assert result["curve"] == fresh["curve"] and result["env_steps"] == fresh["env_steps"] == 20
+    assert result["summary"] == fresh["summary"] and result["mean_mm"] == fresh["mean_mm"]

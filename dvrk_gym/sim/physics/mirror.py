@@ -46,6 +46,7 @@ from pybullet_utils import bullet_client
 from dvrk_gym.sim.physics.client import Physics, quiet_output
 from dvrk_gym.sim.physics.meshes import Mesh, box
 from dvrk_gym.utils.atomic import atomic_write_text
+from dvrk_gym.utils.parent_watch import scratch_folder
 
 logger = logging.getLogger(__name__)
 
@@ -164,7 +165,7 @@ class EglMirror:
         if failure is not None:
             raise RendererUnavailable(f"PyBullet's EGL renderer ({path}) does not run here: {failure}")
         self._shared: _SharedEglClient | None = _SharedEglClient.acquire(path)
-        self._folder: tempfile.TemporaryDirectory[str] | None = tempfile.TemporaryDirectory(prefix="dvrk_gym_display_")
+        self._folder: tempfile.TemporaryDirectory[str] | None = scratch_folder("dvrk_gym_display_")
         # Gives the client back and deletes the folder when closed, collected, or at exit (while the streams still work).
         self._release = weakref.finalize(self, _release, self._shared, self._folder, os.getpid())
         self._layout: int | None = None  # the layout_version of the Physics copied
