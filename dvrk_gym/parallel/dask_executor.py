@@ -2,7 +2,9 @@
 
 Start a scheduler and workers wherever they may run (``dask scheduler`` on one machine,
 ``dask worker tcp://HOST:8786 --nthreads 1`` on each of the others, or a job queue's
-``dask-jobqueue``), with dvrk-gym installed at the same version on every worker; then
+``dask-jobqueue``), with dvrk-gym installed at the same version on every worker (each call
+checks first that its worker runs the same dvrk_gym source as the process that sent it,
+and fails naming both if not: results of two simulators are never mixed); then
 ``dvrk-gym sweep --scheduler tcp://HOST:8786`` or ``dvrk-gym reproduce --scheduler ...``.
 A sweep's units need no shared disk (each sends its numbers back and the process that runs
 the sweep writes them); a reproduction's tasks write their models, tables and figures
@@ -17,7 +19,9 @@ from __future__ import annotations
 
 import concurrent.futures as cf
 import logging
+import socket
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any
 
 from distributed import Client
@@ -25,6 +29,7 @@ from distributed.comm import get_address_host_port, parse_address
 
 from dvrk_gym.parallel.executors import FuturesExecutor
 from dvrk_gym.utils.checks import check_float
+from dvrk_gym.utils.source_fingerprint import SHORT_DIGEST_CHARS, source_fingerprint
 
 logger = logging.getLogger(__name__)
 
@@ -32,12 +37,39 @@ CONNECT_TIMEOUT_S = 10.0
 """How long to try to reach a scheduler before giving up, seconds."""
 
 
+class WorkerSourceError(RuntimeError):
+    """A Dask worker runs other dvrk_gym source than the process that sent it a call."""
+
+
+@dataclass(frozen=True)
+class SameSourceCall:
+    """``function``, called on a worker only if it runs the dvrk_gym source whose
+    :func:`~dvrk_gym.utils.source_fingerprint.source_fingerprint` is ``sha256``.
+
+    Raises:
+        WorkerSourceError: the worker's source differs (another commit, or edited files).
+    """
+
+    function: Callable[..., Any]
+    sha256: str
+
+    def __call__(self, *args: Any, **kwargs: Any) -> Any:
+        found = source_fingerprint()
+        if found.sha256 != self.sha256:
+            raise WorkerSourceError(
+                f"the Dask worker on {socket.gethostname()} runs {found.short()}, the process that sent the work source "
+                f"sha256 {self.sha256[:SHORT_DIGEST_CHARS]}: install the same commit of dvrk-gym on every worker"
+            )
+        return self.function(*args, **kwargs)
+
+
 class DaskExecutor(FuturesExecutor):
     """Runs calls on the workers of a running Dask scheduler.
 
     Futures come from the client's ``concurrent.futures`` view (``Client.get_executor``):
     cancelling one cancels its task on the cluster. Calls are never merged as the same
-    (``pure=False``).
+    (``pure=False``), and each runs only on a worker with this process's dvrk_gym source
+    (:class:`SameSourceCall`).
 
     Args:
         address: the scheduler's address, ``tcp://host:port`` (``LocalCluster.scheduler_address``
@@ -68,6 +100,7 @@ class DaskExecutor(FuturesExecutor):
                 "expected the address of a running scheduler, such as tcp://host:8786"
             ) from None
         self._executor = self.client.get_executor(pure=False)
+        self._source = source_fingerprint().sha256
         threads = self._threads()
         self.description = f"Dask scheduler {address} ({len(threads)} workers, {sum(threads.values())} threads)"
         if not threads:
@@ -78,7 +111,7 @@ class DaskExecutor(FuturesExecutor):
         return {str(worker): int(n) for worker, n in self.client.nthreads().items()}
 
     def submit(self, function: Callable[..., Any], /, *args: Any, **kwargs: Any) -> cf.Future:
-        return self._executor.submit(function, *args, **kwargs)
+        return self._executor.submit(SameSourceCall(function, self._source), *args, **kwargs)
 
     def capacity(self) -> int:
         """The threads of the workers the scheduler has now (at least 1, so work waits for a worker)."""

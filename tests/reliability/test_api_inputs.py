@@ -376,3 +376,22 @@ def test_the_default_calibrated_target_names_the_env_it_reads():
     policy = CalibratedPolicy(RigidBodyCalibrator().fit(*_rows()))
     with pytest.raises(ValueError, match="target=fragment_target"):  # was a bare KeyError 'desired_goal'
         policy({"fragment_positions": np.zeros((8, 3)), "fragment_seen": np.ones(8)})
+
+
+def test_a_dask_worker_running_other_dvrk_gym_source_refuses_the_call_before_running_it(tmp_path):
+    """Sweep units and reproduce stages on a worker with another commit would have mixed two
+    simulators' numbers in one folder, unchecked."""
+    distributed = pytest.importorskip("distributed")
+    from dvrk_gym.parallel.dask_executor import DaskExecutor, WorkerSourceError
+
+    marker = tmp_path / "ran"
+    with (
+        distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False, dashboard_address=":0") as cluster,
+        DaskExecutor(cluster.scheduler_address) as dask,
+    ):
+        assert dask.submit(divmod, 7, 2).result(timeout=60) == (3, 1)  # the same source: runs
+        dask._source = "0" * 64  # as a worker of another commit would compare
+        future = dask.submit(marker.write_text, "x")
+        with pytest.raises(WorkerSourceError, match=r"runs dvrk_gym .* source sha256 000000000000: install the same commit"):
+            future.result(timeout=60)
+    assert not marker.exists()
