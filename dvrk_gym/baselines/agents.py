@@ -6,6 +6,9 @@ keywords and hyperparameters. Adding an agent is adding a row to :data:`AGENTS` 
 name, env and description to :mod:`dvrk_gym.baselines.budgets`). Two agents learn
 GridTouch-v0 (one touch per step), one learns Debridement-v0 in primitive mode (one pick
 per step); a budget counts env steps of either, i.e. robot moves.
+
+:func:`check_policy_kwargs` bounds the networks an agent file's settings may describe,
+before anything is built (:mod:`dvrk_gym.baselines.checkpoints` reads those files).
 """
 
 from __future__ import annotations
@@ -25,8 +28,19 @@ from stable_baselines3.her import HerReplayBuffer
 from dvrk_gym.baselines.budgets import AGENT_DESCRIPTIONS, AGENT_ENVS
 from dvrk_gym.baselines.picking import wrap_debridement
 from dvrk_gym.baselines.wrappers import wrap_grid_touch
+from dvrk_gym.utils.checks import check_bool, check_int
 
 ALGORITHMS: dict[str, type[BaseAlgorithm]] = {"SAC": SAC, "TD3": TD3, "PPO": PPO}
+MAX_LAYERS = 16
+MAX_LAYER_UNITS = 4096
+"""Bounds of the networks an agent file's settings may describe: hidden layers, and units per layer."""
+MAX_POLICY_PARAMETERS = 2**25
+"""The most weights (about 128 MB of float32) that the networks of an agent file's settings may hold
+together, counted before any is built (a 256 x 256 SAC's: about 0.4 million)."""
+_IO_UNITS = 64
+"""Units counted for a network's input and output layers: more than any agent's observation
+or action has, so the count is an upper bound."""
+_POLICY_KEYS = {"net_arch", "use_sde", "n_critics"}
 
 
 @dataclass(frozen=True)
@@ -117,3 +131,56 @@ def build_model(spec: AgentSpec, env: VecEnv, *, seed: int, overrides: dict[str,
 def silent_logger() -> Logger:
     """A logger that writes nothing and creates no folder (SB3's default makes ``/tmp/SB3-<date>``)."""
     return Logger(folder=None, output_formats=[])
+
+
+def _check_layers(name: str, layers: Any) -> None:
+    if not isinstance(layers, list) or len(layers) > MAX_LAYERS:
+        raise ValueError(f"{name} must be a list of at most {MAX_LAYERS} layer sizes, got {layers!r}")
+    for i, units in enumerate(layers):
+        check_int(f"{name}[{i}]", units, 1, MAX_LAYER_UNITS)
+
+
+def check_policy_kwargs(kwargs: Any) -> dict[str, Any]:
+    """The policy settings of an agent file, if they describe a network within fixed bounds.
+
+    Allowed: ``net_arch`` (a list of at most MAX_LAYERS sizes of 1-MAX_LAYER_UNITS units, or
+    ``{"pi": [...], "qf": [...]}``/``{"pi": [...], "vf": [...]}`` of such lists), ``use_sde``
+    (bool), ``n_critics`` (1-10).
+
+    Raises:
+        ValueError: anything else (the message names the key and what is allowed).
+    """
+    if not isinstance(kwargs, dict) or not set(kwargs) <= _POLICY_KEYS:
+        raise ValueError(f"policy_kwargs must be an object with keys among {sorted(_POLICY_KEYS)}, got {kwargs!r}")
+    arch = kwargs.get("net_arch", [])
+    if isinstance(arch, dict):
+        if not arch or not set(arch) <= {"pi", "qf", "vf"}:
+            raise ValueError(f"net_arch must be a list or an object with keys among ['pi', 'qf', 'vf'], got {arch!r}")
+        for key, layers in arch.items():
+            _check_layers(f"net_arch[{key!r}]", layers)
+    else:
+        _check_layers("net_arch", arch)
+    if "use_sde" in kwargs:
+        check_bool("use_sde", kwargs["use_sde"])
+    if "n_critics" in kwargs:
+        check_int("n_critics", kwargs["n_critics"], 1, 10)
+    parameters = policy_parameters_bound(arch, kwargs.get("n_critics", 2))
+    if parameters > MAX_POLICY_PARAMETERS:
+        raise ValueError(
+            f"policy_kwargs describe networks of up to {parameters:,} weights, more than {MAX_POLICY_PARAMETERS:,} "
+            f"(net_arch {arch!r}); refused before building them"
+        )
+    return kwargs
+
+
+def policy_parameters_bound(arch: list[int] | dict[str, list[int]], n_critics: int) -> int:
+    """An upper bound on the weights of an actor-critic's networks with hidden layers ``arch``:
+    the actor and ``n_critics`` critics, each with a target copy, inputs and outputs of
+    :data:`_IO_UNITS` units."""
+
+    def one(layers: list[int]) -> int:
+        sizes = [_IO_UNITS, *layers, _IO_UNITS]
+        return sum(a * b + b for a, b in zip(sizes, sizes[1:]))
+
+    actor, critic = (arch.get("pi", []), arch.get("qf", arch.get("vf", []))) if isinstance(arch, dict) else (arch, arch)
+    return 2 * one(actor) + 2 * n_critics * one(critic)

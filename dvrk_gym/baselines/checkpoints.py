@@ -32,14 +32,14 @@ from typing import Any
 import torch
 from stable_baselines3.common.base_class import BaseAlgorithm
 
-from dvrk_gym.baselines.agents import ALGORITHMS
+from dvrk_gym.baselines.agents import ALGORITHMS, check_policy_kwargs
 from dvrk_gym.baselines.training import TrainConfig, TrainResult, make_agent_env
 from dvrk_gym.baselines.wrappers import GOAL_CENTER_M, GOAL_HALF_RANGE_M
 from dvrk_gym.envs import ENV_CONFIGS
 from dvrk_gym.sim.robot.bias import resolve_bias
 from dvrk_gym.utils.atomic import atomic_path, atomic_write_json, check_regular_file, read_json
 from dvrk_gym.utils.bounded_zip import ArchiveLimits, open_archive, read_member
-from dvrk_gym.utils.checks import check_bool, check_int
+from dvrk_gym.utils.checks import check_int
 from dvrk_gym.utils.run_folder import flatten_settings
 from dvrk_gym.utils.source_fingerprint import SourceFingerprint, source_fingerprint
 
@@ -52,16 +52,6 @@ AGENT_FILE_LIMITS = ArchiveLimits(max_file_bytes=512 * 2**20, max_members=64, ma
 optimisers' state the rest; its replay buffer not included)."""
 MAX_SETTINGS_BYTES = 2**20
 """The largest settings JSON read, bytes."""
-MAX_LAYERS = 16
-MAX_LAYER_UNITS = 4096
-"""Bounds of the networks a settings file may describe: hidden layers, and units per layer."""
-MAX_POLICY_PARAMETERS = 2**25
-"""The most weights (about 128 MB of float32) that the networks of a settings file may hold
-together, counted before any is built (a 256 x 256 SAC's: about 0.4 million)."""
-_IO_UNITS = 64
-"""Units counted for a network's input and output layers: more than any agent's observation
-or action has, so the count is an upper bound."""
-_POLICY_KEYS = {"net_arch", "use_sde", "n_critics"}
 DISPLAY_ONLY = ("render_resolution", "renderer")
 """Env keywords that change only what ``render()`` shows, left out of :attr:`LoadedAgent.env_changes`."""
 
@@ -236,59 +226,6 @@ def _policy_kwargs(model: BaseAlgorithm) -> dict[str, Any]:
     except TypeError as error:
         raise ValueError(f"policy_kwargs must be plain JSON values to be saved safely, got {kwargs!r}: {error}") from None
     return check_policy_kwargs(kwargs)
-
-
-def _check_layers(name: str, layers: Any) -> None:
-    if not isinstance(layers, list) or len(layers) > MAX_LAYERS:
-        raise ValueError(f"{name} must be a list of at most {MAX_LAYERS} layer sizes, got {layers!r}")
-    for i, units in enumerate(layers):
-        check_int(f"{name}[{i}]", units, 1, MAX_LAYER_UNITS)
-
-
-def check_policy_kwargs(kwargs: Any) -> dict[str, Any]:
-    """The policy settings of an agent file, if they describe a network within fixed bounds.
-
-    Allowed: ``net_arch`` (a list of at most MAX_LAYERS sizes of 1-MAX_LAYER_UNITS units, or
-    ``{"pi": [...], "qf": [...]}``/``{"pi": [...], "vf": [...]}`` of such lists), ``use_sde``
-    (bool), ``n_critics`` (1-10).
-
-    Raises:
-        ValueError: anything else (the message names the key and what is allowed).
-    """
-    if not isinstance(kwargs, dict) or not set(kwargs) <= _POLICY_KEYS:
-        raise ValueError(f"policy_kwargs must be an object with keys among {sorted(_POLICY_KEYS)}, got {kwargs!r}")
-    arch = kwargs.get("net_arch", [])
-    if isinstance(arch, dict):
-        if not arch or not set(arch) <= {"pi", "qf", "vf"}:
-            raise ValueError(f"net_arch must be a list or an object with keys among ['pi', 'qf', 'vf'], got {arch!r}")
-        for key, layers in arch.items():
-            _check_layers(f"net_arch[{key!r}]", layers)
-    else:
-        _check_layers("net_arch", arch)
-    if "use_sde" in kwargs:
-        check_bool("use_sde", kwargs["use_sde"])
-    if "n_critics" in kwargs:
-        check_int("n_critics", kwargs["n_critics"], 1, 10)
-    parameters = policy_parameters_bound(arch, kwargs.get("n_critics", 2))
-    if parameters > MAX_POLICY_PARAMETERS:
-        raise ValueError(
-            f"policy_kwargs describe networks of up to {parameters:,} weights, more than {MAX_POLICY_PARAMETERS:,} "
-            f"(net_arch {arch!r}); refused before building them"
-        )
-    return kwargs
-
-
-def policy_parameters_bound(arch: list[int] | dict[str, list[int]], n_critics: int) -> int:
-    """An upper bound on the weights of an actor-critic's networks with hidden layers ``arch``:
-    the actor and ``n_critics`` critics, each with a target copy, inputs and outputs of
-    :data:`_IO_UNITS` units."""
-
-    def one(layers: list[int]) -> int:
-        sizes = [_IO_UNITS, *layers, _IO_UNITS]
-        return sum(a * b + b for a, b in zip(sizes, sizes[1:]))
-
-    actor, critic = (arch.get("pi", []), arch.get("qf", arch.get("vf", []))) if isinstance(arch, dict) else (arch, arch)
-    return 2 * one(actor) + 2 * n_critics * one(critic)
 
 
 def _read_settings(path: Path) -> dict[str, Any]:
