@@ -39,6 +39,7 @@ from dvrk_gym.envs.debridement import PICK_HIGH, PICK_LOW, PickTiming, fragment_
 from dvrk_gym.evaluation.trials import Trial, run_trials, totals
 from dvrk_gym.sim.robot.kinematics import PAPER_YAWS_RAD, nearest_paper_yaw
 from dvrk_gym.sim.robot.motion import MotionLimits
+from dvrk_gym.utils.source_fingerprint import SourceFingerprint, source_fingerprint
 
 TINY = (320, 180)
 FAST = {"learning_starts": 20, "batch_size": 32, "gradient_steps": 1, "policy_kwargs": {"net_arch": [16, 16]}}
@@ -327,11 +328,15 @@ def test_an_agent_picks_on_the_paper_it_learnt_on(monkeypatch):
     comparison.benchmark_debridement(SimpleNamespace(config=TrainConfig(agent="sac_her")), n_trials=1)
     assert seen["contact"] == "compliant"
     notes = comparison.setting_mismatches(
-        SimpleNamespace(config=rigid, label="sac_her (5 steps, seed 0)", env_changes={}), PipelineConfig(), picks=True
+        SimpleNamespace(config=rigid, label="sac_her (5 steps, seed 0)", env_changes={}, source=source_fingerprint()),
+        PipelineConfig(),
+        picks=True,
     )
     assert notes == ["sac_her (5 steps, seed 0): learnt on the rigid paper and picks on it; the calibrators' picks met the compliant one"]
     assert (
-        comparison.setting_mismatches(SimpleNamespace(config=TrainConfig(agent="sac_her"), label="x", env_changes={}), PipelineConfig())
+        comparison.setting_mismatches(
+            SimpleNamespace(config=TrainConfig(agent="sac_her"), label="x", env_changes={}, source=source_fingerprint()), PipelineConfig()
+        )
         == []
     )
 
@@ -375,3 +380,19 @@ def test_trials_on_an_env_without_a_trial_table_are_refused():
 def test_n_trials_is_named_as_such(debridement_env):
     with pytest.raises(ValueError, match="n_trials must be an int in"):
         run_trials(debridement_env, lambda observation: debridement_env.action_space.sample(), 0, progress=False)
+
+
+def test_an_agent_trained_by_other_source_gets_a_note_and_one_of_this_source_none():
+    """Only env setting changes were noted: a model made by other simulator code (its recorded
+    source fingerprint) was evaluated without a word."""
+    from dvrk_gym.baselines import comparison
+    from dvrk_gym.calibration.pipeline import PipelineConfig
+
+    def agent(source):
+        return SimpleNamespace(config=TrainConfig(agent="sac_her"), label="sac_her (5 steps, seed 0)", env_changes={}, source=source)
+
+    assert comparison.env_change_notes(agent(source_fingerprint())) == []
+    other = SourceFingerprint(version="0.0.9", sha256="ab" * 32)
+    (note,) = comparison.env_change_notes(agent(other), picks=True)
+    assert note.startswith("sac_her (5 steps, seed 0): trained by dvrk_gym 0.0.9, source sha256 abababababab; evaluated with dvrk_gym")
+    assert "did not record its source" in comparison.setting_mismatches(agent(None), PipelineConfig())[0]

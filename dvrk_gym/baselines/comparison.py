@@ -42,6 +42,7 @@ from dvrk_gym.evaluation.trials import Trial, run_debridement, totals
 from dvrk_gym.sim.table.contact import DEFAULT_CONTACT
 from dvrk_gym.utils.atomic import read_json
 from dvrk_gym.utils.checks import check_endoscope_resolution, check_float
+from dvrk_gym.utils.source_fingerprint import source_fingerprint
 
 logger = logging.getLogger(__name__)
 
@@ -173,11 +174,22 @@ def pick_env_kwargs(config: TrainConfig) -> dict[str, Any]:
 
 def env_change_notes(agent: LoadedAgent, picks: bool = False) -> list[str]:
     """How this version's env differs from the one ``agent`` learnt in (:attr:`LoadedAgent.env_changes`),
-    one line each; with ``picks``, for a GridTouch agent only what its picks meet (:data:`PICKS_CARRY`)."""
+    one line each; with ``picks``, for a GridTouch agent only what its picks meet (:data:`PICKS_CARRY`);
+    then :func:`source_notes`."""
     changes = agent.env_changes
     if picks and agent.config.spec.env_id == GRID_TOUCH_ID:
         changes = {key: line for key, line in changes.items() if key in PICKS_CARRY}
-    return [f"{agent.label}: {line}" for line in changes.values()]
+    return [f"{agent.label}: {line}" for line in changes.values()] + source_notes(agent)
+
+
+def source_notes(agent: LoadedAgent) -> list[str]:
+    """A line if ``agent`` was trained by other dvrk_gym source than this process runs (its
+    recorded env settings may agree while the simulator's code differs), else none."""
+    here = source_fingerprint()
+    if agent.source == here:
+        return []
+    trained = "a dvrk_gym that did not record its source" if agent.source is None else agent.source.short()
+    return [f"{agent.label}: trained by {trained}; evaluated with {here.short()}"]
 
 
 def setting_mismatches(agent: LoadedAgent, calibration: PipelineConfig, picks: bool = False) -> list[str]:
