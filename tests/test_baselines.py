@@ -459,9 +459,10 @@ def _loaded(tmp_path, name: str, **settings):
     from pathlib import Path
 
     from dvrk_gym.baselines.checkpoints import LoadedAgent
+    from dvrk_gym.utils.source_fingerprint import source_fingerprint
 
     config = TrainConfig(agent="sac", steps=300, camera_resolution=settings.pop("camera_resolution", TINY), **settings)
-    return LoadedAgent(model=None, config=config, env_steps=300, path=Path(tmp_path / name))
+    return LoadedAgent(model=None, config=config, env_steps=300, path=Path(tmp_path / name), source=source_fingerprint())
 
 
 def test_models_trained_alike_but_for_a_setting_are_named_apart_not_refused(tmp_path):

@@ -2,6 +2,7 @@
 
 import csv
 import dataclasses
+import gc
 import json
 import math
 import os
@@ -34,6 +35,7 @@ from dvrk_gym.sweep import (
 from dvrk_gym.sweep.run import SETTINGS_STAMP
 from dvrk_gym.sweep.table import TIME_COLUMNS
 from dvrk_gym.sweep.unit import SCRATCH_PREFIX
+from dvrk_gym.utils.parent_watch import host_label
 from dvrk_gym.utils.run_folder import SOURCE_KEY
 from dvrk_gym.utils.source_fingerprint import source_fingerprint
 from dvrk_gym.utils.torch_threads import torch_threads
@@ -202,6 +204,13 @@ def test_failed_units_are_named_the_rest_kept_and_a_rerun_retries_only_them(tmp_
     assert retry.submitted == ["bias1-seed0"]
 
 
+def test_units_that_failed_alike_are_named_together_with_their_cause_once(tmp_path):
+    """A cause every unit meets (a Dask worker of other source) was repeated once per unit."""
+    settings = SweepSettings(bias_seeds=(0, 1, 2), pipeline=TINY)
+    with pytest.raises(SweepError, match=r"2 of 3 units failed: bias0-seed0, bias2-seed0 \(RuntimeError: the worker died\)\. "):
+        run_sweep(settings, tmp_path, StandInExecutor(fail={(0, 0), (2, 0)}), progress=False)
+
+
 def test_a_grid_whose_every_unit_failed_leaves_no_table_or_figure_of_another_grid(tmp_path):
     run_sweep(SweepSettings(bias_seeds=(0, 1), pipeline=TINY), tmp_path, StandInExecutor(), progress=False)
     assert (tmp_path / "sweep_errors.png").is_file()
@@ -290,7 +299,7 @@ def test_a_unit_gives_the_calibration_table_of_the_pipeline(tmp_path, monkeypatc
     scratch = tmp_path / "scratch"
     scratch.mkdir()
     monkeypatch.setattr(tempfile, "tempdir", str(scratch))
-    orphan = scratch / f"{SCRATCH_PREFIX}{_ended_pid()}_abc"  # a unit's folder, its worker killed with SIGKILL
+    orphan = scratch / f"{SCRATCH_PREFIX}{host_label()}_{_ended_pid()}_abc"  # a unit's folder, its worker killed with SIGKILL
     (orphan / "phase1.npz").parent.mkdir()
     (orphan / "phase1.npz").write_bytes(b"x")
     unit = run_unit(config)
@@ -312,25 +321,43 @@ def _ended_pid() -> int:
     return int(process.stdout)
 
 
-def test_scratch_folders_of_ended_processes_are_deleted_and_no_other(tmp_path):
-    from dvrk_gym.utils.parent_watch import remove_orphaned_scratch, scratch_folder
+def test_scratch_folders_of_ended_processes_on_this_host_are_deleted_and_no_other(tmp_path):
+    from dvrk_gym.utils.parent_watch import ScratchFolder, remove_orphaned_scratch
 
-    ended, prefix = _ended_pid(), "dvrk_gym_test_"
-    orphan, live, unnamed = tmp_path / f"{prefix}{ended}_a", tmp_path / f"{prefix}{os.getpid()}_b", tmp_path / f"{prefix}abc_c"
-    for folder in (orphan, live, unnamed):
+    ended, prefix, host = _ended_pid(), "dvrk_gym_test_", host_label()
+    orphan, live = tmp_path / f"{prefix}{host}_{ended}_a", tmp_path / f"{prefix}{host}_{os.getpid()}_b"
+    other_host, old_style = tmp_path / f"{prefix}elsewhere_{ended}_c", tmp_path / f"{prefix}{ended}_d"  # a shared /tmp; before hosts
+    for folder in (orphan, live, other_host, old_style):
         folder.mkdir()
         (folder / "kept.txt").write_text("x")
     outside = tmp_path / "elsewhere"
     outside.mkdir()
-    (tmp_path / f"{prefix}{ended}_link").symlink_to(outside, target_is_directory=True)
-    (tmp_path / f"{prefix}{ended}_file").write_text("x")
+    (tmp_path / f"{prefix}{host}_{ended}_link").symlink_to(outside, target_is_directory=True)
+    (tmp_path / f"{prefix}{host}_{ended}_file").write_text("x")
     assert remove_orphaned_scratch(prefix, tmp_path) == [orphan]
-    assert live.exists() and unnamed.exists() and outside.exists() and (tmp_path / f"{prefix}{ended}_file").exists()
-    with scratch_folder(prefix) as folder:
-        assert Path(folder).name.startswith(f"{prefix}{os.getpid()}_")
+    assert all(path.exists() for path in (live, other_host, old_style, outside, tmp_path / f"{prefix}{host}_{ended}_file"))
+    with ScratchFolder(prefix) as folder:
+        assert Path(folder).name.startswith(f"{prefix}{host}_{os.getpid()}_")
     assert not Path(folder).exists()
     with pytest.raises(ValueError, match="plain name"):
         remove_orphaned_scratch("a/b", tmp_path)
+
+
+def test_a_forked_process_dropping_its_copy_of_a_scratch_folder_leaves_it_to_its_maker():
+    """A TemporaryDirectory's finalizer ran in the forked child and deleted the parent's folder."""
+    from dvrk_gym.utils.parent_watch import ScratchFolder
+
+    scratch = ScratchFolder("dvrk_gym_test_")
+    pid = os.fork()
+    if pid == 0:  # the child: drop the copy, as an async vector env's worker may
+        scratch.cleanup()
+        del scratch
+        gc.collect()
+        os._exit(0)
+    assert os.waitpid(pid, 0)[1] == 0
+    assert Path(scratch.name).is_dir()
+    scratch.cleanup()
+    assert not Path(scratch.name).exists()
 
 
 # --- the command ------------------------------------------------------------------------

@@ -182,5 +182,6 @@ def policy_parameters_bound(arch: list[int] | dict[str, list[int]], n_critics: i
         sizes = [_IO_UNITS, *layers, _IO_UNITS]
         return sum(a * b + b for a, b in zip(sizes, sizes[1:]))
 
-    actor, critic = (arch.get("pi", []), arch.get("qf", arch.get("vf", []))) if isinstance(arch, dict) else (arch, arch)
-    return 2 * one(actor) + 2 * n_critics * one(critic)
+    if isinstance(arch, dict):  # SAC and TD3 build "qf" critics, PPO a "vf" value network: both counted
+        return 2 * one(arch.get("pi", [])) + 2 * n_critics * (one(arch.get("qf", [])) + one(arch.get("vf", [])))
+    return 2 * one(arch) + 2 * n_critics * one(arch)

@@ -25,7 +25,7 @@ from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecEnv
 from tqdm.auto import tqdm
 
 from dvrk_gym import paper
-from dvrk_gym.baselines.agents import AgentSpec, build_model, get_agent
+from dvrk_gym.baselines.agents import AgentSpec, build_model, check_policy_kwargs, get_agent
 from dvrk_gym.baselines.budgets import CALIBRATOR_MOVES, DEBRIDEMENT_ID, DEFAULT_EVAL_POINTS, MAX_EVAL_POINTS
 from dvrk_gym.baselines.curves import CURVE_TRIALS, CurveEvaluator, CurvePoint, evaluate_curve_point, evaluate_pick_curve_point
 from dvrk_gym.baselines.resume import ResetRecorder, TrainingStateError, TrainingStateWriter, restore_training_state
@@ -103,6 +103,8 @@ class TrainConfig:
         for name in ("env_overrides", "overrides"):
             if not isinstance(getattr(self, name), dict):
                 raise ValueError(f"{name} must be a dict of keywords, got {getattr(self, name)!r}")
+        if "policy_kwargs" in self.overrides:  # what an agent file may hold: refused before training, not at its save
+            check_policy_kwargs(self.overrides["policy_kwargs"])
 
     @property
     def spec(self) -> AgentSpec:

@@ -53,6 +53,11 @@ class SameSourceCall:
     function: Callable[..., Any]
     sha256: str
 
+    @property
+    def __name__(self) -> str:
+        """The function's: Dask names each task by it (``run_unit-<id>``, not this wrapper's repr)."""
+        return str(getattr(self.function, "__name__", type(self).__name__))
+
     def __call__(self, *args: Any, **kwargs: Any) -> Any:
         found = source_fingerprint()
         if found.sha256 != self.sha256:

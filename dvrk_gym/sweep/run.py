@@ -126,7 +126,10 @@ def run_sweep(settings: SweepSettings, out: str | os.PathLike, executor: Executo
             csv_path.unlink(missing_ok=True)  # and an empty table would be a result, keeping the folder's settings
             figure.unlink(missing_ok=True)
     if failures:
-        listed = "; ".join(f"{name} ({message})" for name, message in failures.items())
+        by_message: dict[str, list[str]] = {}  # one cause (a worker of other source, say) named once, with its units
+        for name, message in failures.items():
+            by_message.setdefault(message, []).append(name)
+        listed = "; ".join(f"{', '.join(sorted(names))} ({message})" for message, names in by_message.items())
         raise SweepError(
             f"{len(failures)} of {len(todo)} units failed: {listed}. This grid's {len(results)} finished units are in "
             f"{units_dir}{f' and tabled in {csv_path}' if rows else ''}; the same call runs only the failed ones again"

@@ -19,12 +19,13 @@ import gymnasium as gym
 from dvrk_gym.calibration.benchmark import calibration_table, paper_table_rules, table_summary
 from dvrk_gym.calibration.pipeline import BENCHMARK_SEED_OFFSET, PipelineConfig, run_calibration
 from dvrk_gym.sweep.grid import CALIBRATORS, METHOD_NAMES
-from dvrk_gym.utils.parent_watch import scratch_folder
+from dvrk_gym.utils.parent_watch import ScratchFolder
 from dvrk_gym.utils.torch_threads import torch_threads
 
 SCRATCH_PREFIX = "dvrk_gym_sweep_"
-"""The unit's pipeline folders, in the worker's temporary folder: ``dvrk_gym_sweep_<pid>_*``
-(those of a worker killed meanwhile are deleted by the next unit on that machine)."""
+"""The unit's pipeline folders, in the worker's temporary folder: ``dvrk_gym_sweep_<host>_<pid>_*``
+(:class:`~dvrk_gym.utils.parent_watch.ScratchFolder`: those of a worker killed meanwhile are
+deleted by the next unit that starts on that host)."""
 
 
 def _errors(summary: dict[str, Any]) -> dict[str, Any]:
@@ -53,7 +54,7 @@ def run_unit(config: PipelineConfig) -> dict[str, Any]:
     """
     start = time.perf_counter()
     calibrators: dict[str, Any] = {}
-    with torch_threads(1), scratch_folder(SCRATCH_PREFIX) as folder:
+    with torch_threads(1), ScratchFolder(SCRATCH_PREFIX) as folder:
         result = run_calibration(Path(folder), config, progress=False, benchmark=False)
         grid = gym.make("dvrk_gym/GridTouch-v0", **config.env_kwargs())
         try:

@@ -12,8 +12,8 @@ worker (a pool's ``initializer``), makes sure they do not:
 
 Files the worker was writing are written atomically (:mod:`dvrk_gym.utils.atomic`), so
 ending it mid-write loses nothing that was finished. A process ended with SIGKILL cannot
-delete its temporary folders, so :func:`scratch_folder` names each for its process and first
-deletes those of processes that are gone.
+delete its temporary folders, so a :class:`ScratchFolder` is named for its host and process,
+and first deletes those of this host's processes that are gone.
 """
 
 from __future__ import annotations
@@ -21,7 +21,9 @@ from __future__ import annotations
 import ctypes
 import logging
 import os
+import re
 import shutil
+import socket
 import sys
 import tempfile
 import threading
@@ -76,29 +78,55 @@ def end_with_parent(parent_pid: int, poll_s: float = DEFAULT_POLL_S) -> None:
     threading.Thread(target=_watch, args=(parent, poll_s), name="parent-watch", daemon=True).start()
 
 
-def scratch_folder(prefix: str) -> tempfile.TemporaryDirectory[str]:
-    """A temporary folder ``{prefix}{pid}_...`` for this process, deleted when it is closed;
-    first the folders of ``prefix`` that ended processes of this user left are deleted
-    (:func:`remove_orphaned_scratch`).
+class ScratchFolder:
+    """A temporary folder of this process, ``{prefix}{host}_{pid}_...`` in the temporary
+    folder; first the folders of ``prefix`` that ended processes on this host left are
+    deleted (:func:`remove_orphaned_scratch`).
+
+    :meth:`cleanup` (or leaving it as a context manager) deletes it in the process that made
+    it only: a process forked from that one, which holds a copy of this object, leaves it
+    alone (a ``TemporaryDirectory``'s finalizer in the child deleted the parent's folder).
 
     Args:
-        prefix: names the folder's owner, e.g. ``"dvrk_gym_sweep_"`` (no path separator).
+        prefix: names the folder's owner, e.g. ``"dvrk_gym_sweep_"`` (a plain name).
     """
-    remove_orphaned_scratch(prefix)
-    return tempfile.TemporaryDirectory(prefix=f"{prefix}{os.getpid()}_")
+
+    def __init__(self, prefix: str) -> None:
+        remove_orphaned_scratch(prefix)
+        self._pid = os.getpid()
+        self.name = tempfile.mkdtemp(prefix=f"{prefix}{host_label()}_{self._pid}_")
+        """The folder's path."""
+
+    def cleanup(self) -> None:
+        """Delete the folder and what it holds, if this is the process that made it."""
+        if os.getpid() == self._pid:
+            shutil.rmtree(self.name, ignore_errors=True)
+
+    def __enter__(self) -> str:
+        return self.name
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.cleanup()
+
+
+def host_label() -> str:
+    """This machine's name as a scratch folder holds it: letters, digits and ``-``."""
+    return re.sub(r"[^A-Za-z0-9-]", "-", socket.gethostname()) or "host"
 
 
 def remove_orphaned_scratch(prefix: str, root: Path | None = None) -> list[Path]:
-    """Delete the folders ``{prefix}{pid}_*`` in ``root`` (default: the temporary folder)
-    whose process ``pid`` no longer runs and that belong to this user; the deleted folders.
+    """Delete the folders ``{prefix}{host}_{pid}_*`` in ``root`` (default: the temporary
+    folder) made on this host by a process ``pid`` that no longer runs, and that belong to
+    this user; the deleted folders.
 
-    A folder whose pid now names another process is kept (until that one ends too).
+    A folder of another host (a temporary folder shared between machines) is kept, and so is
+    one whose pid now names another process (until that one ends too).
     """
-    if not prefix or os.sep in prefix:
+    if not re.fullmatch(r"[A-Za-z0-9_.-]+", prefix or ""):
         raise ValueError(f"a scratch prefix must be a plain name, got {prefix!r}")
     removed = []
-    for folder in Path(root or tempfile.gettempdir()).glob(f"{prefix}*_*"):
-        pid = folder.name[len(prefix) :].split("_", 1)[0]
+    for folder in Path(root or tempfile.gettempdir()).glob(f"{prefix}{host_label()}_*_*"):
+        pid = folder.name[len(prefix) + len(host_label()) + 1 :].split("_", 1)[0]
         try:
             if not pid.isdigit() or folder.is_symlink() or not folder.is_dir() or folder.stat().st_uid != os.getuid():
                 continue

@@ -260,6 +260,7 @@ def _agent_files(folder: Path, members: dict[str, bytes], **settings) -> Path:
         # each layer within bounds, together gigabytes of weights (1.5 KB of JSON made torch reserve 7 GB)
         ({"policy_kwargs": {"net_arch": [4096] * 16, "n_critics": 10}}, "more than 33,554,432"),
         ({"policy_kwargs": {"net_arch": {"pi": [64], "qf": [4096] * 4}}}, "refused before building them"),
+        ({"policy_kwargs": {"net_arch": {"pi": [64], "qf": [1], "vf": [4096] * 16}}}, "refused before building them"),  # PPO's
         ({"policy_kwargs": {"net_arch": [8], "activation_fn": "os.system"}}, "policy_kwargs must be an object with keys among"),
         ({"env_steps": -5}, r"env_steps must be an int in \[0, inf\]"),
         ({"goal_scaling": None}, "lacks or mangles a setting"),
@@ -298,3 +299,14 @@ def test_agent_weights_that_inflate_beyond_the_limit_or_hold_objects_are_refused
     text = _bounded(load_agent, path)
     assert "is not a plain tensor state dict (it holds objects other than tensors); refused, never unpickled" in text
     assert "weights_only" not in text  # torch's advice would be to run the file's code
+
+
+def test_training_settings_refuse_a_network_no_agent_file_may_hold_before_training():
+    """They trained in full and were refused at the save."""
+    from dvrk_gym.baselines.training import TrainConfig
+
+    with pytest.raises(ValueError, match="refused before building them"):
+        TrainConfig(agent="sac", overrides={"policy_kwargs": {"net_arch": [4096] * 3}})
+    with pytest.raises(ValueError, match="policy_kwargs must be an object with keys among"):
+        TrainConfig(agent="sac", overrides={"policy_kwargs": {"net_arch": [64], "activation_fn": "os.system"}})
+    assert TrainConfig(agent="sac", overrides={"policy_kwargs": {"net_arch": [256, 256], "n_critics": 2}}).agent == "sac"

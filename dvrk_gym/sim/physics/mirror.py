@@ -32,7 +32,6 @@ import logging
 import os
 import subprocess
 import sys
-import tempfile
 import threading
 import weakref
 from dataclasses import dataclass
@@ -46,7 +45,7 @@ from pybullet_utils import bullet_client
 from dvrk_gym.sim.physics.client import Physics, quiet_output
 from dvrk_gym.sim.physics.meshes import Mesh, box
 from dvrk_gym.utils.atomic import atomic_write_text
-from dvrk_gym.utils.parent_watch import scratch_folder
+from dvrk_gym.utils.parent_watch import ScratchFolder
 
 logger = logging.getLogger(__name__)
 
@@ -165,7 +164,7 @@ class EglMirror:
         if failure is not None:
             raise RendererUnavailable(f"PyBullet's EGL renderer ({path}) does not run here: {failure}")
         self._shared: _SharedEglClient | None = _SharedEglClient.acquire(path)
-        self._folder: tempfile.TemporaryDirectory[str] | None = scratch_folder("dvrk_gym_display_")
+        self._folder: ScratchFolder | None = ScratchFolder("dvrk_gym_display_")
         # Gives the client back and deletes the folder when closed, collected, or at exit (while the streams still work).
         self._release = weakref.finalize(self, _release, self._shared, self._folder, os.getpid())
         self._layout: int | None = None  # the layout_version of the Physics copied
@@ -370,7 +369,7 @@ class _SharedEglClient:
                 logger.debug("the EGL mirror's server was already disconnected")
 
 
-def _release(shared: _SharedEglClient, folder: tempfile.TemporaryDirectory[str], pid: int) -> None:
+def _release(shared: _SharedEglClient, folder: ScratchFolder, pid: int) -> None:
     """Give a mirror's share of the EGL client back and delete its mesh folder; nothing in a
     process forked from the one (``pid``) that made the mirror: both are that one's."""
     if os.getpid() != pid:
