@@ -34,6 +34,33 @@ def test_tasks_run_after_what_they_need_on_any_executor(tmp_path, make_executor)
     assert (pids == {os.getpid()}) == isinstance(executor, InlineExecutor)  # inline runs here, a pool elsewhere
 
 
+def test_the_progress_bar_counts_each_tasks_cost_so_its_estimate_is_not_thrown_by_long_tasks_first(tmp_path, monkeypatch, capsys):
+    """It counted tasks: reproduce's two long tasks run first, and its first estimate of the
+    time left was several times too long."""
+    from dvrk_gym.parallel import task_graph
+
+    bars = []
+
+    class Bar(task_graph.tqdm):  # the real bar, its total and steps kept
+        def __init__(self, *args, **kwargs):
+            super().__init__(*args, **kwargs)
+            self.steps = []
+            bars.append(self)
+
+        def update(self, n=1):
+            self.steps.append(n)
+            return super().update(n)
+
+    monkeypatch.setattr(task_graph, "tqdm", Bar)
+    graph = _graph(tmp_path / "log.txt")  # costs: root 5, free 2, a, b and c 1 each
+    with InlineExecutor() as executor:
+        run_tasks(graph[:2], cache_dir=tmp_path / "cache", executor=executor)  # root and a, cached for the next run
+        run_tasks(graph, cache_dir=tmp_path / "cache", executor=executor)
+    assert (bars[0].total, bars[0].n) == (6.0, 6.0)
+    assert (bars[1].total, bars[1].initial, sorted(bars[1].steps)) == (10.0, 6.0, [1.0, 1.0, 2.0])
+    assert bars[1].desc == "run: 5/5 tasks" and "100%|" in capsys.readouterr().err
+
+
 def test_a_task_that_does_not_see_the_shared_folder_fails_saying_so(tmp_path):
     graph = [Task("a", record, {"name": "a", "log": str(tmp_path / "log.txt")})]
     with pytest.raises(TaskError, match=r"task 'a' failed: FileNotFoundError: the run folder .*gone is not on this worker's disk"):

@@ -24,10 +24,11 @@ import contextlib
 import functools
 import graphlib
 import logging
+import math
 import os
 import socket
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -40,6 +41,10 @@ from dvrk_gym.utils.atomic import read_json
 from dvrk_gym.utils.checks import check_file_stem
 from dvrk_gym.utils.run_folder import RunFolder, locate_in_folder
 from dvrk_gym.utils.torch_threads import torch_threads
+
+BAR_FORMAT = "{desc} {percentage:3.0f}%|{bar}| [{elapsed}<{remaining}{postfix}]"
+"""The progress bar: tasks done, the share of the graph's work done (by ``cost_s``), the time
+taken and left, the tasks running."""
 
 logger = logging.getLogger(__name__)
 
@@ -147,7 +152,7 @@ def run_tasks(
     progress: bool = True,
     executor: Executor | None = None,
     shared_folder: Path | None = None,
-    label: str = "tasks",
+    label: str = "run",
 ) -> dict[str, dict[str, Any]]:
     """Run (or load from ``cache_dir``) every task; returns ``{name: result}`` in the graph's order.
 
@@ -205,7 +210,14 @@ class _GraphRun:
         self.ready: list[str] = []
         self.running: dict[cf.Future, Task] = {}
         self.failure: TaskError | None = None
-        self.bar = tqdm(total=len(tasks), initial=len(self.results), desc=label, unit="task", disable=not progress)
+        # The bar counts each task's cost_s, not tasks: its estimate of the time left is then
+        # not thrown by a graph whose few long tasks run first (counting tasks, reproduce
+        # --quick's estimate after its first task was 12:15 with 33 s left; now 1:47, 40 s left).
+        self.label = label
+        self.work = {task.name: task.cost_s if math.isfinite(task.cost_s) and task.cost_s > 0 else 1.0 for task in tasks}
+        done = sum(self.work[name] for name in self.results)
+        desc = f"{label}: {len(self.results)}/{len(tasks)} tasks"
+        self.bar = tqdm(total=sum(self.work.values()), initial=done, desc=desc, bar_format=BAR_FORMAT, disable=not progress)
 
     def run(self) -> dict[str, dict[str, Any]]:
         try:
@@ -215,7 +227,7 @@ class _GraphRun:
                     self._submit()
                 if not self.running:
                     break
-                self.bar.set_postfix_str(", ".join(sorted(task.name for task in self.running.values())))
+                self._show(task.name for task in self.running.values())
                 done, _ = cf.wait(self.running, return_when=cf.FIRST_COMPLETED)
                 self._collect(done)
                 if self.failure is None:
@@ -228,6 +240,11 @@ class _GraphRun:
         if self.failure is not None:
             raise self.failure
         return {task.name: self.results[task.name] for task in self.tasks}
+
+    def _show(self, running: Iterable[str]) -> None:
+        """The bar's words: tasks finished of all before it, those running after it."""
+        self.bar.set_description_str(f"{self.label}: {len(self.results)}/{len(self.tasks)} tasks", refresh=False)
+        self.bar.set_postfix_str(", ".join(sorted(running)), refresh=False)
 
     def _queue_ready(self) -> None:
         """Queue the tasks whose needs have finished, best first; cached ones count as finished."""
@@ -246,7 +263,7 @@ class _GraphRun:
         """Start the best ready tasks, as many as the executor runs at once."""
         while self.ready and len(self.running) < self.executor.capacity():
             task = self.by_name[self.ready.pop(0)]
-            self.bar.set_postfix_str(task.name)
+            self._show([*(running.name for running in self.running.values()), task.name])
             self.running[self.executor.submit(call_task, task.function, task.kwargs, self.shared)] = task
 
     def _collect(self, done: set[cf.Future]) -> None:
@@ -272,6 +289,7 @@ class _GraphRun:
         self.cache.write_json(f"{task.name}.json", result)
         self.results[task.name] = {**result, "cached": False}
         self.sorter.done(task.name)
-        self.bar.update(1)
+        self._show(running.name for running in self.running.values())
+        self.bar.update(self.work[task.name])
         message = f"{task.name}: {seconds:.0f} s"
         self.bar.write(message) if self.progress else logger.info(message)

@@ -130,7 +130,7 @@ def _calibration_tasks(config: ReproduceConfig, nested_progress: bool) -> list[T
             "bias_field",
             tasks.bias_field,
             {"figure": str(config.out / "figures" / "bias_field.png"), **world},
-            cost_s=15,
+            cost_s=3,
             files=("figure",),
         ),
         Task(
