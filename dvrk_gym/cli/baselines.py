@@ -90,9 +90,8 @@ def _run_train(args: argparse.Namespace) -> int:
             raise FileExistsError(
                 f"{out / 'model.zip'} exists: {out} holds a finished training; give --force to train again, or another --out"
             )
-        if (
-            not resuming and (out / "model.zip").exists()
-        ):  # killed between its outputs before any save: the same training writes the same ones
+        # killed between its outputs before any save: the same training writes the same ones
+        if not resuming and (out / "model.zip").exists():
             print(f"{out} holds a model but not all of {', '.join(OUTPUTS)}, and no saved state: training again from the start")
         try:
             result = train(config, progress=not args.no_progress, state_path=state_path, save_every=save_every)

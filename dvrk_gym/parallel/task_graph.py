@@ -263,7 +263,6 @@ class _GraphRun:
         """Start the best ready tasks, as many as the executor runs at once."""
         while self.ready and len(self.running) < self.executor.capacity():
             task = self.by_name[self.ready.pop(0)]
-            self._show([*(running.name for running in self.running.values()), task.name])
             self.running[self.executor.submit(call_task, task.function, task.kwargs, self.shared)] = task
 
     def _collect(self, done: set[cf.Future]) -> None:

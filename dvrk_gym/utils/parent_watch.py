@@ -31,6 +31,8 @@ from pathlib import Path
 
 import psutil
 
+from dvrk_gym.utils.checks import check_file_stem
+
 logger = logging.getLogger(__name__)
 
 PR_SET_PDEATHSIG = 1
@@ -122,11 +124,10 @@ def remove_orphaned_scratch(prefix: str, root: Path | None = None) -> list[Path]
     A folder of another host (a temporary folder shared between machines) is kept, and so is
     one whose pid now names another process (until that one ends too).
     """
-    if not re.fullmatch(r"[A-Za-z0-9_.-]+", prefix or ""):
-        raise ValueError(f"a scratch prefix must be a plain name, got {prefix!r}")
+    mine = check_file_stem("a scratch prefix (a plain name)", prefix) + host_label() + "_"
     removed = []
-    for folder in Path(root or tempfile.gettempdir()).glob(f"{prefix}{host_label()}_*_*"):
-        pid = folder.name[len(prefix) + len(host_label()) + 1 :].split("_", 1)[0]
+    for folder in Path(root or tempfile.gettempdir()).glob(f"{mine}*_*"):
+        pid = folder.name[len(mine) :].split("_", 1)[0]
         try:
             if not pid.isdigit() or folder.is_symlink() or not folder.is_dir() or folder.stat().st_uid != os.getuid():
                 continue
