@@ -7,7 +7,8 @@ First an uninterrupted run of a small profile (:data:`dvrk_gym.reproduce.TINY` u
 fresh run is started in its own folder and killed with SIGKILL at a random moment within
 the reference's wall time; the processes it started are checked to end (none may outlive
 it by 15 s), and the same command is run again to the end. Each resume must finish, leave
-no temporary file, and give results.json equal to the reference's, but for wall-clock
+no temporary file (in the run's folder, nor a scratch folder of an ended process in the
+system's temporary folder), and give results.json equal to the reference's, but for wall-clock
 times (:func:`dvrk_gym.reproduce.run.seeded_results`). Prints one line per kill and the
 counts. Takes about 1.5 times the reference's wall time per kill (about 30 minutes for 20
 kills of the tiny profile on 2 cores).
@@ -33,6 +34,23 @@ from dvrk_gym.reproduce import TINY
 from dvrk_gym.reproduce.run import seeded_results
 
 ORPHAN_GRACE_S = 15.0
+SCRATCH_PREFIX = "dvrk_gym_"
+"""How the package's scratch folders in the system's temporary folder begin
+(:class:`dvrk_gym.utils.parent_watch.ScratchFolder`: ``{prefix}{host}_{pid}_...``)."""
+
+
+def scratch_folders() -> set[Path]:
+    """The package's scratch folders in the system's temporary folder now."""
+    return set(Path(tempfile.gettempdir()).glob(f"{SCRATCH_PREFIX}*"))
+
+
+def orphaned_scratch(before: set[Path]) -> int:
+    """How many scratch folders made since ``before`` name a process that no longer runs."""
+    left = 0
+    for folder in scratch_folders() - before:
+        fields = folder.name.split("_")  # dvrk, gym, its kind, the host (no "_" in it), the pid, mkdtemp's letters
+        left += len(fields) > 4 and fields[4].isdigit() and not psutil.pid_exists(int(fields[4]))
+    return left
 
 
 def command(profile: Path, out: Path, workers: int) -> list[str]:
@@ -97,12 +115,13 @@ def main() -> None:
         counts = {"killed": 0, "resumed": 0, "identical": 0, "orphans": 0, "partial files": 0}
         for i in range(args.kills):
             out = root / f"kill{i:02d}"
+            scratch_before = scratch_folders()
             after = float(rng.uniform(0.02, 0.98) * reference_s)
             started, orphans, ended_first = kill_at(profile, out, args.workers, after)
             cached = len(list((out / "tasks").glob("*.json"))) if (out / "tasks").exists() else 0
             status, resume_s, err = run_to_end(profile, out, args.workers)
             identical = status == 0 and seeded_results(json.loads((out / "results.json").read_text())) == reference
-            partial = len(list(out.rglob(".*.partial*")))
+            partial = len(list(out.rglob(".*.partial*"))) + orphaned_scratch(scratch_before)
             counts["killed"] += not ended_first
             counts["resumed"] += status == 0
             counts["identical"] += identical

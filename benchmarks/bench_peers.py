@@ -1,6 +1,6 @@
 """Our three envs beside panda-gym's, stepped in one process with seeded random actions.
 
-Run: python benchmarks/bench_peers.py  [--steps 1000] [--picks 16] [--delta-steps 100] [--rounds 3] [--resolution 1920 1080]
+Run: python benchmarks/bench_peers.py  [--steps 1000] [--picks 16] [--delta-steps 100] [--rounds 5] [--resolution 1920 1080]
      python benchmarks/bench_peers.py --profile dvrk_gym/Debridement-v0 [--picks 24]  (cProfile of one env's steps)
 Needs panda-gym (the ``bench`` extra): pip install -e ".[bench]", or pip install panda-gym==3.0.7.
 With --steps 500 --picks 8 it took 4 minutes on the shared 2-core machine (load average 13-18).

@@ -29,11 +29,12 @@ from dataclasses import dataclass
 
 import gymnasium as gym
 import numpy as np
-from fidelity_table_runs import add_calibration_argument, push_means, read_calibration, simulated_pushes
+from fidelity_table_runs import add_calibration_argument, push_means, read_calibration, real_pushes, simulated_pushes
 from tour_order import next_row_gap, pushes_by_move
 
 import dvrk_gym  # noqa: F401  (registers the envs)
 from dvrk_gym.calibration.benchmark import YAW_SETTINGS, calibration_table
+from dvrk_gym.calibration.datasets import load_paper_table_runs
 from dvrk_gym.calibration.models.dnn import DNNCalibrator
 from dvrk_gym.calibration.models.two_phase import TwoPhaseCalibrator
 from dvrk_gym.calibration.phase1 import Phase1Data
@@ -125,7 +126,11 @@ def print_spread(results: dict[int, SeedResult]) -> None:
     for seed, row in zip(results, rows, strict=True):
         print(_row(str(seed), row))
     _print_over_seeds(rows)
-    print("  real, rounds 0 and 1: y spread 1.0 and 0.7, x gap -1.0 and -0.4 (python benchmarks/tour_order.py, fidelity_table_runs.py)")
+    runs = load_paper_table_runs()
+    for k in (0, 1):
+        sent, pushes, yaws = real_pushes(runs, k)
+        real = [1e3 * float(np.ptp(push_means(yaws, pushes)[:, 1])), 1e3 * next_row_gap(pushes_by_move(sent, pushes, yaws))]
+        print(_row(f"real, round {k}", np.array(real)))
 
 
 def main() -> None:
