@@ -87,6 +87,10 @@ def test_row_differences_refuse_rows_from_another_triangulation():
     shifted[:, 2] *= 1.001
     with pytest.raises(ValueError, match="no length of whole pixels"):
         detector_noise.row_differences(shifted)
+    near = X[:3].copy()  # disparities under the 40 rows searched: a row difference above one is no answer
+    near[:, 2] = paper.ENDOSCOPE_FOCAL_PX * paper.ENDOSCOPE_BASELINE_M / np.array([30.3, 12.7, 5.5])
+    with pytest.raises(ValueError, match="rows \\[0, 1, 2\\] have a disparity"):
+        detector_noise.row_differences(near)
 
 
 def test_detector_noise_fit_recovers_the_noise_that_made_a_histogram():

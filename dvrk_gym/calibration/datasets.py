@@ -10,30 +10,59 @@ disk; every function here returns metres and radians.
 
 from __future__ import annotations
 
-import io
+import hashlib
 from dataclasses import dataclass
 from importlib import resources
 
 import numpy as np
 
 from dvrk_gym import paper
+from dvrk_gym.calibration.records import parse_npy, read_npz_arrays
 
-__all__ = ["PaperTableRuns", "load_paper_phase1", "load_paper_table_runs"]
+__all__ = ["PACKAGED_SHA256", "PaperTableRuns", "load_paper_phase1", "load_paper_table_runs"]
 
 _DATA_PACKAGE = "dvrk_gym"
 _MM_TO_M = 1e-3
+MAX_PACKAGED_BYTES = 2**20
+"""The largest packaged data file read, bytes (they are 47 to 135 kB)."""
+PACKAGED_SHA256 = {
+    "X_train.npy": "f41564b20af4aaa957b76bc778fff2c237530c92de7291cdfe233ebe29252e30",
+    "y_train.npy": "334883b4b1c7576d37c7676d32e84d467d2aee55889e600a52cc99ed54e8418b",
+    "table_runs.npz": "2a38eb8f143eda3bb6c1db7559cc10b50fa510d8830b2da2257d87c5f9e302c3",
+}
+"""The SHA-256 of each packaged data file as released: a changed file is refused, so a
+figure compared with the real robot is always compared with the authors' rows."""
 
 
 def _read_packaged(folder: tuple[str, ...], name: str) -> bytes:
+    """A packaged data file's bytes, if it is at most :data:`MAX_PACKAGED_BYTES` and as released.
+
+    Raises:
+        ValueError: larger, or another SHA-256 than :data:`PACKAGED_SHA256` holds.
+    """
     resource = resources.files(_DATA_PACKAGE)
     for part in (*folder, name):
         resource = resource.joinpath(part)
     with resource.open("rb") as stream:
-        return stream.read()
+        data = stream.read(MAX_PACKAGED_BYTES + 1)
+    where = "/".join((_DATA_PACKAGE, *folder, name))
+    if len(data) > MAX_PACKAGED_BYTES:
+        raise ValueError(f"the packaged data file {where} is larger than {MAX_PACKAGED_BYTES:,} bytes; reinstall dvrk_gym")
+    digest = hashlib.sha256(data).hexdigest()
+    if digest != PACKAGED_SHA256[name]:
+        raise ValueError(
+            f"the packaged data file {where} is not the one released (SHA-256 {digest}, expected {PACKAGED_SHA256[name]}); "
+            "reinstall dvrk_gym"
+        )
+    return data
 
 
 def _load_array(name: str) -> np.ndarray:
-    return np.load(io.BytesIO(_read_packaged(paper.REAL_PHASE1_PACKAGE_DIR, name)), allow_pickle=False)
+    where = "/".join((_DATA_PACKAGE, *paper.REAL_PHASE1_PACKAGE_DIR, name))
+    array = parse_npy(where, _read_packaged(paper.REAL_PHASE1_PACKAGE_DIR, name), kinds="f")
+    if not np.isfinite(array).all():
+        raise ValueError(f"the packaged data file {where} holds values that are not finite")
+    return array
 
 
 def load_paper_phase1() -> tuple[np.ndarray, np.ndarray]:
@@ -47,7 +76,8 @@ def load_paper_phase1() -> tuple[np.ndarray, np.ndarray]:
             metres (origin at the remote centre of motion).
 
     Raises:
-        ValueError: If the packaged files do not have the documented shapes.
+        ValueError: If the packaged files are not those released, or do not hold finite
+            floats of the documented shapes.
     """
     X_raw = _load_array("X_train.npy")
     y_raw = _load_array("y_train.npy")
@@ -112,8 +142,8 @@ def load_paper_table_runs() -> PaperTableRuns:
     Raises:
         ValueError: If the packaged file does not hold the documented arrays and shapes.
     """
-    with np.load(io.BytesIO(_read_packaged(paper.REAL_TABLE_PACKAGE_DIR, "table_runs.npz")), allow_pickle=False) as data:
-        arrays = {name: data[name] for name in data.files}
+    where = "/".join((_DATA_PACKAGE, *paper.REAL_TABLE_PACKAGE_DIR, "table_runs.npz"))
+    arrays = read_npz_arrays(_read_packaged(paper.REAL_TABLE_PACKAGE_DIR, "table_runs.npz"), where=where, kinds="fiuU")
     touches, pushes = paper.REAL_TABLE_TOUCHES, paper.REAL_TABLE_PUSHES
     shapes = {
         "touch_method": (touches,), "touch_setting": (touches,), "touch_circle_px": (touches, 2),

@@ -18,47 +18,64 @@ import numpy as np
 from dvrk_gym.utils.atomic import atomic_open
 from dvrk_gym.utils.bounded_zip import ArchiveLimitError, ArchiveLimits, open_archive, read_member, read_npy_header
 
-__all__ = ["DATA_FILE_LIMITS", "ArrayRecord", "non_finite_rows", "read_npz_arrays"]
+__all__ = ["DATA_FILE_LIMITS", "NUMERIC_KINDS", "ArrayRecord", "non_finite_rows", "parse_npy", "read_npz_arrays"]
 
 DATA_FILE_LIMITS = ArchiveLimits(max_file_bytes=512 * 2**20, max_members=10_000, max_member_bytes=256 * 2**20, max_total_bytes=512 * 2**20)
 """What a data file may hold: 512 MiB on disk and inflated, 256 MiB an array, 10,000 arrays
 (the paper's Phase I, 5,301 rows, takes about 0.5 MB)."""
-_ALLOWED_KINDS = "fiub"  # float, signed and unsigned integer, bool
+NUMERIC_KINDS = "fiub"
+"""The numpy dtype kinds a data file's arrays may have: float, signed and unsigned integer, bool."""
 _Record = TypeVar("_Record", bound="ArrayRecord")
 
 
-def _npy_array(path: str | PathLike, name: str, data: bytes) -> np.ndarray:
-    """One ``.npy`` member parsed from its bytes: the header's shape and dtype are checked
-    against the bytes actually there before any array is made."""
+def parse_npy(where: str, data: bytes, *, kinds: str = NUMERIC_KINDS) -> np.ndarray:
+    """An ``.npy`` file's array parsed from its bytes: the header's shape and dtype are checked
+    against the bytes actually there before any array is made.
+
+    Args:
+        where: names the bytes in an error (a file, or a file's member).
+        data: the whole ``.npy`` file.
+        kinds: the numpy dtype kinds accepted (objects, which would be pickles, never are).
+
+    Raises:
+        ValueError: no valid header, another dtype kind, or a header that does not fit the bytes.
+    """
     stream = io.BytesIO(data)
-    shape, fortran_order, dtype = read_npy_header(stream, f"{path}: member {name!r}")
-    if dtype.hasobject or dtype.kind not in _ALLOWED_KINDS:
-        raise ValueError(f"{path}: member {name!r} has dtype {dtype}; only numeric and bool arrays are read (never pickles)")
+    shape, fortran_order, dtype = read_npy_header(stream, where)
+    if dtype.hasobject or dtype.kind not in kinds:
+        raise ValueError(f"{where} has dtype {dtype}; only arrays of the kinds {kinds!r} are read (never pickles)")
     count = math.prod(shape)
     held = len(data) - stream.tell()
     if count * dtype.itemsize != held:
-        raise ValueError(f"{path}: member {name!r} declares {shape} {dtype} ({count * dtype.itemsize:,} bytes) but holds {held:,} bytes")
+        raise ValueError(f"{where} declares {shape} {dtype} ({count * dtype.itemsize:,} bytes) but holds {held:,} bytes")
     array = np.frombuffer(data, dtype=dtype, count=count, offset=stream.tell())
     return array.reshape(shape, order="F" if fortran_order else "C").copy()
 
 
-def read_npz_arrays(path: str | PathLike) -> dict[str, np.ndarray]:
+def read_npz_arrays(source: str | PathLike | bytes, *, where: str | None = None, kinds: str = NUMERIC_KINDS) -> dict[str, np.ndarray]:
     """Every array of an ``.npz``, read within :data:`DATA_FILE_LIMITS` (sizes checked before anything is inflated).
 
+    Args:
+        source: the file, or its bytes.
+        where: names it in an error (default: the path; "archive in memory" for bytes).
+        kinds: the numpy dtype kinds its arrays may have (:func:`parse_npy`).
+
     Raises:
-        ValueError: no such file, not a zip within the limits, a member that is not a numeric
-            ``.npy`` array, or a header that does not fit its bytes.
+        ValueError: no such file, not a zip within the limits, a member that is not an
+            ``.npy`` array of ``kinds``, or a header that does not fit its bytes.
     """
+    name = where or ("archive in memory" if isinstance(source, bytes) else str(source))
     try:
-        with open_archive(path, DATA_FILE_LIMITS) as archive:
+        with open_archive(source, DATA_FILE_LIMITS) as archive:
             arrays = {}
             for member in archive.namelist():
                 if not member.endswith(".npy"):
-                    raise ValueError(f"{path}: member {member!r} is not an .npy array")
-                arrays[member[: -len(".npy")]] = _npy_array(path, member, read_member(archive, member, DATA_FILE_LIMITS))
+                    raise ValueError(f"{name}: member {member!r} is not an .npy array")
+                data = read_member(archive, member, DATA_FILE_LIMITS)
+                arrays[member[: -len(".npy")]] = parse_npy(f"{name}: member {member!r}", data, kinds=kinds)
             return arrays
     except FileNotFoundError:
-        raise ValueError(f"{path}: no such file") from None
+        raise ValueError(f"{name}: no such file") from None
     except ArchiveLimitError as error:
         raise ValueError(f"not an .npz file within the size limits: {error}") from None
 

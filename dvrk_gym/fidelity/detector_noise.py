@@ -49,8 +49,8 @@ def row_differences(X: np.ndarray) -> np.ndarray:
     disparity = paper.ENDOSCOPE_FOCAL_PX * paper.ENDOSCOPE_BASELINE_M / X[:, 2]
     found = np.full(len(X), -1)
     for k in range(_SEARCH_ROWS_PX, -1, -1):  # the last hit is the smallest row difference
-        horizontal = np.sqrt(np.maximum(disparity**2 - k * k, 0.0))
-        found[np.abs(horizontal - np.round(horizontal)) < _EXACT_PX] = k
+        horizontal = np.sqrt(np.maximum(disparity**2 - k * k, 0.0))  # 0, a whole number, where k exceeds the disparity
+        found[(k <= disparity) & (np.abs(horizontal - np.round(horizontal)) < _EXACT_PX)] = k
     if (found < 0).any():
         bad = np.flatnonzero(found < 0)
         raise ValueError(f"rows {bad[:10].tolist()} have a disparity that is no length of whole pixels; not the authors' triangulation")
