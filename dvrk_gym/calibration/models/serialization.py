@@ -41,6 +41,7 @@ import numpy as np
 import safetensors.numpy
 from safetensors import SafetensorError
 
+from dvrk_gym.calibration.records import NUMERIC_KINDS
 from dvrk_gym.utils.atomic import atomic_open
 from dvrk_gym.utils.bounded_zip import ArchiveLimitError, ArchiveLimits, open_archive, read_member
 from dvrk_gym.utils.estimator_files import EstimatorFileError, dump_estimator, load_estimator
@@ -70,7 +71,6 @@ MODEL_FILE_LIMITS = ArchiveLimits(max_file_bytes=512 * 2**20, max_members=64, ma
 the two-phase calibrator, has seven: its JSON, its arrays and five forests, 2 MB in all)."""
 RETIRED_MARKER = "__metadata__.npy"
 """The member by which a file of the retired ``.npz`` format is recognised."""
-_ALLOWED_KINDS = "fiub"  # float, signed and unsigned integer, bool
 _NAME = re.compile(r"[A-Za-z0-9_.+-]{1,100}")
 _FIXED_TIME = (1980, 1, 1, 0, 0, 0)  # the zip epoch: the same model gives the same outer archive
 _LIBRARIES = ("numpy", "scikit-learn", "skops", "safetensors")  # their versions are written, for the record (not checked)
@@ -118,7 +118,7 @@ def _encode_members(parts: ModelParts) -> tuple[dict[str, bytes], dict[str, Any]
     """The members' bytes, and the arrays' shapes and dtypes for ``model.json``."""
     arrays = {name: np.ascontiguousarray(value) for name, value in sorted(parts.arrays.items())}
     for name, value in arrays.items():
-        if not _NAME.fullmatch(name) or value.dtype.kind not in _ALLOWED_KINDS:
+        if not _NAME.fullmatch(name) or value.dtype.kind not in NUMERIC_KINDS:
             raise ValueError(f"array {name!r} ({value.dtype}) cannot be saved: names match {_NAME.pattern}, dtypes are numeric or bool")
     members = {ARRAYS: safetensors.numpy.save(arrays)} if arrays else {}
     for name, estimator in sorted(parts.estimators.items()):
@@ -274,7 +274,7 @@ class _ModelArchive:
             raise ModelFileError(f"{self.path}: arrays {sorted(arrays)} do not match {MANIFEST}'s {sorted(declared)}")
         for name, array in arrays.items():
             spec = declared[name]
-            if list(array.shape) != spec["shape"] or array.dtype.name != spec.get("dtype") or array.dtype.kind not in _ALLOWED_KINDS:
+            if list(array.shape) != spec["shape"] or array.dtype.name != spec.get("dtype") or array.dtype.kind not in NUMERIC_KINDS:
                 raise ModelFileError(
                     f"{self.path}: array {name!r} is {array.dtype.name} {list(array.shape)}; "
                     f"{MANIFEST} says {spec.get('dtype')} {spec['shape']}"
