@@ -40,7 +40,7 @@ from dvrk_gym.sim.robot.body import PSMBody, marker_corners, marker_face_samples
 from dvrk_gym.sim.robot.cables import CableModel
 from dvrk_gym.sim.robot.motion import CartesianMove, SimClock
 from dvrk_gym.sim.robot.motion_limits import MotionLimits
-from dvrk_gym.sim.world_config import JawDriver, MoveResult, WorldConfig, check_jaw_angle, check_joints
+from dvrk_gym.sim.world_config import JawDriver, MoveResult, WorldConfig, check_jaw_angle, check_joints, finite_joint_floats
 from dvrk_gym.utils.checks import check_int
 
 HOME_JOINTS = np.array([0.0, 0.0, 0.05, 0.0, 0.0, 0.0])
@@ -248,9 +248,9 @@ class DvrkWorld:
 
     def move_joints_floats(self, q: list[float], noise_rng: np.random.Generator | None = None) -> MoveResult:
         """:meth:`move_joints` for joints ``q`` (6,) rad / m within the limits (as
-        :func:`~dvrk_gym.sim.robot.ik.inverse_kinematics_floats` gives them; not checked), with
+        :func:`~dvrk_gym.sim.robot.ik.inverse_kinematics_floats` gives them; checked finite only), with
         the end pose's kinematics and the cable model on the compiled float paths: a few ulps from it."""
-        q_target = np.array(q)
+        q_target = finite_joint_floats(q)
         end = self._nominal_poses.get(q_target.tobytes())
         if end is None:  # for the plan only, not remembered: the reported pose stays numpy's
             end = float_paths.forward_kinematics(q)

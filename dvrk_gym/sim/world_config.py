@@ -7,6 +7,7 @@ All five are re-exported by :mod:`dvrk_gym.sim.world`, which builds and runs the
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Protocol
 
@@ -20,7 +21,7 @@ from dvrk_gym.sim.robot.bias import BiasConfig
 from dvrk_gym.sim.robot.motion_limits import MotionLimits
 from dvrk_gym.utils.checks import check_bool, check_endoscope_resolution, check_float, check_float_fields, check_int_fields
 
-__all__ = ["JawDriver", "MoveResult", "WorldConfig", "check_jaw_angle", "check_joints"]
+__all__ = ["JawDriver", "MoveResult", "WorldConfig", "check_jaw_angle", "check_joints", "finite_joint_floats"]
 
 
 def check_jaw_angle(value: float) -> float:
@@ -43,6 +44,18 @@ def check_joints(q: np.ndarray) -> np.ndarray:
     if kin.joint_limit_violations(q, kin.JOINT_LIMIT_TOLERANCE):  # within_joint_limits would check q's values again
         raise ik.UnreachablePoseError(f"joints {np.round(q, 4).tolist()} are outside the joint limits")
     return q
+
+
+def finite_joint_floats(q: list[float]) -> np.ndarray:
+    """Joints (6,) rad / m as a float array, if all six are finite (the float paths' cheap check;
+    the limits are not checked).
+
+    Raises:
+        ValueError: not six finite numbers.
+    """
+    if len(q) != 6 or not all(math.isfinite(value) for value in q):
+        raise ValueError(f"q must be 6 finite joint values (rad / m), got {list(q)!r}")
+    return np.array(q, dtype=float)
 
 
 @dataclass(frozen=True)
@@ -90,10 +103,14 @@ class WorldConfig:
         check_bool("gui", self.gui)
         if not isinstance(self.motion, MotionLimits):
             raise ValueError(f"motion must be a MotionLimits, got {self.motion!r}")
+        if not isinstance(self.marker_noise, DetectionNoise):
+            raise ValueError(f"marker_noise must be a DetectionNoise, got {self.marker_noise!r}")
         if self.camera_pose is not None:
-            pose = np.asarray(self.camera_pose)
+            pose = np.array(self.camera_pose)  # a copy: the caller's array may change after this check
             if pose.shape != (4, 4) or pose.dtype.kind != "f" or not np.all(np.isfinite(pose)):
                 raise ValueError(f"camera_pose must be None or a finite 4x4 float transform (metres), got {self.camera_pose!r}")
+            pose.flags.writeable = False
+            object.__setattr__(self, "camera_pose", pose)
 
 
 @dataclass(frozen=True)

@@ -28,6 +28,7 @@ from scipy.spatial.transform import Rotation
 from dvrk_gym import paper
 from dvrk_gym.sim import identified
 from dvrk_gym.sim.endoscope.baseline import PAPER_BASELINE_M
+from dvrk_gym.utils.checks import check_float
 
 if TYPE_CHECKING:
     from pybullet_utils.bullet_client import BulletClient
@@ -129,7 +130,7 @@ class PixelWindow:
 def default_camera_pose() -> np.ndarray:
     """Return T_world_leftcam (4x4, metres): the endoscope's pose identified from the authors' rows.
 
-    :data:`dvrk_gym.sim.identified.CAMERA`: about 0.19 m above the workspace, looking down
+    :data:`dvrk_gym.sim.identified.CAMERA`: about 0.18 m above the workspace, looking down
     about 10 degrees from the vertical.
     """
     pose = np.eye(4)
@@ -185,13 +186,11 @@ class StereoCamera:
     ) -> None:
         if not isinstance(intrinsics, CameraIntrinsics):
             raise ValueError(f"intrinsics must be CameraIntrinsics, got {type(intrinsics).__name__}")
-        if not np.isfinite(baseline_m) or baseline_m <= 0:
-            raise ValueError(f"baseline_m must be finite and > 0, got {baseline_m!r}")
+        baseline_m = check_float("baseline_m", baseline_m, low=0.0, low_open=True, unit="m")
         calibrated_baseline_m = baseline_m if calibrated_baseline_m is None else calibrated_baseline_m
-        if not np.isfinite(calibrated_baseline_m) or calibrated_baseline_m <= 0:
-            raise ValueError(f"calibrated_baseline_m must be finite and > 0, got {calibrated_baseline_m!r}")
-        if not (np.isfinite(near_m) and np.isfinite(far_m) and 0 < near_m < far_m):
-            raise ValueError(f"need 0 < near_m < far_m (finite), got {near_m!r}, {far_m!r}")
+        calibrated_baseline_m = check_float("calibrated_baseline_m", calibrated_baseline_m, low=0.0, low_open=True, unit="m")
+        near_m = check_float("near_m", near_m, low=0.0, low_open=True, unit="m")
+        far_m = check_float("far_m", far_m, low=near_m, low_open=True, unit="m")
         pose = default_camera_pose() if pose is None else np.array(pose, dtype=float)
         if pose.shape != (4, 4) or not np.isfinite(pose).all():
             raise ValueError(f"pose must be a finite 4x4 matrix, got shape {pose.shape}")

@@ -179,7 +179,7 @@ class FragmentObserver:
             far_m=camera.far_m,
         )
         self.pixel_noise = PixelNoise(pixel_noise_px, k.width)
-        px_per_m = k.fx / float(np.mean(DEPTH_RANGE_M[1]))
+        px_per_m = k.fx / DEPTH_RANGE_M[1]  # at the far end of the depths: the smallest a fragment appears
         self.min_area_px = MIN_FRAGMENT_AREA_M2 * px_per_m**2
         outline = paper_corners()
         inside = paper_corners(PAPER_INSET_M)

@@ -19,6 +19,7 @@ import numpy as np
 
 from dvrk_gym import paper
 from dvrk_gym.sim import identified
+from dvrk_gym.utils.checks import check_int
 
 __all__ = [
     "MAX_PIXEL_NOISE_PX",
@@ -54,8 +55,7 @@ class PixelNoise:
     def __post_init__(self) -> None:
         if not (math.isfinite(self.sigma_px_at_1080p) and self.sigma_px_at_1080p >= 0):
             raise ValueError(f"sigma_px_at_1080p = {self.sigma_px_at_1080p}; expected a finite value >= 0")
-        if self.width_px <= 0:
-            raise ValueError(f"width_px = {self.width_px}; expected a positive image width in pixels")
+        check_int("PixelNoise.width_px", self.width_px, 1)
 
     @property
     def sigma_px(self) -> float:
@@ -222,6 +222,6 @@ def whole_pixels(uv: np.ndarray, width_px: int) -> np.ndarray:
             centres at integers).
         width_px: the image's width, pixels.
     """
-    scale = PAPER_WIDTH_PX / width_px
+    scale = PAPER_WIDTH_PX / check_int("width_px", width_px, 1)
     paper_uv = (np.asarray(uv, dtype=float) + 0.5) * scale - 0.5
     return (np.floor(paper_uv) + 0.5) / scale - 0.5

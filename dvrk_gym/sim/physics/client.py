@@ -20,11 +20,14 @@ import pybullet
 from pybullet_utils import bullet_client
 
 from dvrk_gym.sim.physics.meshes import Mesh
+from dvrk_gym.utils.checks import check_float
 
 logger = logging.getLogger(__name__)
 
 GRAVITY_M_S2 = 9.81
 DEFAULT_TIME_STEP_S = 1.0 / 240.0
+MAX_TIME_STEP_S = 0.1
+"""The longest physics time step a Physics takes, s (PyBullet's contacts fail long before)."""
 _LAYOUTS = itertools.count()  # layout versions, unique across every Physics of the process
 
 
@@ -88,10 +91,11 @@ class Physics:
 
     Args:
         gui: open the PyBullet GUI (needs a display) instead of a headless server.
-        time_step_s: the fixed physics time step, in seconds.
+        time_step_s: the fixed physics time step, in seconds (in (0, ``MAX_TIME_STEP_S``]).
     """
 
     def __init__(self, gui: bool = False, time_step_s: float = DEFAULT_TIME_STEP_S) -> None:
+        time_step_s = check_float("time_step_s", time_step_s, low=0.0, high=MAX_TIME_STEP_S, low_open=True, unit="s")
         if gui and not os.environ.get("DISPLAY"):
             # Gymnasium's env checker makes every advertised render mode, headless too: run
             # the same physics without a window, and say so, rather than fail.
@@ -105,7 +109,7 @@ class Physics:
         mode = pybullet.GUI if gui else pybullet.DIRECT
         with quiet_output():  # the server prints "argv[0]=" on every connection
             self._client: bullet_client.BulletClient | None = _BoundClient(connection_mode=mode)
-        self.time_step_s = float(time_step_s)
+        self.time_step_s = time_step_s
         self._bodies: dict[str, int] = {}
         self._meshes: dict[str, tuple[Mesh, ...]] = {}
         self._pending_meshes: list[Mesh] = []

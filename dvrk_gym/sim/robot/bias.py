@@ -63,7 +63,7 @@ _NOT_MAGNITUDES = ("around_identified", "wrist_settle_lag")
 MAX_MAGNITUDE = {"rad": 1.0, "m": 0.05, "": 1.0}
 """The largest magnitude a :class:`BiasConfig` takes, by the unit its field's name ends
 in (rad, m, or none: the wrist's stretch): ten times the ``paper`` instrument's largest
-term of each kind is well inside (its wrist backlash, 0.059 rad; its repeatability, 1 mm;
+term of each kind is well inside (its wrist backlash, 0.060 rad; its repeatability, 1 mm;
 its wrist stretch, 0.09), and beyond them the tool leaves the endoscope's view."""
 
 
@@ -154,7 +154,7 @@ class BiasConfig:
 # given): outer stretch about 0.37 deg (not the 2.6 deg once tuned to the paper's table),
 # wrist stretch 0.09, a wrist backlash of 3.4 deg and no outer one, and a repeatability of
 # about 1.0 mm across the shaft (what the rows leave unexplained from one row to the next),
-# and wrist motors that stop a quarter of each step short (the reported pose's lag, matched
+# and wrist motors that stop 0.19 of each step short (the reported pose's lag, matched
 # to how often consecutive real rows report the same position). Gravity sag and the
 # insertion's backlash are not separable from the camera pose and the other terms in those
 # rows, so they are left out (0) rather than guessed.

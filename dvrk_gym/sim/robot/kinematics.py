@@ -115,16 +115,16 @@ JOINT_LIMIT_TOLERANCE = 1e-9
 """Round-off (rad or m) allowed past a joint limit, so IK results that sit on a limit pass."""
 
 
-def finite_vector(values: object, size: int, name: str) -> np.ndarray:
-    """values as a float array of shape (size,), every element finite.
+def finite_vector(values: object, size: int | None, name: str) -> np.ndarray:
+    """values as a float array of shape (size,) (None: of any shape), every element finite.
 
     Raises:
         ValueError: naming ``name``, if the shape is not (size,) or an element is not finite.
     """
     array = np.asarray(values, dtype=float)
-    if array.shape != (size,):
+    if size is not None and array.shape != (size,):
         raise ValueError(f"{name} must have shape ({size},), got {array.shape}")
-    if not all(map(math.isfinite, array.tolist())):
+    if not (np.isfinite(array).all() if size is None else all(map(math.isfinite, array.tolist()))):
         raise ValueError(f"{name} must be finite, got {array}")
     return array
 
@@ -341,9 +341,11 @@ def pose_from_euler(position: np.ndarray, yaw: float, pitch: float, roll: float)
         yaw, pitch, roll: Radians (intrinsic ZYX).
 
     Returns:
-        (4, 4) homogeneous transform.
+        (4, 4) homogeneous transform; ValueError for a position or angle that is not finite.
     """
     position = finite_vector(position, 3, "position")
+    if not (math.isfinite(yaw) and math.isfinite(pitch) and math.isfinite(roll)):
+        raise ValueError(f"yaw, pitch, roll must be finite radians, got {yaw!r}, {pitch!r}, {roll!r}")
     cy, sy = np.cos(yaw), np.sin(yaw)
     cp, sp = np.cos(pitch), np.sin(pitch)
     rz = np.array([[cy, -sy, 0.0], [sy, cy, 0.0], [0.0, 0.0, 1.0]])
@@ -378,9 +380,9 @@ def paper_pitch_roll(yaw_rad: float | np.ndarray) -> tuple[float | np.ndarray, f
     """The paper's orientation rule: pitch and roll linear in yaw (all radians).
 
     yaw -90 deg -> (pitch 0, roll -170) deg; yaw +90 deg -> (10, -165) deg. Works
-    elementwise on arrays.
+    elementwise on arrays; ValueError for a yaw that is not finite.
     """
-    fraction = (np.asarray(yaw_rad, dtype=float) - PAPER_YAWS_RAD[0]) / _PAPER_YAW_SPAN_RAD
+    fraction = (finite_vector(yaw_rad, None, "yaw_rad") - PAPER_YAWS_RAD[0]) / _PAPER_YAW_SPAN_RAD
     pitch = _PAPER_PITCH_RAD[0] + fraction * np.diff(_PAPER_PITCH_RAD)[0]
     roll = _PAPER_ROLL_RAD[0] + fraction * np.diff(_PAPER_ROLL_RAD)[0]
     if np.ndim(pitch) == 0:
@@ -389,8 +391,8 @@ def paper_pitch_roll(yaw_rad: float | np.ndarray) -> tuple[float | np.ndarray, f
 
 
 def nearest_paper_yaw(yaw_rad: float | np.ndarray) -> float | np.ndarray:
-    """The element of PAPER_YAWS_RAD closest in angle to yaw_rad (radians, elementwise)."""
-    yaw = np.asarray(yaw_rad, dtype=float)
+    """The element of PAPER_YAWS_RAD closest in angle to yaw_rad (radians, elementwise; ValueError if not finite)."""
+    yaw = finite_vector(yaw_rad, None, "yaw_rad")
     difference = np.angle(np.exp(1j * (yaw[..., None] - PAPER_YAWS_RAD)))
     nearest = PAPER_YAWS_RAD[np.argmin(np.abs(difference), axis=-1)]
     return float(nearest) if nearest.ndim == 0 else nearest

@@ -103,7 +103,9 @@ class CartesianMove:
 
     @classmethod
     def plan(cls, start: np.ndarray, end: np.ndarray, limits: MotionLimits) -> CartesianMove:
-        """Plan a move whose duration respects both the linear and the angular limits."""
+        """Plan a move whose duration respects both the linear and the angular limits (ValueError: ``limits`` is no MotionLimits)."""
+        if not isinstance(limits, MotionLimits):
+            raise ValueError(f"limits must be a MotionLimits, got {limits!r}")
         offset = end[:3, 3] - start[:3, 3]
         distance = math.sqrt(offset.dot(offset))  # np.linalg.norm's own formula, without its checks
         linear = trapezoid_timing(distance, limits.max_speed_m_s, limits.max_accel_m_s2)
