@@ -9,6 +9,7 @@ import pytest
 
 from dvrk_gym.calibration.datasets import load_paper_phase1
 from dvrk_gym.cli.main import main
+from dvrk_gym.fidelity import report as fidelity_report
 from dvrk_gym.fidelity.comparison import RELATIVE_TOLERANCE, SHARE_TOLERANCE, compare
 from dvrk_gym.fidelity.statistics import FidelityStatistics, fidelity_statistics
 from dvrk_gym.sim import identified
@@ -151,11 +152,12 @@ def test_atomic_write_replaces_whole_or_keeps_the_old_file(tmp_path):
 
 
 @pytest.mark.slow
-def test_fidelity_command_writes_finite_numbers_with_the_real_rows_in_the_real_column(tmp_path, capsys):
+def test_fidelity_command_writes_finite_numbers_with_the_real_rows_in_the_real_column(tmp_path, capsys, monkeypatch):
     out = tmp_path / "fidelity"
     assert main(["fidelity", "--trajectories", "2", "--resolution", "640", "360", "--out", str(out), "--no-progress"]) == 0
     printed = capsys.readouterr().out
     assert "rigid residual RMS (mm)" in printed and "statistics within target" in printed
+    assert f"(bias paper, bias_seed 0, wrist settle lag {identified.WRIST_SETTLE_LAG:g}, 640 x 360 px, 2 trajectories" in printed
     report = json.loads((out / "fidelity.json").read_text())
     assert (out / "fidelity.png").stat().st_size > 10_000
     assert sorted(p.name for p in out.iterdir()) == ["fidelity.json", "fidelity.png"]
@@ -179,6 +181,15 @@ def test_fidelity_command_writes_finite_numbers_with_the_real_rows_in_the_real_c
             continue
         assert math.isfinite(row["real"]) and math.isfinite(row["sim"]) and math.isfinite(row["value"]), row
     assert report["passed"] == sum(row["passed"] for row in report["comparison"])
+
+    def no_figure(run, path):
+        raise OSError("no space left on device")
+
+    monkeypatch.setattr(fidelity_report, "plot_fidelity", no_figure)
+    json_before = (out / "fidelity.json").read_bytes()
+    arguments = ["fidelity", "--trajectories", "2", "--seed", "1", "--resolution", "640", "360", "--out", str(out)]
+    assert main([*arguments, "--bootstrap", "0", "--no-progress"]) != 0
+    assert (out / "fidelity.json").read_bytes() == json_before  # the figure that failed left the last run's pair
 
 
 @pytest.mark.slow

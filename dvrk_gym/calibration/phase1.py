@@ -132,7 +132,8 @@ class Phase1Data(ArrayRecord):
 
     Attributes:
         reported_position: (N, 3) the robot's reported base position, m.
-        orientation: (N, 3) the commanded (yaw, pitch, roll), rad.
+        orientation: (N, 3) the reported (yaw, pitch, roll), rad (the command's, but for the
+            wrist's settle lag, :attr:`dvrk_gym.sim.robot.bias.BiasConfig.wrist_settle_lag`).
         left_px: (N, 2) the marker in the left image, px (NaN when unseen).
         right_px: (N, 2) the marker in the right image, px (NaN when unseen).
         areas_px: (N, 2) the marker's blob area in the left and right images, px (0 unseen).

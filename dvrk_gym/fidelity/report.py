@@ -44,13 +44,19 @@ def _sd(value: float | None) -> str:
     return "-" if value is None or not np.isfinite(value) else f"{value:.3g}"
 
 
+def _instrument(settings: dict) -> str:
+    """The settings a run may change beside the instrument's draw: the settle lag and the image size."""
+    width, height = settings["camera_resolution"]
+    return f"wrist settle lag {settings['wrist_settle_lag']:g}, {width} x {height} px"
+
+
 def format_table(run: FidelityRun) -> str:
     """The statistics side by side: statistic, real and sim with their standard errors, ratio
     or difference, the difference in standard errors (z), target, verdict."""
     settings = run.settings
     header = (
         f"Fidelity: the authors' {run.real.rows} real Phase I rows against a simulated Phase I "
-        f"(bias {settings['bias']}, bias_seed {settings['bias_seed']}, {settings['trajectories']} trajectories, "
+        f"(bias {settings['bias']}, bias_seed {settings['bias_seed']}, {_instrument(settings)}, {settings['trajectories']} trajectories, "
         f"seed {settings['seed']}, {run.sim_raw_rows} raw rows, {run.sim.rows} kept)"
     )
     width = max(len(row.name) for row in run.rows)
@@ -150,7 +156,7 @@ def plot_fidelity(run: FidelityRun, path: str | os.PathLike) -> Path:
     settings = run.settings
     figure.suptitle(
         f"Real Phase I rows against simulation (bias {settings['bias']}, bias_seed {settings['bias_seed']}, "
-        f"{settings['trajectories']} trajectories): {run.passed} of {len(run.rows)} statistics within target",
+        f"{_instrument(settings)}, {settings['trajectories']} trajectories): {run.passed} of {len(run.rows)} statistics within target",
         fontsize=10,
     )
     return atomic_savefig(figure, path, dpi=120, format="png")
@@ -164,5 +170,5 @@ def write_report(run: FidelityRun, out: str | os.PathLike) -> tuple[Path, Path]:
     """
     folder = Path(out)
     folder.mkdir(parents=True, exist_ok=True)
-    json_path = atomic_write_text(folder / JSON_NAME, json.dumps(report_dict(run), indent=1))
-    return json_path, plot_fidelity(run, folder / PNG_NAME)
+    figure_path = plot_fidelity(run, folder / PNG_NAME)  # first: a figure that fails leaves the last run's pair
+    return atomic_write_text(folder / JSON_NAME, json.dumps(report_dict(run), indent=1)), figure_path
