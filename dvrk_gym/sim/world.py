@@ -150,9 +150,8 @@ class DvrkWorld:
             self._robot.set_joints(self.q_true, self.jaw_angle, batched=floats)
 
     def restore_physics(self, state_id: int) -> None:
-        """Restore the physics to a ``physics.client.saveState()``, leaving a pending body update
-        pending (``q_true`` is unchanged): the reset that follows sets the body only once.
-        ValueError if no state ``state_id`` was saved here (PyBullet aborts on a negative one)."""
+        """Restore the physics to a ``physics.client.saveState()``, a pending body update left pending (``q_true``
+        is unchanged: the reset that follows sets the body once); ValueError if no state ``state_id`` was saved here."""
         state_id = check_int("state_id", state_id, 0)
         try:
             self._physics.client.restoreState(state_id)
@@ -372,9 +371,10 @@ class DvrkWorld:
     def _render_retracted(self) -> tuple[np.ndarray, np.ndarray]:
         saved_q, saved_jaw = self.q_true.copy(), self.jaw_angle
         self.robot.set_joints(HOME_JOINTS, 0.0)
-        images = (self.render("left"), self.render("right"))
-        self.robot.set_joints(saved_q, saved_jaw)
-        return images
+        try:
+            return self.render("left"), self.render("right")
+        finally:  # also when a render fails: the arm is not left retracted
+            self.robot.set_joints(saved_q, saved_jaw)
 
     # ----------------------------------------------------------------- lifetime
     def rebuild(self) -> None:

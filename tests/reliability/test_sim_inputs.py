@@ -76,3 +76,22 @@ def test_a_refused_move_leaves_the_world_as_it_was():
         world.move_to(pose)  # and it still moves
     finally:
         world.close()
+
+
+def test_a_render_that_fails_while_the_arm_is_retracted_puts_the_arm_back():
+    world = DvrkWorld(WorldConfig(camera_resolution=(640, 360)))
+    try:
+        tool = world.robot.wrist_yaw_frame().copy()
+        render = world.render
+
+        def left_only(side="left"):
+            if side == "right":
+                raise RuntimeError("the renderer died")
+            return render(side)
+
+        world.render = left_only
+        with pytest.raises(RuntimeError, match="the renderer died"):
+            world._render_retracted()
+        np.testing.assert_array_equal(world.robot.wrist_yaw_frame(), tool)
+    finally:
+        world.close()
