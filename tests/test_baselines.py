@@ -180,6 +180,8 @@ def test_loading_needs_the_settings_written_beside_the_zip(tmp_path):
     (tmp_path / "model.json").write_text(json.dumps({"format": "something else"}))
     with pytest.raises(ValueError, match="not a dvrk_gym baseline"):
         load_agent(tmp_path / "model.zip")
+    with pytest.raises(ValueError, match="is a folder; give the agent's model.zip"):  # it said "....json is missing"
+        load_agent(tmp_path)
 
 
 def _untrained_agent(tmp_path, **settings):
@@ -508,6 +510,7 @@ def test_the_calibrators_pick_at_their_own_resolution_whatever_the_order_of_the_
     monkeypatch.setattr(checkpoints, "load_agent", lambda path: agents[path.name])
     monkeypatch.setattr(comparison, "benchmark_debridement", lambda agent, n, **kwargs: [])
     monkeypatch.setattr(comparison, "calibration_debridement_rows", calibrators)
+    monkeypatch.setattr(comparison, "load_calibrator", lambda folder, name: (None, {}))  # the fake run has no model files
     monkeypatch.setattr(
         comparison,
         "debridement_row",
@@ -523,6 +526,30 @@ def test_the_calibrators_pick_at_their_own_resolution_whatever_the_order_of_the_
     assert [note for note in report["notes"] if "camera_resolution" in note] == [
         "sac (300 steps, seed 0; camera_resolution (480, 270)): camera_resolution (480, 270), but the calibration run used (320, 180)"
     ]
+
+
+def test_a_calibration_the_debridement_part_would_refuse_is_refused_before_the_touch_grid_writes(tmp_path, monkeypatch):
+    """The touch grid ran and wrote its files, then the debridement part found the models missing."""
+    from dvrk_gym.baselines import checkpoints
+
+    _fake_calibration_run(tmp_path / "cal", {"RBT": 6.0, "DNN": 2.0, "DNN+RF": 1.0})  # a table, but no model files
+    monkeypatch.setattr(checkpoints, "load_agent", lambda path: _loaded(tmp_path, path.name))
+    written = []
+
+    def touch_grid(agents, args):
+        written.append("baseline_table.json")
+        return []
+
+    monkeypatch.setattr("dvrk_gym.cli.baselines._evaluate_touch_grid", touch_grid)
+    args = _evaluate_args(tmp_path, [str(tmp_path / "a.zip")], "--transfer", "--trials", "1")
+    with pytest.raises(FileNotFoundError, match="has no rbt.zip"):
+        args.func(args)
+    assert written == []
+    (tmp_path / "file").write_text("")
+    args = _evaluate_args(tmp_path, [str(tmp_path / "a.zip")])
+    args.calibration = tmp_path / "file"
+    with pytest.raises(ValueError, match="is a file; --calibration takes a calibration run folder"):
+        args.func(args)
 
 
 def test_agents_benchmarked_at_another_seed_than_the_calibrators_rows_are_noted(tmp_path, monkeypatch):

@@ -164,6 +164,26 @@ def test_a_policy_module_in_the_current_folder_is_found_as_an_installed_command_
     monkeypatch.delitem(sys.modules, "mypolicy_beside_the_user")
 
 
+@pytest.mark.parametrize(
+    ("source", "spec", "message"),
+    [
+        ("def make(env:\n", "policy_with_a_syntax_error:make", "raised SyntaxError: .*policy_with_a_syntax_error.py, line 1"),
+        (
+            "raise RuntimeError('boom')\n",
+            "policy_that_raises:make",
+            "importing 'policy_that_raises' for --policy raised RuntimeError: boom",
+        ),
+        (None, "..x:y", "must look like 'package.module:factory'"),
+    ],
+)
+def test_a_policy_module_that_fails_to_load_is_one_clear_error(source, spec, message, tmp_path, monkeypatch):
+    if source is not None:
+        (tmp_path / f"{spec.partition(':')[0]}.py").write_text(source)
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(ValueError, match=message):
+        load_policy_factory(spec)
+
+
 def test_a_factory_that_does_not_take_the_env_is_refused_and_a_factorys_own_type_error_comes_through():
     with mock.patch("gymnasium.make") as make:
         with pytest.raises(ValueError, match="must take the env as its one argument"):

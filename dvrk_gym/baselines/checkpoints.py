@@ -284,10 +284,12 @@ def load_agent(path: Path) -> LoadedAgent:
 
     Raises:
         FileNotFoundError: the zip or its settings JSON is missing.
-        ValueError: the files are not an agent of this tool, do not match this version, or the
-            zip is not the one its settings were written with.
+        ValueError: a folder; the files are not an agent of this tool, do not match this
+            version, or the zip is not the one its settings were written with.
     """
     path = Path(path)
+    if path.is_dir():
+        raise ValueError(f"{path} is a folder; give the agent's model.zip (its model.json beside it)")
     settings = _read_settings(path)
     recorded_digest = settings.get("zip_sha256")  # absent from files saved before it was recorded
     if recorded_digest is not None and recorded_digest != _zip_sha256(path):

@@ -35,13 +35,14 @@ from dvrk_gym.baselines.training import TrainConfig, make_agent_env
 from dvrk_gym.baselines.transfer import pick_policy
 from dvrk_gym.calibration.benchmark import YAW_SETTINGS, CircleErrors, touch_grid
 from dvrk_gym.calibration.loading import load_calibrator
-from dvrk_gym.calibration.pipeline import BENCHMARK_SEED_OFFSET, CALIBRATOR_FILES, PipelineConfig, read_pipeline_settings
+from dvrk_gym.calibration.pipeline import BENCHMARK_SEED_OFFSET, CALIBRATOR_FILES, SETTINGS_STAMP, PipelineConfig, read_pipeline_settings
 from dvrk_gym.calibration.policy import CalibratedPolicy
 from dvrk_gym.envs.debridement import fragment_target
 from dvrk_gym.evaluation.trials import Trial, run_debridement, totals
 from dvrk_gym.sim.table.contact import DEFAULT_CONTACT
 from dvrk_gym.utils.atomic import read_json
 from dvrk_gym.utils.checks import check_endoscope_resolution, check_float
+from dvrk_gym.utils.run_folder import check_made_here
 from dvrk_gym.utils.source_fingerprint import source_fingerprint
 
 logger = logging.getLogger(__name__)
@@ -110,13 +111,17 @@ def calibration_rows(folder: Path) -> tuple[list[ComparisonRow], PipelineConfig]
 
     Raises:
         FileNotFoundError: the folder has no ``calibration_table.json``.
-        ValueError: the table is not one ``dvrk-gym evaluate`` writes (damaged or edited; the
-            message names it).
+        ValueError: a file, not a folder; made by another dvrk_gym (its numbers are another
+            simulator's); or the table is not one ``dvrk-gym evaluate`` writes (damaged or
+            edited; the message names it).
     """
     folder = Path(folder)
     table_path = folder / "calibration_table.json"
+    if folder.is_file():
+        raise ValueError(f"{folder} is a file; --calibration takes a calibration run folder")
     if not table_path.exists():
         raise FileNotFoundError(f"{table_path} not found: run 'dvrk-gym evaluate --out {folder}' first")
+    check_made_here(folder, SETTINGS_STAMP, remedy=CALIBRATE_AGAIN)
     table = read_json(table_path)
     config = _pipeline_config(folder)
     moves = calibrator_moves(config)
@@ -284,6 +289,26 @@ def benchmark_debridement(
         env_kwargs=pick_env_kwargs(config),
         progress=progress,
     )
+
+
+CALIBRATE_AGAIN = "calibrate again with this version: dvrk-gym calibrate --out NEW_FOLDER && dvrk-gym evaluate --out NEW_FOLDER"
+"""What a comparison with a calibration folder of another dvrk_gym tells the user to do."""
+
+
+def check_calibration_folder(folder: Path, *, table: bool, models: bool) -> None:
+    """Refuse, before any benchmark runs, a calibration folder a comparison would refuse halfway
+    (after the touch grid's files were written): its table (``table``) and every calibrator's
+    model file (``models``) are read as :func:`calibration_rows` and
+    :func:`calibration_debridement_rows` read them.
+
+    Raises:
+        FileNotFoundError, ValueError, ModelFileError: as those two raise.
+    """
+    if table:
+        calibration_rows(folder)
+    if models:
+        for name in CALIBRATORS:
+            load_calibrator(folder, name)
 
 
 def calibration_debridement_rows(

@@ -136,6 +136,7 @@ def _run_train(args: argparse.Namespace) -> int:
 def _run_evaluate(args: argparse.Namespace) -> int:
     from dvrk_gym.baselines.budgets import GRID_TOUCH_ID
     from dvrk_gym.baselines.checkpoints import distinct_labels, load_agent
+    from dvrk_gym.baselines.comparison import check_calibration_folder
 
     if args.trials < 1:
         raise ValueError(f"--trials must be >= 1, got {args.trials}")
@@ -143,9 +144,11 @@ def _run_evaluate(args: argparse.Namespace) -> int:
     agents = distinct_labels([load_agent(path) for path in args.model])  # two trained alike but for --bias...: named apart
     written: list[Path] = []
     grid_agents = [agent for agent in agents if agent.config.spec.env_id == GRID_TOUCH_ID]
+    debriding = [agent for agent in agents if agent.config.spec.env_id != GRID_TOUCH_ID or args.transfer]
+    if args.calibration is not None:  # all of it before any part runs and writes its files
+        check_calibration_folder(args.calibration, table=bool(grid_agents), models=bool(debriding))
     if grid_agents:
         written += _evaluate_touch_grid(grid_agents, args)
-    debriding = [agent for agent in agents if agent.config.spec.env_id != GRID_TOUCH_ID or args.transfer]
     if debriding:
         written += _evaluate_debridement(debriding, args)
     print("wrote " + ", ".join(str(p) for p in written))

@@ -63,7 +63,7 @@ def as_policy(policy: Any) -> Policy:
 def load_policy_factory(spec: str) -> Callable[[gym.Env], Any]:
     """Import ``"package.module:factory"`` (from the import path or the current folder): a function taking the env, returning a policy."""
     module_name, _, attribute = spec.partition(":")
-    if not module_name or not attribute:
+    if not module_name or not attribute or module_name.startswith("."):  # a relative import has no package to start from
         raise ValueError(f"--policy must look like 'package.module:factory', got {spec!r}")
     # The current folder too, as `python -m` would look: an installed command's import path
     # lacks it, so a policy file beside the user was not found.
@@ -75,6 +75,8 @@ def load_policy_factory(spec: str) -> Callable[[gym.Env], Any]:
         module = importlib.import_module(module_name)
     except ImportError as error:
         raise ValueError(f"cannot import {module_name!r} for --policy (from the import path and the current folder): {error}") from None
+    except Exception as error:  # the user's module fails as it loads (a SyntaxError names its file and line)
+        raise ValueError(f"importing {module_name!r} for --policy raised {type(error).__name__}: {error}") from error
     finally:
         if added:
             sys.path.remove(here)
