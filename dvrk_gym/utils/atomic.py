@@ -147,18 +147,27 @@ def read_bounded(path: str | os.PathLike, max_bytes: int, what: str) -> bytes:
     return data
 
 
+def _object_without_repeats(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    found = dict(pairs)
+    if len(found) != len(pairs):
+        repeated = sorted({key for key, _ in pairs if [k for k, _ in pairs].count(key) > 1})
+        raise ValueError(f"an object names {repeated} more than once")
+    return found
+
+
 def read_json(path: str | os.PathLike, max_bytes: int = MAX_JSON_BYTES) -> Any:
     """The JSON value in ``path``, read only if it is a regular file of at most ``max_bytes``.
 
     Raises:
         FileNotFoundError: there is no such file.
         PermissionError: it may not be read.
-        ValueError: not a regular file, too large, not UTF-8, not JSON, or nested too deeply;
+        ValueError: not a regular file, too large, not UTF-8, not JSON, nested too deeply, or
+            an object naming a key twice (which of the two would count is the reader's guess);
             the message names the file.
     """
     data = read_bounded(path, max_bytes, "a JSON file read here")
     try:
-        return json.loads(data.decode("utf-8"))
+        return json.loads(data.decode("utf-8"), object_pairs_hook=_object_without_repeats)
     except (ValueError, RecursionError) as error:  # UnicodeDecodeError and JSONDecodeError are ValueErrors
         raise ValueError(f"{path} is not valid JSON ({type(error).__name__}: {error})") from None
 

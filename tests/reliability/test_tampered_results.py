@@ -170,6 +170,12 @@ def test_json_is_read_only_from_a_regular_file_of_bounded_size(tmp_path):
         read_json(deep)
     with pytest.raises(ValueError, match="profile /dev/zero"):
         Profile.from_file("/dev/zero")
+    twice = tmp_path / "twice.json"  # the last "name" won, silently
+    twice.write_text('{"name": "small", "phase1_trajectories": 2, "nested": {"a": 1, "a": 2}, "name": "paper"}')
+    with pytest.raises(ValueError, match="twice.json is not valid JSON .*an object names \\['a'\\] more than once"):
+        read_json(twice)
+    with pytest.raises(ValueError, match="names \\['a'\\] more than once"):
+        Profile.from_file(twice)
 
 
 def test_fidelity_checks_its_out_before_collecting(tmp_path, capsys, monkeypatch):
