@@ -179,7 +179,7 @@ def _run_search(args: argparse.Namespace) -> int:
         X, y = clean.X, clean.y
         source = str(args.data)
     if args.folds > len(X):
-        raise ValueError(f"--folds {args.folds}: the data has only {len(X)} rows")
+        raise ValueError(f"--folds {args.folds}: {source} has only {len(X)} rows that the cleaning keeps")
     writable_folder(args.out)
     split = args.split or ("contiguous" if args.data == "paper" else "shuffled")
     shuffle, progress = split == "shuffled", not args.no_progress
