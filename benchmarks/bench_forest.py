@@ -24,6 +24,7 @@ import numpy as np
 from dvrk_gym.calibration.datasets import load_paper_phase1
 from dvrk_gym.calibration.models.features import PAPER_YAWS_RAD, encode_euler
 from dvrk_gym.calibration.models.forests import ForestCalibrator, ResidualForests, forest_predict
+from dvrk_gym.cli.options import check_flag_bounds
 
 PHASE2_CIRCLES = 35  # rows of one yaw group of Phase II
 
@@ -67,6 +68,7 @@ def main() -> None:
     parser.add_argument("--trees", type=int, default=100, help="trees of each forest (default: %(default)s)")
     parser.add_argument("--repeats", type=int, default=15, help="timed calls of each, the best kept (default: %(default)s)")
     args = parser.parse_args()
+    check_flag_bounds(parser, args, {"rows": (1, 10_000_000), "trees": (1, 10_000), "repeats": (1, 10_000)})
     rng = np.random.default_rng(0)
 
     X, y = load_paper_phase1()

@@ -33,12 +33,14 @@ import gymnasium as gym
 import numpy as np
 
 import dvrk_gym  # noqa: F401
+from dvrk_gym.cli.options import check_flag_bounds
 from dvrk_gym.envs.debridement import DebridementEnv
 from dvrk_gym.envs.picks import PickPrimitive
 from dvrk_gym.sim.endoscope.camera import StereoCamera
 from dvrk_gym.sim.endoscope.fragment_detection import FragmentBlob, FragmentObserver
 from dvrk_gym.sim.physics.client import Physics
 from dvrk_gym.sim.robot.body import PSMBody
+from dvrk_gym.sim.table.fragment_types import FRAGMENT_TYPES
 from dvrk_gym.sim.table.grasp import Gripper
 from dvrk_gym.sim.table.table import DebridementTable
 
@@ -133,9 +135,10 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--trials", type=int, default=4, help="trials of eight random picks (default: %(default)s)")
     parser.add_argument("--resolution", type=int, nargs=2, default=(1920, 1080), metavar=("W", "H"))
-    parser.add_argument("--fragment", default="pumpkin_seed", help="pumpkin_seed or raisin (default: %(default)s)")
+    parser.add_argument("--fragment", default="pumpkin_seed", choices=sorted(FRAGMENT_TYPES), help="(default: %(default)s)")
     add_what_if_arguments(parser)
     args = parser.parse_args()
+    check_flag_bounds(parser, args, {"trials": (1, 1000), "resolution": (None, None)})
     what_if = apply_what_ifs(parser, args)
     seconds: dict[str, float] = collections.defaultdict(float)
     calls: collections.Counter = collections.Counter()

@@ -27,6 +27,9 @@ REFUSALS = [
     ("bench_fidelity", ["--seeds", "1", "1"], "--seeds must be at most 100 distinct"),
     ("bench_fidelity", ["--bias-seeds", "-1"], "--bias-seeds must be"),
     ("bench_fidelity", ["--resolution", "640", "480"], "--resolution"),
+    ("bench_pick_parts", ["--trials", "0"], "--trials must be"),  # ZeroDivisionError at the end, after the picks
+    ("bench_pick_parts", ["--fragment", "grape"], "invalid choice: 'grape'"),
+    ("bench_forest", ["--rows", "0"], "--rows must be"),  # scikit-learn's error, after the fits
 ]
 
 
