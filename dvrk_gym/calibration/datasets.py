@@ -19,7 +19,7 @@ import numpy as np
 from dvrk_gym import paper
 from dvrk_gym.calibration.records import parse_npy, read_npz_arrays
 
-__all__ = ["PACKAGED_SHA256", "PaperTableRuns", "load_paper_phase1", "load_paper_table_runs"]
+__all__ = ["MAX_PACKAGED_BYTES", "PACKAGED_SHA256", "PaperTableRuns", "load_paper_phase1", "load_paper_table_runs"]
 
 _DATA_PACKAGE = "dvrk_gym"
 _MM_TO_M = 1e-3

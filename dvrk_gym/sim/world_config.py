@@ -1,8 +1,9 @@
 """How to build a world (:class:`WorldConfig`), what one commanded move did (:class:`MoveResult`),
 and what drives the tool once something can be held (:class:`JawDriver`); the checks of
-what a world is commanded (:func:`check_joints`, :func:`check_jaw_angle`).
+what a world is commanded (:func:`check_joints`, :func:`check_jaw_angle`, and the float
+paths' cheaper :func:`finite_joint_floats`).
 
-All five are re-exported by :mod:`dvrk_gym.sim.world`, which builds and runs the world.
+:mod:`dvrk_gym.sim.world`, which builds and runs the world, imports them all from here.
 """
 
 from __future__ import annotations

@@ -18,6 +18,7 @@ it (a missing file a ``FileNotFoundError``, an unreadable one a ``PermissionErro
 
 from __future__ import annotations
 
+import collections
 import contextlib
 import json
 import logging
@@ -150,8 +151,8 @@ def read_bounded(path: str | os.PathLike, max_bytes: int, what: str) -> bytes:
 def _object_without_repeats(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
     found = dict(pairs)
     if len(found) != len(pairs):
-        repeated = sorted({key for key, _ in pairs if [k for k, _ in pairs].count(key) > 1})
-        raise ValueError(f"an object names {repeated} more than once")
+        repeated = sorted(key for key, count in collections.Counter(key for key, _ in pairs).items() if count > 1)
+        raise ValueError(f"an object names {repeated[:5]} more than once")
     return found
 
 
