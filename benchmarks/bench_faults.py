@@ -32,25 +32,18 @@ import psutil
 from dvrk_gym.cli.options import check_flag_bounds
 from dvrk_gym.reproduce import TINY
 from dvrk_gym.reproduce.run import seeded_results
+from dvrk_gym.sim.physics.mirror import SCRATCH_PREFIX as DISPLAY_SCRATCH_PREFIX
+from dvrk_gym.sweep.unit import SCRATCH_PREFIX as SWEEP_SCRATCH_PREFIX
+from dvrk_gym.utils.parent_watch import orphaned_scratch
 
 ORPHAN_GRACE_S = 15.0
-SCRATCH_PREFIX = "dvrk_gym_"
-"""How the package's scratch folders in the system's temporary folder begin
-(:class:`dvrk_gym.utils.parent_watch.ScratchFolder`: ``{prefix}{host}_{pid}_...``)."""
+SCRATCH_PREFIXES = (SWEEP_SCRATCH_PREFIX, DISPLAY_SCRATCH_PREFIX)
+"""The package's scratch folders in the system's temporary folder (:class:`~dvrk_gym.utils.parent_watch.ScratchFolder`)."""
 
 
-def scratch_folders() -> set[Path]:
-    """The package's scratch folders in the system's temporary folder now."""
-    return set(Path(tempfile.gettempdir()).glob(f"{SCRATCH_PREFIX}*"))
-
-
-def orphaned_scratch(before: set[Path]) -> int:
-    """How many scratch folders made since ``before`` name a process that no longer runs."""
-    left = 0
-    for folder in scratch_folders() - before:
-        fields = folder.name.split("_")  # dvrk, gym, its kind, the host (no "_" in it), the pid, mkdtemp's letters
-        left += len(fields) > 4 and fields[4].isdigit() and not psutil.pid_exists(int(fields[4]))
-    return left
+def orphaned_scratch_folders() -> set[Path]:
+    """The package's scratch folders that ended processes on this host left."""
+    return {folder for prefix in SCRATCH_PREFIXES for folder in orphaned_scratch(prefix)}
 
 
 def command(profile: Path, out: Path, workers: int) -> list[str]:
@@ -115,13 +108,13 @@ def main() -> None:
         counts = {"killed": 0, "resumed": 0, "identical": 0, "orphans": 0, "partial files": 0}
         for i in range(args.kills):
             out = root / f"kill{i:02d}"
-            scratch_before = scratch_folders()
+            scratch_before = orphaned_scratch_folders()
             after = float(rng.uniform(0.02, 0.98) * reference_s)
             started, orphans, ended_first = kill_at(profile, out, args.workers, after)
             cached = len(list((out / "tasks").glob("*.json"))) if (out / "tasks").exists() else 0
             status, resume_s, err = run_to_end(profile, out, args.workers)
             identical = status == 0 and seeded_results(json.loads((out / "results.json").read_text())) == reference
-            partial = len(list(out.rglob(".*.partial*"))) + orphaned_scratch(scratch_before)
+            partial = len(list(out.rglob(".*.partial*"))) + len(orphaned_scratch_folders() - scratch_before)
             counts["killed"] += not ended_first
             counts["resumed"] += status == 0
             counts["identical"] += identical

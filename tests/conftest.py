@@ -79,3 +79,25 @@ def tool_to_tip_m(yaw: float):
 
     reference = tool_pose(WORKSPACE_CENTER_M + [0.0, 0.0, 0.01], yaw)
     return kin.touch_point(ik.inverse_kinematics(reference)) - reference[:3, 3]
+
+
+@pytest.fixture
+def unseen_phase1():
+    """A Phase I collection of ``n`` rows in which the camera never saw the marker (none kept)."""
+    import numpy as np
+
+    from dvrk_gym.calibration.phase1 import Phase1Data
+
+    def make(n: int) -> Phase1Data:
+        return Phase1Data(
+            reported_position=np.zeros((n, 3)),
+            orientation=np.zeros((n, 3)),
+            left_px=np.full((n, 2), np.nan),
+            right_px=np.full((n, 2), np.nan),
+            areas_px=np.zeros((n, 2)),
+            camera_position=np.full((n, 3), np.nan),
+            trajectory=np.zeros(n, dtype=int),
+            kept=np.zeros(n, dtype=bool),
+        )
+
+    return make

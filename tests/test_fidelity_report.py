@@ -102,23 +102,10 @@ def test_cross_validation_rows_are_left_out_when_not_run():
     assert len(names) == 20 and not any("CV" in name for name in names)
 
 
-def test_a_simulated_collection_that_keeps_too_few_rows_says_so(monkeypatch):
-    import numpy as np
-
-    from dvrk_gym.calibration.phase1 import Phase1Data
+def test_a_simulated_collection_that_keeps_too_few_rows_says_so(monkeypatch, unseen_phase1):
     from dvrk_gym.fidelity import comparison
 
-    n = 93
-    unseen = Phase1Data(
-        reported_position=np.zeros((n, 3)),
-        orientation=np.zeros((n, 3)),
-        left_px=np.full((n, 2), np.nan),
-        right_px=np.full((n, 2), np.nan),
-        areas_px=np.zeros((n, 2)),
-        camera_position=np.full((n, 3), np.nan),
-        trajectory=np.zeros(n, dtype=int),
-        kept=np.zeros(n, dtype=bool),
-    )
+    unseen = unseen_phase1(93)
     monkeypatch.setattr(comparison, "run_paper_phase1", lambda *args, **kwargs: unseen)
     with pytest.raises(
         ValueError, match="no statistics of the simulated Phase I's 0 kept rows \\(of 93\\): X has no rows.*collect more trajectories"

@@ -216,8 +216,7 @@ class _GraphRun:
         self.label = label
         self.work = {task.name: task.cost_s if math.isfinite(task.cost_s) and task.cost_s > 0 else 1.0 for task in tasks}
         done = sum(self.work[name] for name in self.results)
-        desc = f"{label}: {len(self.results)}/{len(tasks)} tasks"
-        self.bar = tqdm(total=sum(self.work.values()), initial=done, desc=desc, bar_format=BAR_FORMAT, disable=not progress)
+        self.bar = tqdm(total=sum(self.work.values()), initial=done, desc=self._tasks_done(), bar_format=BAR_FORMAT, disable=not progress)
 
     def run(self) -> dict[str, dict[str, Any]]:
         try:
@@ -241,9 +240,12 @@ class _GraphRun:
             raise self.failure
         return {task.name: self.results[task.name] for task in self.tasks}
 
+    def _tasks_done(self) -> str:
+        return f"{self.label}: {len(self.results)}/{len(self.tasks)} tasks"
+
     def _show(self, running: Iterable[str]) -> None:
         """The bar's words: tasks finished of all before it, those running after it."""
-        self.bar.set_description_str(f"{self.label}: {len(self.results)}/{len(self.tasks)} tasks", refresh=False)
+        self.bar.set_description_str(self._tasks_done(), refresh=False)
         self.bar.set_postfix_str(", ".join(sorted(running)), refresh=False)
 
     def _queue_ready(self) -> None:

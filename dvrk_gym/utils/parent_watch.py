@@ -116,16 +116,15 @@ def host_label() -> str:
     return re.sub(r"[^A-Za-z0-9-]", "-", socket.gethostname()) or "host"
 
 
-def remove_orphaned_scratch(prefix: str, root: Path | None = None) -> list[Path]:
-    """Delete the folders ``{prefix}{host}_{pid}_*`` in ``root`` (default: the temporary
-    folder) made on this host by a process ``pid`` that no longer runs, and that belong to
-    this user; the deleted folders.
+def orphaned_scratch(prefix: str, root: Path | None = None) -> list[Path]:
+    """The folders ``{prefix}{host}_{pid}_*`` in ``root`` (default: the temporary folder) made
+    on this host by a process ``pid`` that no longer runs, and that belong to this user.
 
-    A folder of another host (a temporary folder shared between machines) is kept, and so is
-    one whose pid now names another process (until that one ends too).
+    A folder of another host (a temporary folder shared between machines) is not one, and
+    neither is one whose pid now names another process (until that one ends too).
     """
     mine = check_file_stem("a scratch prefix (a plain name)", prefix) + host_label() + "_"
-    removed = []
+    found = []
     for folder in Path(root or tempfile.gettempdir()).glob(f"{mine}*_*"):
         pid = folder.name[len(mine) :].split("_", 1)[0]
         try:
@@ -134,7 +133,14 @@ def remove_orphaned_scratch(prefix: str, root: Path | None = None) -> list[Path]
         except OSError:  # gone meanwhile
             continue
         if not psutil.pid_exists(int(pid)):
-            shutil.rmtree(folder, ignore_errors=True)
-            logger.info("deleted %s, left by process %s, which ended", folder, pid)
-            removed.append(folder)
+            found.append(folder)
+    return found
+
+
+def remove_orphaned_scratch(prefix: str, root: Path | None = None) -> list[Path]:
+    """Delete the folders :func:`orphaned_scratch` finds; the deleted folders."""
+    removed = orphaned_scratch(prefix, root)
+    for folder in removed:
+        shutil.rmtree(folder, ignore_errors=True)
+        logger.info("deleted %s, left by a process that ended", folder)
     return removed

@@ -410,24 +410,10 @@ def test_ctrl_c_of_a_training_says_it_resumes_only_once_a_state_was_saved(capsys
     assert "its last saved training state is kept: the same command resumes from it" in capsys.readouterr().err
 
 
-def test_search_on_a_collection_that_keeps_too_few_rows_names_the_file(capsys, tmp_path):
+def test_search_on_a_collection_that_keeps_too_few_rows_names_the_file(capsys, tmp_path, unseen_phase1):
     """It said "--folds 2: the data has only 0 rows", as though the flag were at fault."""
-    import numpy as np
-
-    from dvrk_gym.calibration.phase1 import Phase1Data
-
-    n = 5
     data = tmp_path / "phase1.npz"
-    Phase1Data(
-        reported_position=np.zeros((n, 3)),
-        orientation=np.zeros((n, 3)),
-        left_px=np.full((n, 2), np.nan),
-        right_px=np.full((n, 2), np.nan),
-        areas_px=np.zeros((n, 2)),
-        camera_position=np.full((n, 3), np.nan),
-        trajectory=np.zeros(n, dtype=int),
-        kept=np.zeros(n, dtype=bool),
-    ).save(data)
+    unseen_phase1(5).save(data)
     assert main(["search", "--data", str(data), "--folds", "2", "--out", str(tmp_path / "search")]) == 2
     assert f"--folds 2: {data} has only 0 rows that the cleaning keeps" in capsys.readouterr().err
     assert not (tmp_path / "search").exists()

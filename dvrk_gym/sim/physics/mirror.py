@@ -62,6 +62,8 @@ draws a shadow map from the light every frame, 4096 texels over 20 m, 1 m to 300
 front of it: a millimetre scene would shadow itself in 5 mm blotches. A light this far
 away leaves the whole scene beyond the shadow map's depth range: all of it is lit."""
 EGL_LIGHT_POSITION = [LIGHT_DISTANCE_M * v / float(np.linalg.norm(TINY_LIGHT_DIRECTION)) for v in TINY_LIGHT_DIRECTION]
+SCRATCH_PREFIX = "dvrk_gym_display_"
+"""How the renderer's scratch folders of meshes begin (:class:`~dvrk_gym.utils.parent_watch.ScratchFolder`)."""
 PROBE_TIMEOUT_S = 60.0
 """How long the child process that tries the EGL plugin may take, seconds."""
 _PROBE_SENTINEL = "dvrk_gym-egl-probe-ok"
@@ -164,7 +166,7 @@ class EglMirror:
         if failure is not None:
             raise RendererUnavailable(f"PyBullet's EGL renderer ({path}) does not run here: {failure}")
         self._shared: _SharedEglClient | None = _SharedEglClient.acquire(path)
-        self._folder: ScratchFolder | None = ScratchFolder("dvrk_gym_display_")
+        self._folder: ScratchFolder | None = ScratchFolder(SCRATCH_PREFIX)
         # Gives the client back and deletes the folder when closed, collected, or at exit (while the streams still work).
         self._release = weakref.finalize(self, _release, self._shared, self._folder, os.getpid())
         self._layout: int | None = None  # the layout_version of the Physics copied
