@@ -183,28 +183,19 @@ def _play_floats(motor: float, plays: tuple[float, ...], radii: list[float]) -> 
 
 
 def play_update(plays: np.ndarray, q_cmd: np.ndarray, radii: np.ndarray) -> np.ndarray:
-    """Advance play operators (backlash elements) to a new command.
+    """The outputs (n_plays, 6) of play operators (backlash elements) at ``plays`` (n_plays, 6)
+    after a new command ``q_cmd`` (6,), with half-widths ``radii`` (n_plays, 6) >= 0, rad / m.
 
     Each play's output stays put until the command is more than its radius away, then
-    is dragged along at that distance: approaching one command from opposite sides
-    leaves the output on opposite sides of it.
-
-    Args:
-        plays: (n_plays, 6) previous outputs.
-        q_cmd: (6,) new command.
-        radii: (n_plays, 6) half-widths, >= 0 (zero: the output follows exactly).
-
-    Returns:
-        (n_plays, 6) new outputs.
+    is dragged along at that distance (radius zero: it follows exactly): approaching one
+    command from opposite sides leaves the output on opposite sides of it.
     """
     return np.clip(plays, q_cmd - radii, q_cmd + radii)
 
 
 def hysteresis_output(plays: np.ndarray, q_cmd: np.ndarray) -> np.ndarray:
-    """The Prandtl-Ishlinskii joint value: the mean of the play outputs, (6,).
-
-    Written as q_cmd minus the mean lag so that zero-width plays give q_cmd bit for bit.
-    """
+    """The Prandtl-Ishlinskii joint value: the mean of the play outputs, (6,); written as
+    q_cmd minus the mean lag so that zero-width plays give q_cmd bit for bit."""
     # np.mean's arithmetic (a sum, then a division by the count), without its wrapper's overhead.
     return q_cmd - np.add.reduce(q_cmd - plays, axis=0) / len(plays)
 
@@ -272,8 +263,7 @@ class CableModel:
         # NaN = no history yet: the first command finds the cables at rest there.
         self._plays = np.full((len(PLAY_FRACTIONS), _N_JOINTS), np.nan)
         self._settle_lag = config.wrist_settle_lag
-        # Where the motors stopped on the last move (what the encoders read): the commands
-        # themselves unless the wrist settles short (``wrist_settle_lag``); NaN before the first.
+        # Where the motors stopped on the last move (what the encoders read; NaN before it).
         self._motors = np.full(_N_JOINTS, np.nan)
         # The float path's constants (peek_true_joints_floats, true_joints_floats).
         self._radii_columns, self._n_plays = self._radii.T.tolist(), len(PLAY_FRACTIONS)
@@ -291,12 +281,13 @@ class CableModel:
             return q_cmd
         return self._motors.copy()
 
-    def _motor_joints(self, q_cmd: np.ndarray) -> np.ndarray:
-        """Where the motors stop for the command ``q_cmd`` (6,), without moving them."""
-        if self._settle_lag == 0.0 or np.isnan(self._motors).any():
+    def _motor_joints(self, q_cmd: np.ndarray, start: np.ndarray | None = None) -> np.ndarray:
+        """Where the motors stop for ``q_cmd`` (6,) from ``start`` (None: the last stop); nothing moves."""
+        start = self._motors if start is None else start
+        if self._settle_lag == 0.0 or np.isnan(start).any():
             return q_cmd
         motors = q_cmd.copy()
-        motors[_WRIST_BENDING] += self._settle_lag * (self._motors[_WRIST_BENDING] - q_cmd[_WRIST_BENDING])
+        motors[_WRIST_BENDING] += self._settle_lag * (start[_WRIST_BENDING] - q_cmd[_WRIST_BENDING])
         return motors
 
     def reset(self, q_cmd: np.ndarray) -> None:
@@ -305,24 +296,35 @@ class CableModel:
         self._plays = np.tile(q_cmd, (len(PLAY_FRACTIONS), 1))
         self._motors = q_cmd.copy()
 
-    def true_joints(self, q_cmd: np.ndarray, noise_rng: np.random.Generator | None = None) -> np.ndarray:
+    def true_joints(
+        self, q_cmd: np.ndarray, noise_rng: np.random.Generator | None = None, *, settle_from: np.ndarray | None = None
+    ) -> np.ndarray:
         """Move to a joint command and return the joints the arm really takes.
 
         Args:
             q_cmd: (6,) commanded (= reported) joints, rad / m.
             noise_rng: Source of this move's repeatability noise (one draw per call);
                 None for a noiseless move.
+            settle_from: where the motors stood as the move began (6,) rad / m (NaN: no
+                history), for a point of a move sampled in several calls: the wrist settles
+                short once a move; None: where the last call left them.
 
         Returns:
             (6,) true joint values, rad / m.
         """
-        q_cmd = _checked_joints(q_cmd, "q_cmd")
-        motors = self._motor_joints(q_cmd)
+        motors = self._motor_joints(_checked_joints(q_cmd, "q_cmd"), settle_from)
         self._plays, q_true = self._advance(motors)
         self._motors = motors.copy()  # the cables follow the motors
-        if noise_rng is not None:
-            q_true = q_true + noise_rng.normal(0.0, 1.0, _N_JOINTS) * self._noise_std
-        return q_true
+        return q_true if noise_rng is None else q_true + self.repeatability_draw(noise_rng)
+
+    def repeatability_draw(self, noise_rng: np.random.Generator) -> np.ndarray:
+        """One move's repeatability noise (6,) rad / m: the draw :meth:`true_joints` adds."""
+        return noise_rng.normal(0.0, 1.0, _N_JOINTS) * self._noise_std
+
+    def resting_true_joints(self, q_cmd: np.ndarray) -> np.ndarray:
+        """:meth:`true_joints` of the last move, whose command was ``q_cmd`` (6,), without its
+        noise (6,) rad / m; nothing moves (:meth:`peek_true_joints` would settle the wrist again)."""
+        return self.peek_true_joints(q_cmd) if np.isnan(self._motors).any() else self._advance(self._motors)[1]
 
     def peek_true_joints(self, q_cmd: np.ndarray) -> np.ndarray:
         """The joints (6,) rad / m that a noiseless move to ``q_cmd`` (6,) would give, without
@@ -385,14 +387,12 @@ class CableModel:
         return plays, q + self.instrument.homing_offsets + error
 
     def get_state(self) -> np.ndarray:
-        """A copy of the cables' history, (n_plays + 1, 6): the play outputs, then where the
-        motors stopped; NaN before the first move."""
+        """A copy of the cables' history (n_plays + 1, 6): the plays, then the motors; NaN before a move."""
         return np.concatenate((self._plays, self._motors[np.newaxis]))
 
     def set_state(self, state: np.ndarray) -> None:
         """Restore a state from get_state (all finite, or all NaN for 'no history')."""
-        state = np.array(state, dtype=float)
-        shape = (len(PLAY_FRACTIONS) + 1, _N_JOINTS)
+        state, shape = np.array(state, dtype=float), (len(PLAY_FRACTIONS) + 1, _N_JOINTS)
         if state.shape != shape:
             raise ValueError(f"state must have shape {shape}, got {state.shape}")
         if not (np.isfinite(state).all() or np.isnan(state).all()):

@@ -152,7 +152,8 @@ class DebridementTable:
         sample goes through the nominal inverse kinematics (the joint command) and the
         cable model (the true joints the jaws follow), so the jaws push, squeeze and lift
         what they meet. This move's repeatability noise is blended in along the way from
-        the last move's.
+        the last move's, and the wrist settles short of the command once a move
+        (``BiasConfig.wrist_settle_lag``), as after :meth:`~dvrk_gym.sim.world.DvrkWorld.move_to`.
 
         Args:
             pose: the commanded tool pose (4x4, base frame, metres); clamped to the
@@ -187,10 +188,10 @@ class DebridementTable:
         else:
             move = CartesianMove(world.reported_pose(), end, duration_s, 0.0)
         dt = world.physics.time_step_s
-        offset_start = world.q_true - world.cable.true_joints(world.q_cmd)
+        offset_start = world.q_true - world.cable.resting_true_joints(world.q_cmd)  # the last move's noise
         floor = None if min_tip_clearance_m is None else float(WORKSPACE_CENTER_M[2]) + min_tip_clearance_m
         commands, trues, slides = self._joint_path(move, offset_start, floor)
-        noise_end = world.cable.true_joints(commands[-1], noise_rng) - trues[-1]
+        noise_end = np.zeros(len(offset_start)) if noise_rng is None else world.cable.repeatability_draw(noise_rng)
         fractions = np.arange(1, len(commands) + 1)[:, None] / len(commands)
         path = np.array(trues) + (1.0 - fractions) * offset_start + fractions * noise_end
         for i, slide in slides.items():
@@ -224,10 +225,11 @@ class DebridementTable:
         trues: list[np.ndarray] = []
         slid: dict[int, np.ndarray] = {}
         q_ref = self.world.q_cmd
+        motors = cable.get_state()[-1]  # the wrist settles short once a move, as move_to's does
         for waypoint in _waypoints(move, self.world.physics.time_step_s):
             state = cable.get_state()
             q_ref, _ = ik.inverse_kinematics_clamped(waypoint, q_ref=q_ref)
-            q_true = cable.true_joints(q_ref)
+            q_true = cable.true_joints(q_ref, settle_from=motors)
             if floor is not None:
                 gap = kin.touch_point(q_true + offset_start, cable.true_dh)[2] - floor
                 if gap < 0.0:  # the tip stays on the floor: lift this waypoint by the gap (the
@@ -236,7 +238,7 @@ class DebridementTable:
                     lifted = waypoint.copy()
                     lifted[2, 3] -= gap
                     q_ref, _ = ik.inverse_kinematics_clamped(lifted, q_ref=commands[-1] if commands else self.world.q_cmd)
-                    q_true = cable.true_joints(q_ref)
+                    q_true = cable.true_joints(q_ref, settle_from=motors)
                     depth = paper_z - (floor + gap)  # how far under the paper the tip was sent
                     if slides and depth > 0.0:
                         lifted[:2, 3] += self.contact.slide_m(depth)
