@@ -342,3 +342,18 @@ def test_collect_stamps_its_folder_as_calibrate_does_and_refuses_other_settings(
     assert main(["calibrate", "--trajectories", "2", "--resolution", "640", "360", "--no-progress", "--out", str(tmp_path)]) == 2
     assert "n_trajectories: 1 there, 2 here" in capsys.readouterr().err
     assert (tmp_path / "phase1.npz").read_bytes() == collected and not (tmp_path / "rbt.zip").exists()
+
+
+def test_asked_to_calibrate_a_folder_whose_model_is_damaged_the_pipeline_sets_it_aside_and_makes_it_again(tmp_path):
+    """As ``dvrk-gym calibrate`` does; ``debride --calibrate`` refused the folder instead."""
+    config = PipelineConfig(n_trajectories=3, steps_per_trajectory=30, dnn_epochs=5, bias="none", camera_resolution=SMALL)
+    with RunFolder(tmp_path, dataclasses.asdict(config), stamp=SETTINGS_STAMP):
+        pass
+    (tmp_path / "rbt.zip").write_bytes(b"PK\x03\x04 cut short")
+    with pytest.raises(ModelFileError, match="rbt.zip"):
+        load_calibrator(tmp_path, "rbt")
+    assert not (tmp_path / "phase1.npz").exists()  # not asked: nothing ran
+    model, _ = load_calibrator(tmp_path, "rbt", calibrate_if_missing=True)
+    assert isinstance(model, RigidBodyCalibrator)
+    assert (tmp_path / "rbt.zip.corrupt").read_bytes() == b"PK\x03\x04 cut short"
+    assert load_calibrator(tmp_path, "rbt")[0].predict(np.zeros((1, 6))).shape == (1, 3)

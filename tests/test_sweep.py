@@ -6,6 +6,7 @@ import gc
 import json
 import math
 import os
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -59,6 +60,8 @@ def test_ranges_and_calibrator_lists_parse_and_bad_ones_say_what_is_allowed():
         ("-1", "not a non-negative number"),
         ("0--3", "not a non-negative number"),
         ("1-2-3", "not a non-negative number"),
+        ("\u0663", "not a non-negative number"),  # ARABIC-INDIC DIGIT THREE: int() reads it as 3
+        ("0-\uff14", "not a non-negative number"),  # FULLWIDTH DIGIT FOUR
     ):
         with pytest.raises(ValueError, match=message):
             parse_int_list(text, "--bias-seeds")
@@ -170,6 +173,16 @@ def test_a_resumed_sweep_runs_nothing_and_a_larger_grid_runs_only_the_new_units(
     larger = run_sweep(SweepSettings(bias_seeds=(0, 1, 2), seeds=(0, 1), pipeline=TINY), tmp_path, grown, progress=False)
     assert sorted(grown.submitted) == ["bias0-seed1", "bias1-seed1", "bias2-seed0", "bias2-seed1"]
     assert len(larger.rows) == 3 * 2 * 3
+
+
+def test_a_sweep_whose_units_folder_became_a_file_says_so_and_keeps_it(tmp_path):
+    run_sweep(SweepSettings(bias_seeds=(0,), pipeline=TINY), tmp_path, StandInExecutor(), progress=False)
+    shutil.rmtree(tmp_path / "units")
+    (tmp_path / "units").write_text("notes")
+    other = StandInExecutor()
+    with pytest.raises(ValueError, match="units is not a folder, where the sweep keeps its finished units: move it away"):
+        run_sweep(SweepSettings(bias_seeds=(0,), pipeline=TINY), tmp_path, other, progress=False)
+    assert other.submitted == [] and (tmp_path / "units").read_text() == "notes"
 
 
 def test_a_folder_made_with_other_settings_is_refused(tmp_path):

@@ -45,7 +45,8 @@ def load_calibrator(
     """A calibrator from a calibration run folder, and the run's settings.
 
     With ``calibrate_if_missing``, runs the calibration pipeline in ``folder`` first if the
-    model file is missing (its stages are cached, so an interrupted run resumes); without
+    model file is missing or damaged (its stages are cached, so an interrupted run resumes,
+    and a damaged file is set aside as ``<name>.corrupt`` and made again); without
     it, a missing model is an error (a mistyped folder would start a calibration of an hour
     at the paper's budget). The settings come from the folder's stamp when it has one, else
     from ``bias``/``bias_seed`` and ``camera_resolution`` (None: the paper's).
@@ -56,7 +57,8 @@ def load_calibrator(
         bias: the cable bias preset, for a folder without settings.
         bias_seed: which instrument, for a folder without settings.
         camera_resolution: (width, height) px, for a folder without settings.
-        calibrate_if_missing: run the pipeline when the folder has no such model.
+        calibrate_if_missing: run the pipeline when the folder has no such model, or a
+            damaged one.
 
     Raises:
         ValueError: an unknown calibrator name; a folder stamped by another dvrk_gym (its
@@ -65,8 +67,9 @@ def load_calibrator(
             other settings (:class:`~dvrk_gym.utils.run_folder.RunFolder`).
         FileNotFoundError: the folder has no such model, and ``calibrate_if_missing`` is False.
         ModelFileError: the folder holds the calibrator only in the retired ``.npz`` format (the
-            message gives the command that makes it again), or its model file is bad, or holds
-            a network fitted with another seed or epoch count than the folder's settings.
+            message gives the command that makes it again), or its model file is bad (without
+            ``calibrate_if_missing``), or holds a network fitted with another seed or epoch
+            count than the folder's settings.
     """
     if name not in CALIBRATOR_FILES:
         raise ValueError(f"unknown calibrator {name!r}; expected one of {sorted(CALIBRATOR_FILES)}")
@@ -84,11 +87,20 @@ def load_calibrator(
             f"{folder} {found}: give a calibration run folder ('dvrk-gym calibrate --out {folder}' makes one), "
             "or calibrate_if_missing=True to run the calibration there"
         )
-    if not path.exists():
-        logger.warning("%s has no %s: running the calibration pipeline there (cached stages)", folder, path.name)
+    model = None
+    if path.exists():
+        try:
+            model = CALIBRATOR_LOADERS[name].load(path)
+        except ModelFileError as error:  # damaged: the pipeline sets it aside and makes it again, as `calibrate` does
+            if not calibrate_if_missing:
+                raise
+            logger.warning("%s; running the calibration pipeline there, which makes it again", error)
+    if model is None:
+        if not path.exists():
+            logger.warning("%s has no %s: running the calibration pipeline there (cached stages)", folder, path.name)
         run_calibration(folder, PipelineConfig.from_settings(settings, source=f"the settings of {folder}"), benchmark=False)
         settings = read_pipeline_settings(folder) or settings
-    model = CALIBRATOR_LOADERS[name].load(path)
+        model = CALIBRATOR_LOADERS[name].load(path)
     _check_fitted_as_stamped(model, path, settings)
     return model, settings
 

@@ -145,8 +145,9 @@ def _check_seeds(values: tuple[int, ...], name: str) -> None:
     _check_unique(values, name)
 
 
-_NUMBER_OR_RANGE = re.compile(r"\s*(?P<first>\d+)\s*(?:-\s*(?P<last>\d+)\s*)?")
-"""One part of a list of seeds: a non-negative integer, or an inclusive range of them ("7-9")."""
+_NUMBER_OR_RANGE = re.compile(r"\s*(?P<first>[0-9]+)\s*(?:-\s*(?P<last>[0-9]+)\s*)?")
+"""One part of a list of seeds: a non-negative integer, or an inclusive range of them ("7-9"), in ASCII
+digits (``\\d`` would take other scripts' digits too, which ``int`` reads)."""
 
 
 def parse_int_list(text: str, option: str) -> tuple[int, ...]:

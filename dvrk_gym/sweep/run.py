@@ -107,6 +107,8 @@ def run_sweep(settings: SweepSettings, out: str | os.PathLike, executor: Executo
     start = time.perf_counter()
     with RunFolder(out, settings.stamp(), stamp=SETTINGS_STAMP) as folder:
         units_dir = folder.file(UNITS_FOLDER)
+        if units_dir.exists() and not units_dir.is_dir():  # mkdir would say "[Errno 17] File exists"
+            raise ValueError(f"{units_dir} is not a folder, where the sweep keeps its finished units: move it away, or give another --out")
         units_dir.mkdir(exist_ok=True)
         results: dict[str, dict[str, Any]] = {}
         for unit in settings.units():
