@@ -9,8 +9,8 @@ paths' cheaper :func:`finite_joint_floats`).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
-from typing import Protocol
+from dataclasses import dataclass, field, fields
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -112,6 +112,18 @@ class WorldConfig:
                 raise ValueError(f"camera_pose must be None or a finite 4x4 float transform (metres), got {self.camera_pose!r}")
             pose.flags.writeable = False
             object.__setattr__(self, "camera_pose", pose)
+
+    def __eq__(self, other: object) -> bool:
+        """Field by field, ``camera_pose`` by value (an array's ``==`` is elementwise, so the
+        generated method raised for two configs with one)."""
+        return self._key() == other._key() if isinstance(other, WorldConfig) else NotImplemented
+
+    def __hash__(self) -> int:
+        return hash(self._key())
+
+    def _key(self) -> tuple[Any, ...]:
+        pose = None if self.camera_pose is None else tuple(self.camera_pose.ravel().tolist())
+        return tuple(pose if f.name == "camera_pose" else getattr(self, f.name) for f in fields(self))
 
 
 @dataclass(frozen=True)

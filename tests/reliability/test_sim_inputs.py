@@ -59,6 +59,10 @@ def test_world_config_refuses_a_detector_of_another_kind_and_keeps_its_own_camer
     pose[0, 3] = 9.0  # the caller's array changes after the check
     assert config.camera_pose[0, 3] == default_camera_pose()[0, 3]
     assert not config.camera_pose.flags.writeable
+    # compared and hashed by value, as a frozen config should be (it raised: an array's == is elementwise)
+    same, moved = WorldConfig(camera_pose=default_camera_pose()), WorldConfig(camera_pose=pose)
+    assert config == same and hash(config) == hash(same) and len({config, same, moved, WorldConfig()}) == 3
+    assert config != moved and config != WorldConfig() and WorldConfig() == WorldConfig()
 
 
 def test_a_refused_move_leaves_the_world_as_it_was():
