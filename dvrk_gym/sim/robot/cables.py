@@ -322,8 +322,8 @@ class CableModel:
         return noise_rng.normal(0.0, 1.0, _N_JOINTS) * self._noise_std
 
     def resting_true_joints(self, q_cmd: np.ndarray) -> np.ndarray:
-        """:meth:`true_joints` of the last move, whose command was ``q_cmd`` (6,), without its
-        noise (6,) rad / m; nothing moves (:meth:`peek_true_joints` would settle the wrist again)."""
+        """:meth:`true_joints` of the last move without its noise (6,) rad / m (before any, at rest
+        at ``q_cmd`` (6,)); nothing moves (:meth:`peek_true_joints` would settle the wrist again)."""
         return self.peek_true_joints(q_cmd) if np.isnan(self._motors).any() else self._advance(self._motors)[1]
 
     def peek_true_joints(self, q_cmd: np.ndarray) -> np.ndarray:

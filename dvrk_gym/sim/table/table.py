@@ -188,7 +188,7 @@ class DebridementTable:
         else:
             move = CartesianMove(world.reported_pose(), end, duration_s, 0.0)
         dt = world.physics.time_step_s
-        offset_start = world.q_true - world.cable.resting_true_joints(world.q_cmd)  # the last move's noise
+        offset_start = world.q_true - world.cable.resting_true_joints(world.q_cmd)  # the last move's noise (and slide)
         floor = None if min_tip_clearance_m is None else float(WORKSPACE_CENTER_M[2]) + min_tip_clearance_m
         commands, trues, slides = self._joint_path(move, offset_start, floor)
         noise_end = np.zeros(len(offset_start)) if noise_rng is None else world.cable.repeatability_draw(noise_rng)
@@ -211,7 +211,7 @@ class DebridementTable:
         Args:
             move: the Cartesian move, sampled every physics step.
             offset_start: the true joints' offset from the cable model's at the start
-                (the last move's repeatability noise), rad / m.
+                (the last move's repeatability noise, and its slide on the paper), rad / m.
             floor: the lowest height the closed jaw tip may reach, base frame z, m; None:
                 no floor. A waypoint that would take the tip under it is raised onto it; if
                 it would take the tip ``depth`` under the paper (where GridTouch-v0's touches
