@@ -1,8 +1,8 @@
 """``dvrk-gym debride``: the paper's debridement trials with a calibrator from a calibration run folder.
 
 Loads the calibrator (:func:`~dvrk_gym.calibration.loading.load_calibrator`; with
-``--calibrate`` it runs the two-phase pipeline in the folder first if it holds no model,
-without it such a folder is an error), runs the trials
+``--calibrate`` it runs the two-phase pipeline in the folder first if it holds no model or
+a damaged one, without it such a folder is an error), runs the trials
 (:func:`~dvrk_gym.evaluation.trials.run_debridement`) with a
 :class:`~dvrk_gym.calibration.policy.CalibratedPolicy` aimed at the next fragment the
 endoscope sees, prints the trial table and writes it (JSON, text) with a picture of the
@@ -121,7 +121,10 @@ def add_commands(subparsers: argparse._SubParsersAction) -> None:
     debride.add_argument(
         "--calibrate",
         action="store_true",
-        help="run the two-phase calibration in --calibration first if it holds no model (without it, a folder with no model is an error)",
+        help=(
+            "run the two-phase calibration in --calibration first if it holds no model, or a damaged one, which is set "
+            "aside as <name>.corrupt (without it, either is an error)"
+        ),
     )
     debride.add_argument("--seed", type=int, default=0, help="seeds the trials (default: %(default)s)")
     debride.add_argument(
