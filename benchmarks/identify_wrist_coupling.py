@@ -64,16 +64,14 @@ def fit_coupling(fit: identify.InstrumentFit, commands: np.ndarray, pixels: np.n
     free = list(fit.free)
 
     def residuals(values: np.ndarray) -> np.ndarray:
-        theta = fit.theta.copy()
-        theta[free] = values[:-1]
+        theta = identify.theta_of(values[:-1], fit)
         scaled = ((coupled_pixels(theta, values[-1], commands) - pixels) / fit.scales).ravel()
-        return np.concatenate([scaled, identify.prior_residuals(theta, fit.free)])
+        return np.concatenate([identify.huber_residuals(scaled), identify.prior_residuals(theta, fit.free)])
 
-    start = np.r_[fit.theta[free], 0.0]
-    result = least_squares(residuals, start, x_scale="jac", diff_step=1e-5, loss="huber", f_scale=identify.HUBER_SCALE)
-    theta = fit.theta.copy()
-    theta[free] = result.x[:-1]
-    return theta, float(result.x[-1])
+    # The camera's rotation as a turn of the fit's (zero at the start), as identify.refit fits it.
+    start = np.r_[np.where(np.isin(free, identify.CAMERA_ROTATION), 0.0, fit.theta[free]), 0.0]
+    result = least_squares(residuals, start, x_scale="jac", diff_step=1e-5)
+    return identify.theta_of(result.x[:-1], fit), float(result.x[-1])
 
 
 @contextlib.contextmanager

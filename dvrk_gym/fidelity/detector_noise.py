@@ -19,7 +19,7 @@ from scipy.optimize import minimize
 from scipy.stats import chisquare, norm
 
 from dvrk_gym import paper
-from dvrk_gym.sim.endoscope.noise import DetectionNoise
+from dvrk_gym.sim.endoscope.noise import DetectionNoise, whole_pixels
 from dvrk_gym.utils.checks import check_int
 
 __all__ = [
@@ -30,6 +30,7 @@ __all__ = [
     "histogram",
     "held_out_pvalue",
     "disparity_noise_px",
+    "plane_noise_mm",
 ]
 
 MAX_ROW_DIFFERENCE_PX = 10
@@ -136,3 +137,45 @@ def disparity_noise_px(noise: DetectionNoise) -> float:
     """RMS error of a disparity from two such detections truncated to whole pixels, px."""
     per_camera = (1 - noise.outlier_probability) * noise.core_px**2 + noise.outlier_probability * noise.outlier_px**2
     return float(np.sqrt(2.0 * per_camera + 1.0 / 6.0))
+
+
+def _errors(noise: DetectionNoise, rng: np.random.Generator, shape: tuple[int, ...]) -> np.ndarray:
+    """Detection errors (*shape, 2) px at 1080p: :meth:`DetectionNoise.sample`, drawn for many detections at once."""
+    outlier = rng.uniform(size=shape) < noise.outlier_probability
+    sigma = np.where(outlier, noise.outlier_px, noise.core_px)
+    return rng.normal(size=(*shape, 2)) * sigma[..., None]
+
+
+def plane_noise_mm(noise: DetectionNoise, camera_points_m: np.ndarray, *, draws: int = 16, seed: int = 0) -> float:
+    """RMS error per image-plane axis (camera x, y) that this detector gives stereo positions at these points, mm.
+
+    Each point (left camera frame, m) is projected into both cameras of the authors'
+    rectified pair, each camera's detection errs by its own draw and is truncated to whole
+    pixels, and the pair is triangulated as the authors did (the disparity is the length
+    ``|left - right|``; x and y are the left pixel's ray at that depth). A camera x is
+    ``(u - cx) z / f``: the depth's noise, the disparity's, reaches the image plane too,
+    by x / z of it, which for a tape 10 to 30 mm off the optical axis outweighs the left
+    pixel's own error. The figure is each point's scatter about its own mean over
+    ``draws`` draws (the truncation's fixed part is a bias, not jitter), pooled over the
+    points and both axes.
+    """
+    points = np.asarray(camera_points_m, dtype=float)
+    if points.ndim != 2 or points.shape[1] != 3 or points.shape[0] == 0 or not np.all(np.isfinite(points)) or np.any(points[:, 2] <= 0):
+        raise ValueError(f"camera_points_m has shape {points.shape}; expected (N >= 1, 3) finite points in front of the camera (z > 0)")
+    draws = check_int("draws", draws, 2, 100_000)
+    if points.shape[0] * draws > 10_000_000:
+        raise ValueError(f"{points.shape[0]} points x {draws} draws is over 10,000,000 detections; pass fewer")
+    rng = np.random.default_rng(seed)
+    focal, (cx, cy), baseline = paper.ENDOSCOPE_FOCAL_PX, paper.ENDOSCOPE_PRINCIPAL_POINT_PX, paper.ENDOSCOPE_BASELINE_M
+    x, y, z = (points[:, i, None] for i in range(3))
+    width, shape = paper.ENDOSCOPE_RESOLUTION_PX[0], (len(points), draws)
+    v = np.broadcast_to(focal * y / z + cy, shape)
+    left = whole_pixels(np.stack([np.broadcast_to(focal * x / z + cx, shape), v], axis=-1) + _errors(noise, rng, shape), width)
+    right = whole_pixels(
+        np.stack([np.broadcast_to(focal * (x - baseline) / z + cx, shape), v], axis=-1) + _errors(noise, rng, shape), width
+    )
+    disparity = np.linalg.norm(left - right, axis=-1)
+    depth = focal * baseline / np.maximum(disparity, 1e-9)
+    plane = (left - np.array([cx, cy])) * depth[..., None] / focal
+    scatter = plane - plane.mean(axis=1, keepdims=True)
+    return float(np.sqrt(np.mean(scatter**2) * draws / (draws - 1)) * 1e3)

@@ -5,9 +5,10 @@ collection order) and judged on the held-out rest:
 
 1. The deterministic parameters (:data:`~dvrk_gym.fidelity.instrument_model.PARAMETERS`:
    camera pose and depth scale, tape position, homing offsets, cable stretch, backlash) by
-   maximum a posteriori least squares (``scipy.optimize.least_squares``, Huber loss, the
-   parameters' Gaussian priors) on the pixel residuals of every row: left u, v and the
-   disparity, each divided by its RMS after a first fit of the camera and tape alone.
+   maximum a posteriori least squares (``scipy.optimize.least_squares``) on the pixel
+   residuals of every row (a Huber loss) and the parameters' Gaussian priors (plain
+   squares): left u, v and the disparity, each divided by its RMS after a first fit of the
+   camera and tape alone.
    Their spread by a moving-block bootstrap of the training rows (blocks of
    ``BOOTSTRAP_BLOCK`` rows keep the residuals' serial correlation).
 2. The red-tape detector's error (:class:`~dvrk_gym.sim.endoscope.noise.DetectionNoise`)
@@ -20,11 +21,13 @@ collection order) and judged on the held-out rest:
    (:func:`match_miss_probability`).
 4. The reported pose's lag (``BiasConfig.wrist_settle_lag``), from how often consecutive
    real rows report the same position, against simulated Phase I collections over a grid
-   of lags (:func:`match_settle_lag`). It runs before the misses are matched again: the lag
-   changes which orientations keep their tape in view.
+   of lags (:func:`dvrk_gym.fidelity.settle_lag.match_settle_lag`). It runs before the
+   misses are matched again: the lag changes which orientations keep their tape in view.
 
-``python benchmarks/identify_instrument.py`` runs it all and prints every figure quoted in
-:mod:`dvrk_gym.sim.identified`.
+``python benchmarks/identify_instrument.py`` runs it all. :mod:`dvrk_gym.sim.identified`
+holds what it printed before three mends (Gaussian priors, the stereo depth's share of the
+detector's noise, the camera's rotation fitted as a turn of its start); what it prints
+now is a candidate, set out in docs/fidelity.md ("The identification mended").
 """
 
 from __future__ import annotations
@@ -38,16 +41,15 @@ from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
 from dvrk_gym import paper
-from dvrk_gym.calibration.datasets import load_paper_phase1
-from dvrk_gym.calibration.phase1 import MAX_TRAJECTORIES, PaperExplorationPolicy, collect_phase1, run_paper_phase1
+from dvrk_gym.calibration.phase1 import PaperExplorationPolicy, collect_phase1
 from dvrk_gym.envs.exploration import CalibrationExplorationEnv
 from dvrk_gym.fidelity.instrument_model import PARAMETERS, initial_vector, predict_camera_points, predict_pixels
 from dvrk_gym.fidelity.statistics import fidelity_statistics
 from dvrk_gym.fidelity.uncertainty import block_bootstrap_rows
 from dvrk_gym.sim.endoscope.camera import WORKSPACE_CENTER_M
-from dvrk_gym.sim.endoscope.noise import IDENTIFIED_MARKER_NOISE, DetectionNoise
+from dvrk_gym.sim.endoscope.noise import IDENTIFIED_MARKER_NOISE
 from dvrk_gym.sim.robot.bias import BIAS_PRESETS
-from dvrk_gym.utils.checks import check_float, check_int
+from dvrk_gym.utils.checks import check_int
 
 __all__ = [
     "TRAIN_FRACTION",
@@ -59,17 +61,15 @@ __all__ = [
     "fit_parameters",
     "refit",
     "prior_residuals",
+    "huber_residuals",
+    "CAMERA_ROTATION",
+    "theta_of",
     "residual_rms",
     "bootstrap_sd",
     "model_jitter_mm",
-    "detector_plane_noise_mm",
     "repeatability_from_jitter",
     "MissMatch",
     "match_miss_probability",
-    "SETTLE_LAG_GRID",
-    "SettleLagMatch",
-    "first_crossing",
-    "match_settle_lag",
 ]
 
 logger = logging.getLogger(__name__)
@@ -126,11 +126,51 @@ def split(n_rows: int, train_fraction: float = TRAIN_FRACTION) -> tuple[np.ndarr
     return np.arange(cut), np.arange(cut, n_rows)
 
 
-def _residuals(free_values: np.ndarray, fit: InstrumentFit, commands: np.ndarray, pixels: np.ndarray) -> np.ndarray:
+def huber_residuals(scaled: np.ndarray, scale: float = HUBER_SCALE) -> np.ndarray:
+    """Residuals (dimensionless) whose sum of squares is the Huber loss of ``scaled``.
+
+    Each r becomes ``sign(r) c sqrt(rho((r / c)^2))`` with ``c = scale`` and scipy's Huber
+    ``rho(z) = z`` up to 1, ``2 sqrt(z) - 1`` beyond: unchanged within ``c``, growing as the
+    square root of ``|r|`` past it. A plain least-squares fit of these is the Huber fit of
+    ``scaled`` alone, so the priors beside them stay quadratic (Gaussian).
+    """
+    z = (np.asarray(scaled, dtype=float) / scale) ** 2
+    rho = np.where(z <= 1.0, z, 2.0 * np.sqrt(np.maximum(z, 1.0)) - 1.0)
+    return np.sign(scaled) * scale * np.sqrt(rho)
+
+
+CAMERA_ROTATION = (0, 1, 2)
+"""Indices of the camera's rotation vector: a fit moves them together, as a turn of the start's camera."""
+
+
+def _check_free(free: tuple[int, ...]) -> tuple[int, ...]:
+    """``free`` if it frees the camera's rotation whole or not at all (ValueError otherwise)."""
+    freed = set(free) & set(CAMERA_ROTATION)
+    if freed and freed != set(CAMERA_ROTATION):
+        raise ValueError(f"free = {free}; the camera's rotation {CAMERA_ROTATION} is fitted whole or not at all")
+    return free
+
+
+def theta_of(free_values: np.ndarray, fit: InstrumentFit) -> np.ndarray:
+    """The parameter vector a fit's free values stand for, from ``fit.theta``.
+
+    The camera's rotation, when free, is a rotation vector *of a turn of the start's
+    camera* (zero at the start): the absolute rotation vector of a camera looking down is
+    near a half turn, where it is singular, and a fit in it stopped at points whose
+    residuals hang on the start's last bit (two starts 6e-17 apart: cameras about 90 mm apart).
+    """
     theta = fit.theta.copy()
     theta[list(fit.free)] = free_values
+    if CAMERA_ROTATION[0] in fit.free:
+        turn = Rotation.from_rotvec(theta[list(CAMERA_ROTATION)])
+        theta[list(CAMERA_ROTATION)] = (Rotation.from_rotvec(fit.theta[list(CAMERA_ROTATION)]) * turn).as_rotvec()
+    return theta
+
+
+def _residuals(free_values: np.ndarray, fit: InstrumentFit, commands: np.ndarray, pixels: np.ndarray) -> np.ndarray:
+    theta = theta_of(free_values, fit)
     scaled = ((predict_pixels(theta, commands) - pixels) / fit.scales).ravel()
-    return np.concatenate([scaled, prior_residuals(theta, fit.free)])
+    return np.concatenate([huber_residuals(scaled), prior_residuals(theta, fit.free)])
 
 
 def prior_residuals(theta: np.ndarray, free: tuple[int, ...]) -> np.ndarray:
@@ -140,13 +180,16 @@ def prior_residuals(theta: np.ndarray, free: tuple[int, ...]) -> np.ndarray:
 
 def refit(fit: InstrumentFit, commands: np.ndarray, pixels: np.ndarray) -> InstrumentFit:
     """MAP fit of the parameters ``fit.free`` to rows (commands (N, 6) rad / m, pixels (N, 3)
-    px), starting from ``fit.theta`` with its residual scales; the others keep their values."""
-    start = fit.theta[list(fit.free)]
-    result = least_squares(
-        _residuals, start, args=(fit, commands, pixels), x_scale="jac", diff_step=1e-5, loss="huber", f_scale=HUBER_SCALE
-    )
-    theta = fit.theta.copy()
-    theta[list(fit.free)] = result.x
+    px), starting from ``fit.theta`` with its residual scales; the others keep their values.
+
+    The pixel residuals take the Huber loss (:func:`huber_residuals`: the detector's
+    outliers), the priors a plain square: their penalty is Gaussian however far out a
+    parameter lies (scipy's ``loss="huber"`` on both would make them linear past two sds).
+    The camera's rotation is fitted as a turn of ``fit.theta``'s (:func:`theta_of`)."""
+    free = _check_free(fit.free)
+    start = np.where(np.isin(free, CAMERA_ROTATION), 0.0, fit.theta[list(free)])  # no turn yet (:func:`theta_of`)
+    result = least_squares(_residuals, start, args=(fit, commands, pixels), x_scale="jac", diff_step=1e-5)
+    theta = theta_of(result.x, fit)
     logger.info("fit of %d parameters: cost %.1f after %d evaluations", len(fit.free), result.cost, result.nfev)
     return InstrumentFit(theta, fit.scales, fit.free)
 
@@ -212,18 +255,14 @@ def model_jitter_mm(theta: np.ndarray, commands: np.ndarray, X: np.ndarray, y: n
     return statistics.view_axis_jitter_mm, statistics.image_plane_jitter_mm
 
 
-def detector_plane_noise_mm(noise: DetectionNoise, depth_m: float) -> float:
-    """RMS error per image-plane axis of a left detection with this noise, truncated to whole pixels, mm at depth_m."""
-    per_axis_px = np.sqrt((1 - noise.outlier_probability) * noise.core_px**2 + noise.outlier_probability * noise.outlier_px**2 + 1 / 12)
-    return float(per_axis_px * depth_m / paper.ENDOSCOPE_FOCAL_PX * 1e3)
-
-
 def repeatability_from_jitter(real_plane_jitter_mm: float, model_plane_jitter_mm: float, detector_plane_mm: float) -> float:
     """The robot's repeatability (RMS tip scatter across the shaft, m) that the real rows' image-plane jitter leaves.
 
     Independent noise adds in quadrature to the jitter per axis: what the real rows show
     beyond the fitted model's own jitter over the same rows (:func:`model_jitter_mm`) and
-    the detector's, per axis, times sqrt(2) for the two axes across the shaft, where the
+    the detector's (:func:`~dvrk_gym.fidelity.detector_noise.plane_noise_mm`: the left
+    pixel's error and the stereo depth's, which reaches camera x and y by x / z), per axis,
+    times sqrt(2) for the two axes across the shaft, where the
     rotary joints move the tip (:func:`dvrk_gym.sim.robot.cables.repeatability_std`; the
     shaft is within about 10 degrees of the view axis). Measured on the real rows' own
     sequence, so that it is the robot's and not the exploration's: a simulated Phase I
@@ -280,92 +319,3 @@ def match_miss_probability(
     miss = 1.0 - np.sqrt(min(real_share / sim_share, 1.0))
     jitter = fidelity_statistics(kept.X, kept.y, cross_validation=False).image_plane_jitter_mm
     return MissMatch(float(miss), float(sim_share), float(real_share), float(jitter))
-
-
-SETTLE_LAG_GRID = (0.10, 0.15, 0.20, 0.25, 0.30, 0.35)
-"""The settle lags :func:`match_settle_lag` collects at (the real rows' sequence suggests
-0.2-0.4: ``benchmarks/fidelity_sequence.py``)."""
-
-
-@dataclass(frozen=True)
-class SettleLagMatch:
-    """The wrist's settle lag matched to the real rows' same-position share.
-
-    Attributes:
-        wrist_settle_lag: where the simulated share first falls to the real one (:func:`first_crossing`).
-        real_share: the real rows' same-position share.
-        lags: the lags collected at.
-        sim_shares: the simulated same-position share at each lag.
-        sim_pitch_autocorrelations: the simulated pitch autocorrelation (lag 1) at each
-            lag, for the record (the real rows: 0.27).
-    """
-
-    wrist_settle_lag: float
-    real_share: float
-    lags: tuple[float, ...]
-    sim_shares: tuple[float, ...]
-    sim_pitch_autocorrelations: tuple[float, ...]
-
-
-def _check_lag_grid(lags: tuple[float, ...]) -> tuple[float, ...]:
-    """``lags`` as floats, if they are one or more increasing settle lags, each in [0, 1)."""
-    if not lags:
-        raise ValueError("expected at least one settle lag, got none")
-    values = tuple(check_float("settle lag", lag, low=0.0, high=1.0) for lag in lags)
-    if values[-1] >= 1.0:
-        raise ValueError(f"a settle lag is a fraction in [0, 1), got {values[-1]}")
-    if any(b <= a for a, b in zip(values, values[1:])):
-        raise ValueError(f"lags must increase, got {tuple(lags)}")
-    return values
-
-
-def first_crossing(lags: tuple[float, ...], shares: tuple[float, ...], target: float) -> float:
-    """The lag where ``shares`` first fall to ``target``: linear between the two lags of the
-    grid (increasing) around the crossing, to 0.01 (the first lag if its share is already
-    at most the target).
-
-    Raises:
-        ValueError: lags and shares differ in length, lags do not increase, or no share
-            falls to the target (the grid stops short).
-    """
-    if len(lags) != len(shares):
-        raise ValueError(f"expected one share per lag, got {len(lags)} lags and {len(shares)} shares")
-    _check_lag_grid(lags)
-    for index, share in enumerate(shares):
-        if share <= target:
-            if index == 0:
-                return float(lags[0])
-            above, lag_above = shares[index - 1], lags[index - 1]
-            crossing = round(float(lag_above + (lags[index] - lag_above) * (above - target) / (above - share)), 2)
-            return min(max(crossing, float(lag_above)), float(lags[index]))
-    raise ValueError(f"no lag in {lags} brings the share to {target:.4f} (the last gives {shares[-1]:.4f}); extend the grid")
-
-
-def match_settle_lag(
-    lags: tuple[float, ...] = SETTLE_LAG_GRID, n_trajectories: int = paper.PHASE1_TRAJECTORIES, seed: int = 0
-) -> SettleLagMatch:
-    """The reported pose's lag from how often consecutive rows report the same position.
-
-    A robot that reports its command reports the same position whenever the protocol
-    pauses at one position for several orientations (a simulated Phase I without a lag:
-    0.52 of consecutive kept rows); the real rows do so 3% of the time, because the wrist
-    stops short of each new orientation and the reported tip moves with it. Collects the
-    paper's Phase I on the ``paper`` instrument (its detector and repeatability included)
-    at each lag and returns the lag where the same-position share falls to the real one,
-    linear between the grid's lags around it (:func:`first_crossing`).
-    """
-    lags = _check_lag_grid(tuple(lags))  # before the first collection: each takes about a minute
-    n_trajectories = check_int("n_trajectories", n_trajectories, 1, MAX_TRAJECTORIES)
-    seed = check_int("seed", seed, 0)
-    real_X, real_y = load_paper_phase1()
-    real_share = fidelity_statistics(real_X, real_y, cross_validation=False).same_position_share
-    shares, correlations = [], []
-    for lag in lags:
-        config = dataclasses.replace(BIAS_PRESETS["paper"], wrist_settle_lag=float(lag))
-        kept = run_paper_phase1(n_trajectories=n_trajectories, seed=seed, bias=config, progress=False).cleaned()
-        statistics = fidelity_statistics(kept.X, kept.y, cross_validation=False)
-        shares.append(statistics.same_position_share)
-        correlations.append(statistics.pitch_autocorrelation)
-        logger.info("settle lag %.2f: same-position share %.4f", lag, statistics.same_position_share)
-    chosen = first_crossing(tuple(lags), tuple(shares), real_share)
-    return SettleLagMatch(chosen, float(real_share), tuple(float(v) for v in lags), tuple(shares), tuple(correlations))

@@ -185,14 +185,14 @@ def test_the_bootstrap_refuses_blocks_and_replicates_it_cannot_draw(keywords, na
 
 @pytest.mark.parametrize("lags", [(), (0.3, 0.2), (0.2, 0.2), (0.5, 1.0), (-0.1, 0.2), (0.1, float("nan"))])
 def test_the_settle_lag_match_refuses_its_grid_before_it_collects(lags, monkeypatch):
-    from dvrk_gym.fidelity import identify
+    from dvrk_gym.fidelity import settle_lag
 
     def collect(*args, **kwargs):
         raise AssertionError("collected a Phase I for a grid it refuses")
 
-    monkeypatch.setattr(identify, "run_paper_phase1", collect)
+    monkeypatch.setattr(settle_lag, "run_paper_phase1", collect)
     with pytest.raises(ValueError, match="lag"):
-        identify.match_settle_lag(lags=lags, n_trajectories=1)
+        settle_lag.match_settle_lag(lags=lags, n_trajectories=1)
 
 
 @pytest.mark.parametrize("methods", [("RBT", "RBT"), ("DNN", "DNN+RF", "DNN"), (), ("rbt",)])
