@@ -81,6 +81,7 @@ def main() -> None:
         shown, unit = _display(value, parameter.unit)
         shown_sd, _ = _display(spread, parameter.unit)
         print(f"{parameter.name:22s} {shown:10.4f} {shown_sd:13.4f}  {unit}")
+    print("(the camera_rotvec rows' sd: of each replicate's turn of the fitted camera, about the rotation vector's axes)")
     print(f"residual scales (u, v, disparity) px: {np.round(fit.scales, 3).tolist()}")
     results: dict[str, object] = {
         "parameters": {p.name: float(v) for p, v in zip(PARAMETERS, fit.theta)},
@@ -114,7 +115,8 @@ def main() -> None:
     repeatability = repeatability_from_jitter(real.image_plane_jitter_mm, plane_jitter, detector_mm)
     print(
         f"\nimage-plane jitter per axis (mm): real rows {real.image_plane_jitter_mm:.3f}, fitted model alone on them {plane_jitter:.3f}, "
-        f"detector {detector_mm:.3f}: repeatability {repeatability * 1e3:.3f} mm RMS across the shaft"
+        f"detector {detector_mm:.3f} (left {real.image_plane_jitter_mm**2 - plane_jitter**2 - detector_mm**2:+.3f} mm^2): "
+        f"repeatability {repeatability * 1e3:.3f} mm RMS across the shaft"
     )
     print(f"view-axis jitter (mm): real rows {real.view_axis_jitter_mm:.3f}, fitted model alone on them {view_jitter:.3f}")
     lag = match_settle_lag()

@@ -183,11 +183,19 @@ def test_a_fit_turns_the_start_camera_and_frees_its_rotation_whole_only(rows):
 
 
 def test_huber_residuals_square_to_scipys_huber_loss():
+    from scipy.optimize import least_squares
+
     r = np.array([-9.0, -2.5, -2.0, -0.3, 0.0, 1.0, 2.0, 4.0, 50.0])
-    z = (r / HUBER_SCALE) ** 2
-    rho = np.where(z <= 1, z, 2 * np.sqrt(z) - 1)  # scipy.optimize.least_squares' "huber"
-    np.testing.assert_allclose(huber_residuals(r) ** 2, HUBER_SCALE**2 * rho, rtol=1e-12)
+    for values in (r, r[[3, 5]], r[[0, 8]]):
+        scipy_cost = least_squares(lambda x, v=values: v + 0.0 * x[0], [0.0], loss="huber", f_scale=HUBER_SCALE, max_nfev=1).cost
+        assert 0.5 * np.sum(huber_residuals(values) ** 2) == pytest.approx(scipy_cost, rel=1e-12)
     np.testing.assert_array_equal(np.sign(huber_residuals(r)), np.sign(r))
+    # Slope 1 up to the scale and on through it (continuous), 1 / sqrt(2 |r| / c - 1) beyond.
+    for at, slope in ((0.0, 1.0), (HUBER_SCALE, 1.0), (-HUBER_SCALE, 1.0), (4.0, 1 / np.sqrt(2 * 4.0 / HUBER_SCALE - 1))):
+        step = 1e-6
+        assert (huber_residuals(np.array([at + step])) - huber_residuals(np.array([at - step])))[0] / (2 * step) == pytest.approx(
+            slope, rel=1e-4
+        )
     np.testing.assert_array_equal(huber_residuals(r[np.abs(r) <= HUBER_SCALE]), r[np.abs(r) <= HUBER_SCALE])
 
 
@@ -231,7 +239,8 @@ def test_the_detectors_image_plane_noise_takes_the_stereo_depths_share():
     assert expected_mm > 3 * pixel_only_mm
     on_axis = detector_noise.plane_noise_mm(noise, np.array([[0.0, 0.0, 0.19]]), draws=20_000, seed=1)
     assert on_axis == pytest.approx(pixel_only_mm, rel=0.05)
-    assert detector_noise.plane_noise_mm(DetectionNoise(0.0, 0.0, 0.0), point) < 1e-12  # the truncation alone is a bias
+    with pytest.raises(ValueError, match="non-positive disparity"):  # 6 m away: a disparity of 2 px, and 3 px of noise
+        detector_noise.plane_noise_mm(DetectionNoise(core_px=3.0, outlier_px=0.0, outlier_probability=0.0), np.array([[0.0, 0.0, 6.0]]))
 
 
 @pytest.mark.parametrize(

@@ -140,7 +140,7 @@ def huber_residuals(scaled: np.ndarray, scale: float = HUBER_SCALE) -> np.ndarra
 
 
 CAMERA_ROTATION = (0, 1, 2)
-"""Indices of the camera's rotation vector: a fit moves them together, as a turn of the start's camera."""
+"""Indices of the camera's rotation vector: a fit moves them together, as a turn of the start's camera (:func:`theta_of`)."""
 
 
 def _check_free(free: tuple[int, ...]) -> tuple[int, ...]:
@@ -155,10 +155,13 @@ def theta_of(free_values: np.ndarray, fit: InstrumentFit) -> np.ndarray:
     """The parameter vector a fit's free values stand for, from ``fit.theta``.
 
     The camera's rotation, when free, is a rotation vector *of a turn of the start's
-    camera* (zero at the start): the absolute rotation vector of a camera looking down is
-    near a half turn, where it is singular, and a fit in it stopped at points whose
-    residuals hang on the start's last bit (two starts 6e-17 apart: cameras about 90 mm apart).
+    camera* (zero at the start, where it is well conditioned). Fitted as the absolute
+    rotation vector of a camera looking down (near a half turn), fits stopped at points
+    that hung on the start's last bit (two starts 6e-17 apart: cameras about 90 mm apart);
+    why is not pinned down (that map is not singular there, though it stretches a turn
+    about two axes 1.5 times as much as about the third).
     """
+    _check_free(fit.free)
     theta = fit.theta.copy()
     theta[list(fit.free)] = free_values
     if CAMERA_ROTATION[0] in fit.free:
@@ -224,7 +227,10 @@ def bootstrap_sd(
 
     Each replicate draws ``len(rows) / block`` blocks of ``block`` contiguous rows with
     replacement, joins them in the drawn order and refits the free parameters from
-    ``fit`` (with its residual scales). Parameters not fitted get sd 0.
+    ``fit`` (with its residual scales). Parameters not fitted get sd 0. The camera's
+    rotation (:data:`CAMERA_ROTATION`) is taken as each replicate's turn of ``fit``'s
+    camera, rad about the fitted camera's axes: the rotation vector's own components stretch
+    a turn by up to 1.5 times near a half turn and mix its axes.
 
     Raises:
         ValueError: ``replicates`` not an int in [2, ``MAX_BOOTSTRAP_REPLICATES``],
@@ -238,7 +244,10 @@ def bootstrap_sd(
     rng = np.random.default_rng(check_int("seed", seed, 0))
     estimates = []
     for k, rows in enumerate(block_bootstrap_rows(rng, n, block, replicates)):
-        estimates.append(refit(fit, commands[rows], pixels[rows]).theta)
+        theta = refit(fit, commands[rows], pixels[rows]).theta
+        turn = Rotation.from_rotvec(fit.theta[list(CAMERA_ROTATION)]).inv() * Rotation.from_rotvec(theta[list(CAMERA_ROTATION)])
+        theta[list(CAMERA_ROTATION)] = turn.as_rotvec()
+        estimates.append(theta)
         logger.info("bootstrap replicate %d of %d done", k + 1, replicates)
     return np.std(np.array(estimates), axis=0, ddof=1)
 
