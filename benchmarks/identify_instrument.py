@@ -81,7 +81,7 @@ def main() -> None:
         shown, unit = _display(value, parameter.unit)
         shown_sd, _ = _display(spread, parameter.unit)
         print(f"{parameter.name:22s} {shown:10.4f} {shown_sd:13.4f}  {unit}")
-    print("(the camera_rotvec rows' sd: of each replicate's turn of the fitted camera, about the rotation vector's axes)")
+    print("(the camera_rotvec rows' sd: of each replicate's turn of the fitted camera, about its axes)")
     print(f"residual scales (u, v, disparity) px: {np.round(fit.scales, 3).tolist()}")
     results: dict[str, object] = {
         "parameters": {p.name: float(v) for p, v in zip(PARAMETERS, fit.theta)},

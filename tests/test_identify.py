@@ -155,8 +155,8 @@ def test_a_camera_and_tape_fit_from_the_start_finds_the_paper_camera(rows):
 
 @pytest.mark.slow
 def test_a_camera_and_tape_fit_finds_one_camera_from_starts_tilted_other_ways(rows):
-    # The absolute rotation vector of a camera looking down is near a half turn, where it is
-    # singular: fitted in it, a start differing in its last bit (6e-17) ended about 90 mm away.
+    # Fitted in the absolute rotation vector of a camera looking down (near a half turn), a
+    # start differing in its last bit (6e-17) ended about 90 mm away; as a turn of the start, not.
     from scipy.spatial.transform import Rotation
 
     X, _, commands = rows

@@ -8,9 +8,9 @@ collection order) and checked on the held-out rest, before three mends to it: it
 are Gaussian now, not Huber; the detector's share of the image-plane jitter counts the
 stereo depth's noise, so the repeatability comes to 0; and the camera's rotation is fitted
 as a turn of its start. The mended script's values differ (roll offset -5.35 degrees,
-wrist stretch -0.071, settle lag 0.23, repeatability 0): a candidate instrument, for which every simulated figure of the README would be
-measured again, set out with what it does to the fidelity report in ``docs/fidelity.md``
-("The identification mended"). The figures quoted below are the script's before the
+wrist stretch -0.071, settle lag 0.23, repeatability 0): a candidate instrument, for
+which every simulated figure of the README would be measured again, set out with what it
+does to the fidelity report in ``docs/fidelity.md`` ("The identification mended"). The figures quoted below are the script's before the
 mends (4.3 minutes with ``--bootstrap 2`` on a busy 2-core machine, and about 30 s more
 per replicate of the default 16). One value the rows cannot give, the red-tape detector's
 right-image shift (:data:`TAPE_RIGHT_SHIFT_PX`), comes from the authors' records of the
