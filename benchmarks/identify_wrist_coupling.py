@@ -61,7 +61,6 @@ def coupled_pixels(theta: np.ndarray, coupling: float, commands: np.ndarray) -> 
 def fit_coupling(fit: identify.InstrumentFit, commands: np.ndarray, pixels: np.ndarray) -> tuple[np.ndarray, float]:
     """The identification's free parameters and the coupling, fitted together from ``fit``
     (same residual scales, priors and robust loss): (theta, coupling)."""
-    free = list(fit.free)
 
     def residuals(values: np.ndarray) -> np.ndarray:
         theta = identify.theta_of(values[:-1], fit)
@@ -69,8 +68,7 @@ def fit_coupling(fit: identify.InstrumentFit, commands: np.ndarray, pixels: np.n
         return np.concatenate([identify.huber_residuals(scaled), identify.prior_residuals(theta, fit.free)])
 
     # The camera's rotation as a turn of the fit's (zero at the start), as identify.refit fits it.
-    start = np.r_[np.where(np.isin(free, identify.CAMERA_ROTATION), 0.0, fit.theta[free]), 0.0]
-    result = least_squares(residuals, start, x_scale="jac", diff_step=1e-5)
+    result = least_squares(residuals, np.r_[identify.start_values(fit), 0.0], x_scale="jac", diff_step=1e-5)
     return identify.theta_of(result.x[:-1], fit), float(result.x[-1])
 
 

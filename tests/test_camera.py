@@ -331,6 +331,14 @@ def test_detection_noise_draws_outliers_and_misses_at_their_rates() -> None:
     assert np.mean([noise.misses(rng) for _ in range(20000)]) == pytest.approx(0.3, abs=0.01)
     np.testing.assert_allclose(noise.sample(np.random.default_rng(1), 640) * 3, noise.sample(np.random.default_rng(1), 1920))
     assert not DetectionNoise(1.0, 1.0, 0.0).misses(rng)
+    many = noise.sample_many(rng, (100, 200))  # the same mixture, drawn at once
+    assert many.shape == (100, 200, 2)
+    assert np.var(many) == pytest.approx(0.8 * 1.0 + 0.2 * 25.0, rel=0.05)
+    # Beyond 3 px: 0.2% of the core's draws, 55% of the outliers'.
+    assert np.mean(np.abs(many) > 3.0) == pytest.approx(0.8 * 0.0027 + 0.2 * 0.5485, abs=0.005)
+    np.testing.assert_allclose(
+        noise.sample_many(np.random.default_rng(1), (7,), 640) * 3, noise.sample_many(np.random.default_rng(1), (7,))
+    )
     with pytest.raises(ValueError, match="miss_probability"):
         DetectionNoise(1.0, 1.0, 0.0, miss_probability=1.5)
     with pytest.raises(ValueError, match="core_px"):

@@ -22,6 +22,7 @@ from dvrk_gym.fidelity.identify import (
     residual_rms,
     split,
     start_camera_pose,
+    start_values,
     theta_of,
 )
 from dvrk_gym.fidelity.instrument_model import (
@@ -178,6 +179,9 @@ def test_a_fit_turns_the_start_camera_and_frees_its_rotation_whole_only(rows):
     fit = InstrumentFit(theta, np.ones(3), CAMERA_AND_TAPE)
     np.testing.assert_array_equal(theta_of(theta[list(CAMERA_AND_TAPE)] * np.r_[0, 0, 0, np.ones(7)], fit)[3:], theta[3:])
     np.testing.assert_allclose(theta_of(np.r_[0.0, 0.0, 0.0, theta[3:10]], fit), theta, atol=1e-12)
+    np.testing.assert_allclose(theta_of(start_values(fit), fit), theta, atol=1e-12)  # a fit starts where it stands
+    with pytest.raises(ValueError, match="whole"):
+        start_values(InstrumentFit(theta, np.ones(3), (1, 2, 5)))
     with pytest.raises(ValueError, match="whole"):
         refit(InstrumentFit(theta, np.ones(3), (0, 1)), commands[:20], real_pixels(X)[:20])
 

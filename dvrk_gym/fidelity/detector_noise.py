@@ -19,6 +19,8 @@ from scipy.optimize import minimize
 from scipy.stats import chisquare, norm
 
 from dvrk_gym import paper
+from dvrk_gym.fidelity.instrument_model import pixels_of_camera_points
+from dvrk_gym.sim.endoscope.camera import StereoCamera
 from dvrk_gym.sim.endoscope.noise import DetectionNoise, whole_pixels
 from dvrk_gym.utils.checks import check_int
 
@@ -139,20 +141,14 @@ def disparity_noise_px(noise: DetectionNoise) -> float:
     return float(np.sqrt(2.0 * per_camera + 1.0 / 6.0))
 
 
-def _errors(noise: DetectionNoise, rng: np.random.Generator, shape: tuple[int, ...]) -> np.ndarray:
-    """Detection errors (*shape, 2) px at 1080p: :meth:`DetectionNoise.sample`, drawn for many detections at once."""
-    outlier = rng.uniform(size=shape) < noise.outlier_probability
-    sigma = np.where(outlier, noise.outlier_px, noise.core_px)
-    return rng.normal(size=(*shape, 2)) * sigma[..., None]
-
-
 def plane_noise_mm(noise: DetectionNoise, camera_points_m: np.ndarray, *, draws: int = 16, seed: int = 0) -> float:
     """RMS error per image-plane axis (camera x, y) that this detector gives stereo positions at these points, mm.
 
     Each point (left camera frame, m) is projected into both cameras of the authors'
     rectified pair, each camera's detection errs by its own draw and is truncated to whole
-    pixels, and the pair is triangulated as the authors did (the disparity is the length
-    ``|left - right|``; x and y are the left pixel's ray at that depth). A camera x is
+    pixels, and the pair is triangulated as the authors did
+    (:meth:`~dvrk_gym.sim.endoscope.camera.StereoCamera.triangulate`: the disparity is the
+    length ``|left - right|``; x and y are the left pixel's ray at that depth). A camera x is
     ``(u - cx) z / f``: the depth's noise, the disparity's, reaches the image plane too,
     by x / z of it, which for a tape 10 to 30 mm off the optical axis outweighs the left
     pixel's own error. The figure is each point's scatter about its own mean over
@@ -173,18 +169,12 @@ def plane_noise_mm(noise: DetectionNoise, camera_points_m: np.ndarray, *, draws:
     if points.shape[0] * draws > 10_000_000:
         raise ValueError(f"{points.shape[0]} points x {draws} draws is over 10,000,000 detections; pass fewer")
     rng = np.random.default_rng(seed)
-    focal, (cx, cy), baseline = paper.ENDOSCOPE_FOCAL_PX, paper.ENDOSCOPE_PRINCIPAL_POINT_PX, paper.ENDOSCOPE_BASELINE_M
-    x, y, z = (points[:, i, None] for i in range(3))
-    width, shape = paper.ENDOSCOPE_RESOLUTION_PX[0], (len(points), draws)
-    v = np.broadcast_to(focal * y / z + cy, shape)
-    left = whole_pixels(np.stack([np.broadcast_to(focal * x / z + cx, shape), v], axis=-1) + _errors(noise, rng, shape), width)
-    right = whole_pixels(
-        np.stack([np.broadcast_to(focal * (x - baseline) / z + cx, shape), v], axis=-1) + _errors(noise, rng, shape), width
-    )
-    if np.any(left[..., 0] - right[..., 0] <= 0):
+    left_u, v, disparity = (np.repeat(column, draws) for column in pixels_of_camera_points(points).T)
+    width = paper.ENDOSCOPE_RESOLUTION_PX[0]
+    left = whole_pixels(np.stack([left_u, v], axis=1) + noise.sample_many(rng, (len(left_u),)), width)
+    right = whole_pixels(np.stack([left_u - disparity, v], axis=1) + noise.sample_many(rng, (len(left_u),)), width)
+    if np.any(left[:, 0] - right[:, 0] <= 0):
         raise ValueError("the detector's noise gave a non-positive disparity: the points are too far, or the noise too large")
-    disparity = np.linalg.norm(left - right, axis=-1)
-    depth = focal * baseline / disparity
-    plane = (left - np.array([cx, cy])) * depth[..., None] / focal
+    plane = StereoCamera().triangulate(left, right)[:, :2].reshape(len(points), draws, 2)
     scatter = plane - plane.mean(axis=1, keepdims=True)
     return float(np.sqrt(np.mean(scatter**2) * draws / (draws - 1)) * 1e3)

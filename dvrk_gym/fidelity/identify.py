@@ -63,6 +63,7 @@ __all__ = [
     "prior_residuals",
     "huber_residuals",
     "CAMERA_ROTATION",
+    "start_values",
     "theta_of",
     "residual_rms",
     "bootstrap_sd",
@@ -170,6 +171,17 @@ def theta_of(free_values: np.ndarray, fit: InstrumentFit) -> np.ndarray:
     return theta
 
 
+def start_values(fit: InstrumentFit) -> np.ndarray:
+    """The free values a fit starts from (:func:`theta_of` gives back ``fit.theta``): each
+    free parameter's value, and no turn yet of the camera's rotation.
+
+    Raises:
+        ValueError: ``fit.free`` frees only part of the camera's rotation.
+    """
+    free = _check_free(fit.free)
+    return np.where(np.isin(free, CAMERA_ROTATION), 0.0, fit.theta[list(free)])
+
+
 def _residuals(free_values: np.ndarray, fit: InstrumentFit, commands: np.ndarray, pixels: np.ndarray) -> np.ndarray:
     theta = theta_of(free_values, fit)
     scaled = ((predict_pixels(theta, commands) - pixels) / fit.scales).ravel()
@@ -189,9 +201,7 @@ def refit(fit: InstrumentFit, commands: np.ndarray, pixels: np.ndarray) -> Instr
     outliers), the priors a plain square: their penalty is Gaussian however far out a
     parameter lies (scipy's ``loss="huber"`` on both would make them linear past two sds).
     The camera's rotation is fitted as a turn of ``fit.theta``'s (:func:`theta_of`)."""
-    free = _check_free(fit.free)
-    start = np.where(np.isin(free, CAMERA_ROTATION), 0.0, fit.theta[list(free)])  # no turn yet (:func:`theta_of`)
-    result = least_squares(_residuals, start, args=(fit, commands, pixels), x_scale="jac", diff_step=1e-5)
+    result = least_squares(_residuals, start_values(fit), args=(fit, commands, pixels), x_scale="jac", diff_step=1e-5)
     theta = theta_of(result.x, fit)
     logger.info("fit of %d parameters: cost %.1f after %d evaluations", len(fit.free), result.cost, result.nfev)
     return InstrumentFit(theta, fit.scales, fit.free)

@@ -183,6 +183,17 @@ class DetectionNoise:
         sigma = self.outlier_px if outlier else self.core_px
         return rng.normal(0.0, sigma, size=2) * (width_px / PAPER_WIDTH_PX)
 
+    def sample_many(self, rng: np.random.Generator, shape: tuple[int, ...], width_px: int = PAPER_WIDTH_PX) -> np.ndarray:
+        """Errors (du, dv) of many detections at once, (*shape, 2) pixels of an image width_px wide.
+
+        Each is distributed as one :meth:`sample` (the same mixture), but drawn in batches:
+        all the uniforms (outlier or not), then all the normals; so not the same numbers as
+        that many calls of :meth:`sample`.
+        """
+        outlier = rng.uniform(size=shape) < self.outlier_probability
+        sigma = np.where(outlier, self.outlier_px, self.core_px)
+        return rng.normal(size=(*shape, 2)) * sigma[..., None] * (width_px / PAPER_WIDTH_PX)
+
 
 def _box_shaped(value: object) -> bool:
     """Whether ``value`` is two sequences of four real numbers (not booleans)."""
