@@ -21,11 +21,11 @@ from dvrk_gym.baselines.agents import build_model
 from dvrk_gym.baselines.budgets import GRID_TOUCH_ID
 from dvrk_gym.baselines.comparison import agent_contact, agent_row, benchmark_agent, calibration_rows, format_comparison, setting_mismatches
 from dvrk_gym.baselines.training import TrainResult, make_agent_env, make_training_vec_env
-from dvrk_gym.baselines.wrappers import GoalScaling, TargetYawAction, TrainingYaws
+from dvrk_gym.baselines.wrappers import GoalScaling, TargetYawAction, TourStart, TrainingYaws
 from dvrk_gym.calibration.benchmark import YAW_SETTINGS, CircleErrors, save_table
 from dvrk_gym.calibration.pipeline import SETTINGS_STAMP
 from dvrk_gym.cli.baselines import add_commands
-from dvrk_gym.envs.grid_touch import ACTION_HIGH, ACTION_LOW, N_CIRCLES
+from dvrk_gym.envs.grid_touch import ACTION_HIGH, ACTION_LOW, N_CIRCLES, TOUR
 from dvrk_gym.sim.robot.kinematics import PAPER_YAWS_RAD
 from dvrk_gym.utils.run_folder import RunFolder
 
@@ -87,6 +87,30 @@ def test_paper_training_yaws_tour_the_circles_once_per_paper_yaw(grid_env):
     assert yaws[:N_CIRCLES] == [pytest.approx(PAPER_YAWS_RAD[0])] * N_CIRCLES
     assert yaws[N_CIRCLES] == pytest.approx(PAPER_YAWS_RAD[1])
     assert env.reset(options={"yaw": 0.25})[1]["target_yaw"] == pytest.approx(0.25)  # the caller wins
+
+
+def test_tour_start_begins_a_seeded_tour_at_its_place_and_the_caller_wins(grid_env):
+    env = TourStart(grid_env, start=5)
+    assert env.reset(seed=0)[1]["circle_index"] == TOUR[5]
+    assert env.reset()[1]["circle_index"] == TOUR[6]  # then the tour goes on
+    assert env.reset(seed=1, options={"circle": 3})[1]["circle_index"] == 3
+    assert TourStart(grid_env, start=0).reset(seed=0)[1]["circle_index"] == TOUR[0]
+    with pytest.raises(ValueError, match="start"):
+        TourStart(grid_env, start=N_CIRCLES)
+
+
+def test_training_sub_envs_tour_the_circles_from_places_spread_over_the_tour():
+    """Sub-env i of n begins at i * 35 // n: they touched the same circle at every step."""
+    config = TrainConfig(camera_resolution=TINY, n_envs=3, overrides=FAST_NETWORK)
+    env = make_training_vec_env(config)
+    try:
+        env.seed(0)
+        env.reset()
+        assert [info["circle_index"] for info in env.reset_infos] == [TOUR[0], TOUR[11], TOUR[23]]
+        _, _, dones, infos = env.step(np.zeros((3, 3), dtype=np.float32))
+        assert dones.all() and [info["circle_index"] for info in env.reset_infos] == [TOUR[1], TOUR[12], TOUR[24]]
+    finally:
+        env.close()
 
 
 def test_wrapped_env_passes_stable_baselines3_check_env(grid_env):

@@ -23,6 +23,20 @@ def test_any_method_name_lines_up_and_a_method_without_a_paper_figure_shows_a_da
     assert summary[1].split()[-2:] == ["2.14", "-16%"]
 
 
+def test_the_papers_pixels_are_scaled_to_the_width_the_touches_were_judged_in():
+    from dvrk_gym import paper
+
+    def paper_row(text: str) -> list[float]:
+        return [float(v) for v in next(line for line in text.splitlines() if line.startswith("  paper")).split()[1:]]
+
+    full, third = format_table(_table("DNN")), format_table(_table("DNN"), width_px=640)
+    np.testing.assert_allclose(paper_row(full), paper.CALIBRATION_PIXELS["DNN"], atol=0.05)  # 1920 x 1080: as printed
+    np.testing.assert_allclose(paper_row(third), np.array(paper.CALIBRATION_PIXELS["DNN"]) / 3, atol=0.05)
+    assert "scaled to it" in third and "scaled to it" not in full
+    mixed = format_table(_table("DNN"), width_px=None)
+    assert not any(line.startswith("  paper") for line in mixed.splitlines()) and "not shown" in mixed
+
+
 def test_the_table_and_the_pipeline_share_one_default_seed():
     assert inspect.signature(calibration_table).parameters["seed"].default == BENCHMARK_SEED
     assert pipeline.PipelineConfig().seed + pipeline.BENCHMARK_SEED_OFFSET == BENCHMARK_SEED

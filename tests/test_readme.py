@@ -241,6 +241,42 @@ def test_every_python_block_of_the_readme_runs(block, tmp_path):
     assert result.returncode == 0, f"{block.document} line {block.line}:\n{result.stderr[-3000:]}"
 
 
+CLAIMS = (
+    (
+        re.compile(r'^(\s*)info\["pixel_error"\].*#\s*(\d+) px, ([\d.]+) mm off'),
+        'assert (round(info["pixel_error"]), round(info["mm_error"], 1)) == ({1}, {2}), (info["pixel_error"], info["mm_error"])',
+    ),
+    (
+        re.compile(r'^(\s*)info\["outcome"\].*#\s*"(.)" here \(the jaws ([\d.]+) mm off\)'),
+        'assert (info["outcome"], round(1e3 * float(np.hypot(*info["true_grip_offset_m"])), 1)) == ("{1}", {2}), info',
+    ),
+)
+"""Results the README's example comments state (a GridTouch touch's error, a pick's outcome),
+each checked by an assert put after its line when the block runs."""
+
+
+def _with_claims_checked(code: str) -> tuple[str, int]:
+    """``code`` with an assert after each line whose comment states a result, and how many."""
+    lines, claims = [], 0
+    for line in code.splitlines():
+        lines.append(line)
+        for pattern, check in CLAIMS:
+            if match := pattern.match(line):
+                lines.append(match[1] + check.format(*match.groups()))
+                claims += 1
+    return "\n".join(lines) + "\n", claims
+
+
+def test_the_readme_examples_give_the_results_their_comments_state(tmp_path):
+    checked = [_with_claims_checked(block.code) + (block,) for block in PYTHON_BLOCKS if block.document == "README.md"]
+    assert sum(claims for _, claims, _ in checked) == len(CLAIMS), "each stated result is found once (a comment reworded?)"
+    for code, claims, block in checked:
+        if claims:
+            (tmp_path / "claims.py").write_text("import numpy as np\n" + _imports_above(block) + code)
+            result = _run([sys.executable, "claims.py"], tmp_path, timeout=600)
+            assert result.returncode == 0, f"README line {block.line}: {result.stderr[-1500:]}"
+
+
 def _figures(document: str = "README.md") -> list[tuple[int, str]]:
     """(line, first line) of each image and each table with a measured number in its body, outside code blocks."""
     lines = re.sub(r"```.*?```", lambda m: "\n" * m.group(0).count("\n"), DOCUMENTS[document], flags=re.S).splitlines()

@@ -10,6 +10,7 @@ in the budget.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import logging
 import time
 from collections.abc import Callable
@@ -26,10 +27,11 @@ from tqdm.auto import tqdm
 
 from dvrk_gym import paper
 from dvrk_gym.baselines.agents import AgentSpec, build_model, check_policy_kwargs, get_agent
-from dvrk_gym.baselines.budgets import CALIBRATOR_MOVES, DEBRIDEMENT_ID, DEFAULT_EVAL_POINTS, MAX_EVAL_POINTS
+from dvrk_gym.baselines.budgets import CALIBRATOR_MOVES, DEBRIDEMENT_ID, DEFAULT_EVAL_POINTS, GRID_TOUCH_ID, MAX_EVAL_POINTS
 from dvrk_gym.baselines.curves import CURVE_TRIALS, CurveEvaluator, CurvePoint, evaluate_curve_point, evaluate_pick_curve_point
 from dvrk_gym.baselines.resume import ResetRecorder, TrainingStateError, TrainingStateWriter, restore_training_state
-from dvrk_gym.baselines.wrappers import TRAINING_YAWS
+from dvrk_gym.baselines.wrappers import TRAINING_YAWS, TourStart
+from dvrk_gym.envs.grid_touch import N_CIRCLES
 from dvrk_gym.utils.checks import check_choice, check_endoscope_resolution, check_float, check_int, check_int_fields
 from dvrk_gym.utils.torch_threads import torch_threads
 
@@ -156,11 +158,20 @@ def make_agent_env(config: TrainConfig, training: bool) -> gym.Env:
     return config.spec.wrap(env, config.training_yaws if training else None)
 
 
+def _training_env(config: TrainConfig, index: int) -> gym.Env:
+    """Sub-env ``index`` of the training vector env: GridTouch-v0's begin their tours spread
+    over the circles (:class:`~dvrk_gym.baselines.wrappers.TourStart`), not all at the first."""
+    env = make_agent_env(config, training=True)
+    if config.spec.env_id == GRID_TOUCH_ID and index:
+        env = TourStart(env, start=index * N_CIRCLES // config.n_envs)
+    return ResetRecorder(env)
+
+
 def make_training_vec_env(config: TrainConfig) -> VecEnv:
     """The training vector env: ``n_envs`` copies, one process each with "subproc"; each
     env's resets recorded (:class:`~dvrk_gym.baselines.resume.ResetRecorder`), so that its
     state can be saved between episodes."""
-    factories: list[Callable[[], gym.Env]] = [lambda: ResetRecorder(make_agent_env(config, training=True)) for _ in range(config.n_envs)]
+    factories: list[Callable[[], gym.Env]] = [functools.partial(_training_env, config, index) for index in range(config.n_envs)]
     if config.vec_env == "subproc":
         return SubprocVecEnv(factories, start_method="forkserver")
     return DummyVecEnv(factories)

@@ -8,7 +8,8 @@ agent free to pick its yaw would make the benchmark's yaw settings meaningless. 
 are scaled from metres to about [-1, 1] over the workspace (:class:`GoalScaling`), so that
 a millimetre is a visible change to the networks; the wrapper's ``compute_reward`` undoes
 the scaling, so HER's relabelled rewards stay the env's own. :class:`TrainingYaws` chooses
-the yaw of each training episode.
+the yaw of each training episode, and :class:`TourStart` where a training sub-env's tour of
+the circles begins.
 """
 
 from __future__ import annotations
@@ -22,7 +23,7 @@ from gymnasium.wrappers import RescaleAction
 from numpy.typing import ArrayLike
 
 from dvrk_gym import paper
-from dvrk_gym.envs.grid_touch import N_CIRCLES
+from dvrk_gym.envs.grid_touch import N_CIRCLES, TOUR
 from dvrk_gym.sim.robot.kinematics import PAPER_YAWS_RAD
 from dvrk_gym.utils.checks import check_int
 
@@ -159,6 +160,31 @@ class TrainingYaws(gym.Wrapper, gym.utils.RecordConstructorArgs):
 
     def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
         return self.env.step(action)
+
+
+class TourStart(gym.Wrapper, gym.utils.RecordConstructorArgs):
+    """Begin GridTouch-v0's tour at its ``start``-th circle after each seeded reset (reset
+    options given by the caller win), where it would begin at the first.
+
+    A seeded reset starts the authors' tour (:data:`~dvrk_gym.envs.grid_touch.TOUR`) at its
+    first circle whatever the seed, so sub-envs of one vector env, seeded ``seed + i``, would
+    touch the same circle at every step; sub-env i of n starts at ``i * 35 // n`` instead.
+
+    Args:
+        env: GridTouch-v0 (possibly wrapped).
+        start: the place in the tour, 0 to 34 (0: as without the wrapper).
+    """
+
+    def __init__(self, env: gym.Env, start: int) -> None:
+        start = check_int("start", start, 0, N_CIRCLES - 1)
+        gym.utils.RecordConstructorArgs.__init__(self, start=start)
+        gym.Wrapper.__init__(self, env)
+        self.start = start
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
+        if seed is not None and self.start:
+            options = {"circle": TOUR[self.start], **(options or {})}
+        return self.env.reset(seed=seed, options=options)
 
 
 def wrap_grid_touch(env: gym.Env, training_yaws: str | None = None) -> gym.Env:

@@ -22,6 +22,7 @@ from dvrk_gym.calibration.policy import CalibratedPolicy, Calibrator
 from dvrk_gym.envs.grid_touch import N_CIRCLES, TOUR
 from dvrk_gym.evaluation.episodes import EpisodeResult, run_episodes, summarize
 from dvrk_gym.evaluation.table_protocol import RAW, HeightRule, RuledPolicy, check_rules, paper_rules
+from dvrk_gym.sim.endoscope.noise import PAPER_WIDTH_PX
 from dvrk_gym.sim.physics.scene import GRID_COLUMNS, GRID_ROWS
 from dvrk_gym.utils.atomic import atomic_savefig, atomic_write_json
 
@@ -156,19 +157,31 @@ def _cell(stats: dict[str, float]) -> str:
     return f"{stats['mean']:>9.2f} +- {stats['sem']:<4.2f} {stats['median']:>4.1f}/{stats['min']:.1f}/{stats['max']:.1f}"
 
 
-def format_table(table: dict[str, dict[str, CircleErrors]]) -> str:
-    """The paper's table in text: mean +- s.e., median, min, max per setting; paper beside."""
+def format_table(table: dict[str, dict[str, CircleErrors]], *, width_px: int | None = PAPER_WIDTH_PX) -> str:
+    """The paper's table in text: mean +- s.e., median, min, max per setting; paper beside.
+
+    The pixel errors are of the left image the touches were judged in, ``width_px`` wide;
+    the paper's (of 1920 x 1080) are scaled to that width beside them, and left out, with a
+    note, when the width is None (rows of several resolutions).
+    """
     summary = table_summary(table)
     width = max([8, *(len(method) + 2 for method in summary)])  # any method name lines up
     lines = []
     for unit, key in (("pixels", "pixel"), ("mm", "mm")):
         lines.append(f"Calibration error ({unit}), over the 35 circles: mean +- s.e. / median / min / max")
+        if key == "pixel" and width_px != PAPER_WIDTH_PX:
+            lines.append(
+                "(pixels of images of several widths: the paper's, of 1920 x 1080, are not shown)"
+                if width_px is None
+                else f"(pixels of a {width_px}-px-wide image; the paper's, of 1920 x 1080, scaled to it)"
+            )
         lines.append(f"{'method':<{width}}" + "".join(f"{label:>26}" for label, _ in YAW_SETTINGS))
         for method, rows in summary.items():
             cells = "".join(_cell(rows[label][key]).rjust(26) for label, _ in YAW_SETTINGS)
             lines.append(f"{method:<{width}}{cells}")
-            if key == "pixel" and method in paper.CALIBRATION_PIXELS:
-                lines.append(f"{'  paper':<{width}}" + "".join(f"{v:>26.1f}" for v in paper.CALIBRATION_PIXELS[method]))
+            if key == "pixel" and method in paper.CALIBRATION_PIXELS and width_px is not None:
+                scale = width_px / PAPER_WIDTH_PX
+                lines.append(f"{'  paper':<{width}}" + "".join(f"{v * scale:>26.1f}" for v in paper.CALIBRATION_PIXELS[method]))
         lines.append("")
     lines.append(f"{'method':<{width}}{'sim mean mm':>14}{'paper mm':>10}{'difference':>12}")
     for method, rows in summary.items():

@@ -29,9 +29,7 @@ from dvrk_gym.calibration.benchmark import (
     save_table,
     table_summary,
 )
-from dvrk_gym.calibration.models.dnn import MAX_EPOCHS, DNNCalibrator
-from dvrk_gym.calibration.models.rigid import RigidBodyCalibrator
-from dvrk_gym.calibration.models.two_phase import TwoPhaseCalibrator
+from dvrk_gym.calibration.models.limits import MAX_EPOCHS
 from dvrk_gym.calibration.phase1 import MAX_STEPS_PER_TRAJECTORY, MAX_TRAJECTORIES, Phase1Data, run_paper_phase1
 from dvrk_gym.calibration.phase2 import Phase2Data, collect_phase2
 from dvrk_gym.evaluation.table_protocol import PROTOCOL_LINES, PROTOCOLS
@@ -152,6 +150,12 @@ def run_calibration(
 
 def _run_stages(out: Path, folder: RunFolder, config: PipelineConfig, progress: bool, protocol: str | None) -> dict[str, Any]:
     """The stages; ``protocol`` is the benchmark's, or None for no benchmark."""
+    # The models here, not at the top: they load torch, scikit-learn and skops (seconds), which
+    # the stamp's readers (``dvrk-gym collect``, ``PipelineConfig``) do not need.
+    from dvrk_gym.calibration.models.dnn import DNNCalibrator
+    from dvrk_gym.calibration.models.rigid import RigidBodyCalibrator
+    from dvrk_gym.calibration.models.two_phase import TwoPhaseCalibrator
+
     grid = gym.make("dvrk_gym/GridTouch-v0", **config.env_kwargs())
     try:
         phase1 = folder.cached("phase1.npz", make=lambda: _run_phase1(config, progress), load=Phase1Data.load, save=_save)
@@ -193,7 +197,9 @@ def _run_stages(out: Path, folder: RunFolder, config: PipelineConfig, progress: 
         grid.close()
     save_table(table, out / "calibration_table.json", protocol=protocol)
     plot_error_maps(table, out / "calibration_error_maps.png")
-    atomic_write_text(out / "calibration_table.txt", f"{PROTOCOL_LINES[protocol]}\n{format_table(table)}\n")
+    atomic_write_text(
+        out / "calibration_table.txt", f"{PROTOCOL_LINES[protocol]}\n{format_table(table, width_px=config.camera_resolution[0])}\n"
+    )
     return {
         "protocol": protocol,
         "phase1": phase1,
