@@ -35,6 +35,8 @@ def test_the_papers_pixels_are_scaled_to_the_width_the_touches_were_judged_in():
     assert "scaled to it" in third and "scaled to it" not in full
     mixed = format_table(_table("DNN"), width_px=None)
     assert not any(line.startswith("  paper") for line in mixed.splitlines()) and "not shown" in mixed
+    with pytest.raises(ValueError, match="width_px"):
+        format_table(_table("DNN"), width_px=0)
 
 
 def test_the_table_and_the_pipeline_share_one_default_seed():

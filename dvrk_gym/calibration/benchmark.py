@@ -25,6 +25,7 @@ from dvrk_gym.evaluation.table_protocol import RAW, HeightRule, RuledPolicy, che
 from dvrk_gym.sim.endoscope.noise import PAPER_WIDTH_PX
 from dvrk_gym.sim.physics.scene import GRID_COLUMNS, GRID_ROWS
 from dvrk_gym.utils.atomic import atomic_savefig, atomic_write_json
+from dvrk_gym.utils.checks import check_int
 
 logger = logging.getLogger(__name__)
 
@@ -164,6 +165,7 @@ def format_table(table: dict[str, dict[str, CircleErrors]], *, width_px: int | N
     the paper's (of 1920 x 1080) are scaled to that width beside them, and left out, with a
     note, when the width is None (rows of several resolutions).
     """
+    width_px = None if width_px is None else check_int("width_px", width_px, 1)
     summary = table_summary(table)
     width = max([8, *(len(method) + 2 for method in summary)])  # any method name lines up
     lines = []
