@@ -9,8 +9,8 @@ from dvrk_gym.calibration import pipeline
 from dvrk_gym.calibration.benchmark import BENCHMARK_SEED, YAW_SETTINGS, CircleErrors, calibration_table, format_table
 
 
-def _table(*methods: str) -> dict:
-    errors = CircleErrors(pixel=np.full(35, 20.0), mm=np.full(35, 1.8), yaw=np.zeros(35))
+def _table(*methods: str, width_px: int = 1920) -> dict:
+    errors = CircleErrors(pixel=np.full(35, 20.0), mm=np.full(35, 1.8), yaw=np.zeros(35), width_px=width_px)
     return {method: {label: errors for label, _ in YAW_SETTINGS} for method in methods}
 
 
@@ -29,14 +29,14 @@ def test_the_papers_pixels_are_scaled_to_the_width_the_touches_were_judged_in():
     def paper_row(text: str) -> list[float]:
         return [float(v) for v in next(line for line in text.splitlines() if line.startswith("  paper")).split()[1:]]
 
-    full, third = format_table(_table("DNN")), format_table(_table("DNN"), width_px=640)
+    full, third = format_table(_table("DNN")), format_table(_table("DNN", width_px=640))
     np.testing.assert_allclose(paper_row(full), paper.CALIBRATION_PIXELS["DNN"], atol=0.05)  # 1920 x 1080: as printed
     np.testing.assert_allclose(paper_row(third), np.array(paper.CALIBRATION_PIXELS["DNN"]) / 3, atol=0.05)
     assert "scaled to it" in third and "scaled to it" not in full
-    mixed = format_table(_table("DNN"), width_px=None)
+    mixed = format_table({**_table("DNN"), **_table("RBT", width_px=640)})
     assert not any(line.startswith("  paper") for line in mixed.splitlines()) and "not shown" in mixed
     with pytest.raises(ValueError, match="width_px"):
-        format_table(_table("DNN"), width_px=0)
+        CircleErrors(pixel=np.zeros(35), mm=np.zeros(35), yaw=np.zeros(35), width_px=0)
 
 
 def test_the_table_and_the_pipeline_share_one_default_seed():
@@ -63,6 +63,7 @@ def test_a_pass_tours_the_authors_order_and_its_errors_come_back_per_circle_in_r
     by_circle = {e.final_info["circle_index"]: e.metrics["mm_error"] for e in episodes}
     np.testing.assert_array_equal(errors.mm, [by_circle[c] for c in range(35)])  # the same pass, put back in circle order
     assert len(set(np.round(errors.mm, 6))) > 4
+    assert errors.width_px == 320  # the pixel errors' image, for the table's paper rows
 
 
 def test_a_pass_refuses_an_order_that_is_not_each_circle_once():

@@ -50,11 +50,17 @@ class CircleErrors:
         pixel: (35,) distance in the left image, pixels.
         mm: (35,) distance in the workspace plane, millimetres.
         yaw: (35,) the yaw asked for at each circle, radians.
+        width_px: the width of the left image the pixel errors were measured in, pixels
+            (the env's ``camera_resolution``; the paper's: 1920).
     """
 
     pixel: np.ndarray
     mm: np.ndarray
     yaw: np.ndarray
+    width_px: int = PAPER_WIDTH_PX
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "width_px", check_int("CircleErrors.width_px", self.width_px, 1))
 
 
 def touch_grid_episodes(
@@ -88,7 +94,8 @@ def touch_grid(env: gym.Env, policy: Any, yaw: float | str, seed: int = 0, *, pr
     toured = touch_grid_episodes(env, policy, yaw, seed=seed, progress=progress)
     results = [toured[i] for i in np.argsort(TOUR)]  # episode i touched circle TOUR[i]
     pick = lambda key: np.array([r.metrics.get(key, np.nan) for r in results])  # noqa: E731
-    return CircleErrors(pixel=pick("pixel_error"), mm=pick("mm_error"), yaw=pick("target_yaw"))
+    width_px = int(env.unwrapped.config.camera_resolution[0])  # type: ignore[attr-defined]
+    return CircleErrors(pixel=pick("pixel_error"), mm=pick("mm_error"), yaw=pick("target_yaw"), width_px=width_px)
 
 
 BENCHMARK_SEED = 1000
@@ -158,14 +165,16 @@ def _cell(stats: dict[str, float]) -> str:
     return f"{stats['mean']:>9.2f} +- {stats['sem']:<4.2f} {stats['median']:>4.1f}/{stats['min']:.1f}/{stats['max']:.1f}"
 
 
-def format_table(table: dict[str, dict[str, CircleErrors]], *, width_px: int | None = PAPER_WIDTH_PX) -> str:
+def format_table(table: dict[str, dict[str, CircleErrors]]) -> str:
     """The paper's table in text: mean +- s.e., median, min, max per setting; paper beside.
 
-    The pixel errors are of the left image the touches were judged in, ``width_px`` wide;
-    the paper's (of 1920 x 1080) are scaled to that width beside them, and left out, with a
-    note, when the width is None (rows of several resolutions).
+    The pixel errors are of the left image the touches were judged in
+    (:attr:`CircleErrors.width_px` wide); the paper's (of 1920 x 1080) are scaled to that
+    width beside them, and left out, with a note, when the rows come from images of several
+    widths.
     """
-    width_px = None if width_px is None else check_int("width_px", width_px, 1)
+    widths = {errors.width_px for settings in table.values() for errors in settings.values()}
+    width_px = widths.pop() if len(widths) == 1 else None
     summary = table_summary(table)
     width = max([8, *(len(method) + 2 for method in summary)])  # any method name lines up
     lines = []
@@ -230,7 +239,10 @@ def save_table(table: dict[str, dict[str, CircleErrors]], path: Path, protocol: 
         "notes": list(notes),
         "summary": table_summary(table),
         "per_circle": {
-            method: {label: {"pixel": e.pixel.tolist(), "mm": e.mm.tolist(), "yaw": e.yaw.tolist()} for label, e in settings.items()}
+            method: {
+                label: {"pixel": e.pixel.tolist(), "mm": e.mm.tolist(), "yaw": e.yaw.tolist(), "width_px": e.width_px}
+                for label, e in settings.items()
+            }
             for method, settings in table.items()
         },
         "paper": {"mean_mm": paper.CALIBRATION_MEAN_MM, "pixels": paper.CALIBRATION_PIXELS},

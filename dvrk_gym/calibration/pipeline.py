@@ -197,9 +197,7 @@ def _run_stages(out: Path, folder: RunFolder, config: PipelineConfig, progress: 
         grid.close()
     save_table(table, out / "calibration_table.json", protocol=protocol)
     plot_error_maps(table, out / "calibration_error_maps.png")
-    atomic_write_text(
-        out / "calibration_table.txt", f"{PROTOCOL_LINES[protocol]}\n{format_table(table, width_px=config.camera_resolution[0])}\n"
-    )
+    atomic_write_text(out / "calibration_table.txt", f"{PROTOCOL_LINES[protocol]}\n{format_table(table)}\n")
     return {
         "protocol": protocol,
         "phase1": phase1,

@@ -174,12 +174,7 @@ def _evaluate_touch_grid(agents: list, args: argparse.Namespace) -> list[Path]:
     keys = names if len(set(names)) == len(names) else [f"{name}#{i + 1}" for i, name in enumerate(names)]  # short, for the paper's table
     table = {key: benchmark_agent(agent, seed=BENCHMARK_SEED + seed, progress=not args.no_progress) for key, agent in zip(keys, agents)}
     changes = [f"note: {note}" for agent in agents for note in env_change_notes(agent)]
-    widths = {agent.config.camera_resolution[0] for agent in agents}
-    text = (
-        format_table(table, width_px=widths.pop() if len(widths) == 1 else None)
-        + "\n"
-        + "\n".join([*(f"{key}: {agent.label}, {agent.path}" for key, agent in zip(keys, agents)), *changes])
-    )
+    text = format_table(table) + "\n" + "\n".join([*(f"{key}: {agent.label}, {agent.path}" for key, agent in zip(keys, agents)), *changes])
     print(text)
     save_table(table, args.out / "baseline_table.json", notes=[note for agent in agents for note in env_change_notes(agent)])
     atomic_write_text(args.out / "baseline_table.txt", text + "\n")

@@ -116,7 +116,7 @@ def _run_evaluate(args: argparse.Namespace) -> int:
     config = _config(args)  # checked before the folder is made or stamped
     result = run_calibration(writable_folder(args.out), config, progress=not args.no_progress, benchmark=True, protocol=protocol)
     print(PROTOCOL_LINES[protocol])
-    print(format_table(result["table"], width_px=config.camera_resolution[0]))
+    print(format_table(result["table"]))
     print(f"wrote {args.out / 'calibration_table.json'}, {args.out / 'calibration_table.txt'}, {args.out / 'calibration_error_maps.png'}")
     return 0
 
