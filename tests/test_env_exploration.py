@@ -175,3 +175,14 @@ def test_phase1_refuses_counts_and_seeds_that_are_not_ints_before_it_runs(n_traj
             collect_phase1(grid, PaperExplorationPolicy(seed=0), 1, progress=False)
     finally:
         grid.close()
+
+
+def test_phase1_at_a_resolution_that_loses_the_grid_is_refused_before_it_collects():
+    env = gym.make("dvrk_gym/CalibrationExploration-v0", camera_resolution=(64, 36))
+    policy = PaperExplorationPolicy(seed=0)
+    try:
+        with pytest.raises(ValueError, match=r"camera_resolution of 64 x 36 px the endoscope does not see the printed grid"):
+            collect_phase1(env, policy, n_trajectories=1, progress=False)
+        assert env.unwrapped._steps == 0  # not one pose commanded
+    finally:
+        env.close()

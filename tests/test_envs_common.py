@@ -143,6 +143,16 @@ def test_unknown_constructor_argument_and_bias_preset_are_clear_errors(env_id):
         gym.make(env_id, camera_resolution=SMALL, bias="no-such-preset")
 
 
+def test_a_subclass_that_inherits_the_constructor_is_named_in_its_refusal():
+    from dvrk_gym.envs.grid_touch import GridTouchEnv
+
+    class ShapedGridTouch(GridTouchEnv):
+        pass
+
+    with pytest.raises(TypeError, match=r"^ShapedGridTouch got an unexpected keyword argument 'biass' \(did you mean 'bias'\?\)"):
+        ShapedGridTouch(camera_resolution=SMALL, biass="paper")
+
+
 @pytest.mark.parametrize("env_id", ENV_IDS)
 def test_render_modes(make_env, env_id):
     env = make_env(env_id, render_mode="rgb_array")

@@ -175,6 +175,20 @@ def test_a_resumed_sweep_runs_nothing_and_a_larger_grid_runs_only_the_new_units(
     assert len(larger.rows) == 3 * 2 * 3
 
 
+@pytest.mark.parametrize(
+    ("settings", "executor", "message"),
+    [
+        ({"bias_seeds": (0,)}, StandInExecutor(), "settings must be a SweepSettings"),
+        (SweepSettings(bias_seeds=(0,), pipeline=TINY), None, "executor must be an Executor"),
+        (SweepSettings(bias_seeds=(0,), pipeline=TINY), "local", "executor must be an Executor"),
+    ],
+)
+def test_a_sweep_of_no_settings_or_no_executor_is_refused_before_its_folder_is_made(tmp_path, settings, executor, message):
+    with pytest.raises(TypeError, match=message):
+        run_sweep(settings, tmp_path / "sweep", executor, progress=False)
+    assert not (tmp_path / "sweep").exists()  # it wrote a stamp, a units folder and a lock, then failed
+
+
 def test_a_sweep_whose_units_folder_became_a_file_says_so_and_keeps_it(tmp_path):
     run_sweep(SweepSettings(bias_seeds=(0,), pipeline=TINY), tmp_path, StandInExecutor(), progress=False)
     shutil.rmtree(tmp_path / "units")

@@ -274,6 +274,14 @@ def collect_phase1(
     check_int("seed", seed, 0)  # episode k is reset with seed + k
     if not isinstance(env.unwrapped, CalibrationExplorationEnv):
         raise ValueError(f"Phase I runs on CalibrationExploration-v0, got {type(env.unwrapped).__name__}")
+    width, height = env.unwrapped.config.camera_resolution
+    try:  # before the collection: its cleaning rule matches the marker's pixels through the grid's
+        left_to_right = grid_left_to_right_map(env)
+    except ValueError as error:
+        raise ValueError(
+            f"at a camera_resolution of {width} x {height} px the endoscope does not see the printed grid ({error}); "
+            "Phase I's cleaning rule needs it: give a larger resolution"
+        ) from error
     rows: dict[str, list] = {
         name: [] for name in ("reported_position", "orientation", "left_px", "right_px", "areas_px", "camera_position", "trajectory")
     }
@@ -293,9 +301,7 @@ def collect_phase1(
             rows["camera_position"].append(_or_nan(info["marker_camera_position"], 3))
             rows["trajectory"].append(k)
     arrays = {name: np.array(values) for name, values in rows.items()}
-    unwrapped: Any = env.unwrapped
-    width = unwrapped.config.camera_resolution[0]
-    kept = clean_mask(arrays["left_px"], arrays["right_px"], grid_left_to_right_map(env), width)
+    kept = clean_mask(arrays["left_px"], arrays["right_px"], left_to_right, width)
     return Phase1Data(**arrays, kept=kept)
 
 

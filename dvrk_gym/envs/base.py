@@ -47,10 +47,11 @@ def config_docs(config_class: type) -> str:
     return "\n".join(blocks)
 
 
-def checking_keywords(init: Callable[..., None], class_name: str) -> Callable[..., None]:
+def checking_keywords(init: Callable[..., None]) -> Callable[..., None]:
     """``init`` (an env's ``__init__``) that first refuses a keyword it does not take.
 
-    The ``TypeError`` names the keyword, the nearest one it takes and all the ones it takes
+    The ``TypeError`` names the env's class (the subclass's, for one that inherits ``init``),
+    the keyword, the nearest one it takes and all the ones it takes
     (Python's own names only the bad keyword), before any world is built; ``gym.make``
     passes it on. ``inspect.signature`` and ``help()`` still show ``init``'s own signature.
     A constructor with ``**kwargs`` is returned as it is.
@@ -67,7 +68,7 @@ def checking_keywords(init: Callable[..., None], class_name: str) -> Callable[..
                 close = difflib.get_close_matches(name, allowed, n=1)
                 hint = f" (did you mean {close[0]!r}?)" if close else ""
                 listed = ", ".join(allowed)
-                raise TypeError(f"{class_name} got an unexpected keyword argument {name!r}{hint}; its keywords are: {listed}")
+                raise TypeError(f"{type(self).__name__} got an unexpected keyword argument {name!r}{hint}; its keywords are: {listed}")
         init(self, *args, **kwargs)
 
     return checked
@@ -140,7 +141,7 @@ class DvrkEnv(gym.Env, Generic[ConfigT]):
         and append the config's field docs to its docstring, for ``help()``."""
         super().__init_subclass__(**kwargs)
         if "__init__" in cls.__dict__:
-            cls.__init__ = checking_keywords(cls.__dict__["__init__"], cls.__name__)  # type: ignore[method-assign]
+            cls.__init__ = checking_keywords(cls.__dict__["__init__"])  # type: ignore[method-assign]
             fields = "\n".join("    " + line if line else line for line in config_docs(cls.config_class).splitlines())
             cls.__init__.__doc__ = (
                 f"{inspect.cleandoc(cls.__init__.__doc__ or '')}\n\nKeyword arguments ({cls.config_class.__name__}'s fields):\n{fields}\n"

@@ -100,10 +100,18 @@ def run_sweep(settings: SweepSettings, out: str | os.PathLike, executor: Executo
         progress: show a bar over the units.
 
     Raises:
+        TypeError: ``settings`` is no :class:`SweepSettings`, or ``executor`` has no
+            ``map_unordered`` and ``description`` (refused before ``out`` is touched).
         ValueError: ``out`` holds a sweep made with other settings or by another dvrk_gym.
         SweepError: some units failed; the others are written and tabled first, and the
             same call retries only the failed ones.
     """
+    if not isinstance(settings, SweepSettings):
+        raise TypeError(f"settings must be a SweepSettings (SweepSettings(bias_seeds=..., ...)), got {type(settings).__name__}")
+    if not (callable(getattr(executor, "map_unordered", None)) and isinstance(getattr(executor, "description", None), str)):
+        raise TypeError(
+            f"executor must be an Executor (dvrk_gym.parallel.executors.local_executor(workers), or a DaskExecutor), got {executor!r}"
+        )
     start = time.perf_counter()
     with RunFolder(out, settings.stamp(), stamp=SETTINGS_STAMP) as folder:
         units_dir = folder.file(UNITS_FOLDER)
