@@ -30,21 +30,6 @@ def test_importing_the_package_registers_the_envs_without_loading_torch_pybullet
     assert result.stdout.strip() == ""
 
 
-def test_collect_and_flag_checks_load_no_model_library():
-    """``dvrk-gym collect`` (Phase I only) and every command's flag checks run without torch,
-    scikit-learn or skops: importing them took seconds (10 s on a busy machine) before a
-    refusal or a collection could start."""
-    code = (
-        "import sys, argparse\n"
-        "from dvrk_gym.cli.options import check_common_options\n"
-        "check_common_options(argparse.Namespace(seed=0, bias_seed=0, trajectories=2, epochs=10, resolution=[640, 360], trials=1))\n"
-        "import dvrk_gym.calibration.pipeline  # collect's stamp: PipelineConfig, SETTINGS_STAMP\n"
-        "print('heavy:' + ','.join(sorted(m for m in ('torch', 'sklearn', 'skops', 'stable_baselines3') if m in sys.modules)))\n"
-    )
-    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
-    assert "heavy:\n" in result.stdout + "\n", result.stdout
-
-
 def test_the_public_names_are_the_modules_own_objects():
     from dvrk_gym.calibration.policy import CalibratedPolicy
     from dvrk_gym.envs.grid_touch import GridTouchEnv

@@ -29,7 +29,9 @@ from dvrk_gym.calibration.benchmark import (
     save_table,
     table_summary,
 )
-from dvrk_gym.calibration.models.limits import MAX_EPOCHS
+from dvrk_gym.calibration.models.dnn import MAX_EPOCHS, DNNCalibrator
+from dvrk_gym.calibration.models.rigid import RigidBodyCalibrator
+from dvrk_gym.calibration.models.two_phase import TwoPhaseCalibrator
 from dvrk_gym.calibration.phase1 import MAX_STEPS_PER_TRAJECTORY, MAX_TRAJECTORIES, Phase1Data, run_paper_phase1
 from dvrk_gym.calibration.phase2 import Phase2Data, collect_phase2
 from dvrk_gym.evaluation.table_protocol import PROTOCOL_LINES, PROTOCOLS
@@ -150,12 +152,6 @@ def run_calibration(
 
 def _run_stages(out: Path, folder: RunFolder, config: PipelineConfig, progress: bool, protocol: str | None) -> dict[str, Any]:
     """The stages; ``protocol`` is the benchmark's, or None for no benchmark."""
-    # The models here, not at the top: they load torch, scikit-learn and skops (seconds), which
-    # the stamp's readers (``dvrk-gym collect``, ``PipelineConfig``) do not need.
-    from dvrk_gym.calibration.models.dnn import DNNCalibrator
-    from dvrk_gym.calibration.models.rigid import RigidBodyCalibrator
-    from dvrk_gym.calibration.models.two_phase import TwoPhaseCalibrator
-
     grid = gym.make("dvrk_gym/GridTouch-v0", **config.env_kwargs())
     try:
         phase1 = folder.cached("phase1.npz", make=lambda: _run_phase1(config, progress), load=Phase1Data.load, save=_save)

@@ -40,7 +40,7 @@ def check_common_options(args: argparse.Namespace) -> None:
 
         check_int("--trajectories", args.trajectories, 1, MAX_TRAJECTORIES)
     if getattr(args, "epochs", None) is not None:
-        from dvrk_gym.calibration.models.limits import MAX_EPOCHS
+        from dvrk_gym.calibration.models.dnn import MAX_EPOCHS
 
         check_int("--epochs", args.epochs, 1, MAX_EPOCHS)
     if getattr(args, "resolution", None) is not None:

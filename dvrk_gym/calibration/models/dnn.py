@@ -30,7 +30,6 @@ from tqdm import tqdm
 
 from dvrk_gym import paper
 from dvrk_gym.calibration.models.features import EULER_FEATURES, calibrator_layout, check_inputs, check_targets, encode_euler
-from dvrk_gym.calibration.models.limits import MAX_BATCH_SIZE, MAX_EPOCHS, MAX_HIDDEN_LAYERS, MAX_PARAMETERS, MAX_UNITS
 from dvrk_gym.calibration.models.serialization import ModelParts, SavableModel, require_array, require_names
 from dvrk_gym.utils.checks import check_bool, check_choice, check_float, check_int
 from dvrk_gym.utils.torch_threads import torch_threads
@@ -53,6 +52,12 @@ DEFAULT_LEARNING_RATE = 3e-3
 _INPUT_FEATURES = 9
 _OUTPUTS = 3
 _PROGRESS_EVERY_EPOCHS = 25
+MAX_HIDDEN_LAYERS = 16
+MAX_UNITS = 4096
+MAX_PARAMETERS = 2**25
+"""The largest network built, weights and biases (128 MiB in float32); the paper's 3 x 300 has 183,303."""
+MAX_EPOCHS = 10**7
+MAX_BATCH_SIZE = 2**24
 
 
 def network_parameters(hidden_layers: int, units: int) -> int:
