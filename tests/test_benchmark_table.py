@@ -35,6 +35,7 @@ def test_the_papers_pixels_are_scaled_to_the_width_the_touches_were_judged_in():
     assert "scaled to it" in third and "scaled to it" not in full
     mixed = format_table({**_table("DNN"), **_table("RBT", width_px=640)})
     assert not any(line.startswith("  paper") for line in mixed.splitlines()) and "not shown" in mixed
+    assert "widths" not in format_table({})  # no rows, nothing to note
     with pytest.raises(ValueError, match="width_px"):
         CircleErrors(pixel=np.zeros(35), mm=np.zeros(35), yaw=np.zeros(35), width_px=0)
 

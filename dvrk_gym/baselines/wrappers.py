@@ -168,7 +168,8 @@ class TourStart(gym.Wrapper, gym.utils.RecordConstructorArgs):
 
     A seeded reset starts the authors' tour (:data:`~dvrk_gym.envs.grid_touch.TOUR`) at its
     first circle whatever the seed, so sub-envs of one vector env, seeded ``seed + i``, would
-    touch the same circle at every step; sub-env i of n starts at ``i * 35 // n`` instead.
+    touch the same circle at every step; the training vector env gives sub-env i of n the
+    start ``i * 35 // n`` instead.
 
     Args:
         env: GridTouch-v0 (possibly wrapped).

@@ -173,8 +173,8 @@ def format_table(table: dict[str, dict[str, CircleErrors]]) -> str:
     width beside them, and left out, with a note, when the rows come from images of several
     widths.
     """
-    widths = {errors.width_px for settings in table.values() for errors in settings.values()}
-    width_px = widths.pop() if len(widths) == 1 else None
+    widths = {errors.width_px for settings in table.values() for errors in settings.values()} or {PAPER_WIDTH_PX}
+    width_px = widths.pop() if len(widths) == 1 else None  # an empty table has no rows to note
     summary = table_summary(table)
     width = max([8, *(len(method) + 2 for method in summary)])  # any method name lines up
     lines = []
