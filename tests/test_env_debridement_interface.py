@@ -16,11 +16,12 @@ from test_env_debridement import ENV_ID, _first_on_paper, debridement_maker, ora
 
 from dvrk_gym.envs.debridement import fragment_target, image_angle_to_yaw
 from dvrk_gym.envs.grid_touch import tool_pose
-from dvrk_gym.sim.endoscope.fragment_detection import detect_fragments
+from dvrk_gym.sim.endoscope.fragment_detection import MIN_FRAGMENT_IMAGE_WIDTH_PX, detect_fragments
 from dvrk_gym.sim.physics.scene import WORKSPACE_CENTER_M
 from dvrk_gym.sim.robot import ik
 from dvrk_gym.sim.robot import kinematics as kin
 from dvrk_gym.sim.table.contact import CONTACTS
+from dvrk_gym.sim.world import DvrkWorld
 
 
 @pytest.fixture
@@ -60,6 +61,22 @@ def test_two_pass_detection_equals_a_full_frame_detection(make):
         np.testing.assert_allclose(d.left.centroid, nearest.centroid, atol=0.02)
         assert d.left.area_px == pytest.approx(nearest.area_px, abs=2)
         assert d.image_angle_rad == pytest.approx(nearest.angle_rad, abs=0.01)
+
+
+@pytest.mark.parametrize("width", [96, 128, 192])
+def test_small_endoscope_images_still_see_every_fragment(make, width):
+    """The coarse pass keeps MIN_FRAGMENT_IMAGE_WIDTH_PX: at a quarter of 128 px it saw 0-2 fragments of 8."""
+    env = make(camera_resolution=(width, round(width * 9 / 16)), fragment="raisin")
+    assert env.unwrapped.observer.scale == min(4, width // MIN_FRAGMENT_IMAGE_WIDTH_PX)
+    assert [int(env.reset(seed=seed)[0]["fragment_seen"].sum()) for seed in range(3)] == [8, 8, 8]
+
+
+def test_an_endoscope_too_small_to_see_the_fragments_is_refused_before_the_world_is_built(make, monkeypatch):
+    built = []
+    monkeypatch.setattr(DvrkWorld, "__init__", lambda *args, **kwargs: built.append(args))
+    with pytest.raises(ValueError, match=r"camera_resolution 64 x 36 is too small .* at least 80 px wide"):
+        make(camera_resolution=(64, 36))
+    assert not built
 
 
 def test_fragment_target_is_the_first_fragment_seen_or_the_middle_of_the_view():

@@ -58,7 +58,7 @@ from dvrk_gym.envs.grid_touch import ACTION_HIGH as PICK_HIGH
 from dvrk_gym.envs.grid_touch import ACTION_LOW as PICK_LOW
 from dvrk_gym.envs.grid_touch import tool_pose
 from dvrk_gym.envs.picks import ABORTED_PICK_INFO, CLOSED_JAW_RAD, PHASES, PickPrimitive, PickRun
-from dvrk_gym.sim.endoscope.fragment_detection import MAX_FRAGMENTS, FragmentDetection, FragmentObserver
+from dvrk_gym.sim.endoscope.fragment_detection import MAX_FRAGMENTS, MIN_FRAGMENT_IMAGE_WIDTH_PX, FragmentDetection, FragmentObserver
 from dvrk_gym.sim.robot import ik
 from dvrk_gym.sim.robot import kinematics as kin
 from dvrk_gym.sim.robot.bias import BiasConfig
@@ -154,7 +154,14 @@ class DebridementEnv(DvrkEnv[DebridementConfig]):
         renderer: str = "auto",
     ) -> None:
         """Debridement-v0, set up by the fields of :class:`DebridementConfig` (listed below)."""
-        super().__init__(DebridementConfig(**config_arguments(locals())), render_mode=render_mode)
+        config = DebridementConfig(**config_arguments(locals()))
+        width, height = config.camera_resolution
+        if width < MIN_FRAGMENT_IMAGE_WIDTH_PX:  # checked before the world is built: the detector would lose fragments
+            raise ValueError(
+                f"camera_resolution {width} x {height} is too small for the endoscope to see the fragments: they need at "
+                f"least {MIN_FRAGMENT_IMAGE_WIDTH_PX} px wide, e.g. 160 x 90 (render_resolution sets the picture alone)"
+            )
+        super().__init__(config, render_mode=render_mode)
         self.primitive = self.config.action_mode == "primitive"
         if self.primitive:
             self.action_names = PICK_ACTION_NAMES

@@ -49,7 +49,15 @@ MIN_FRAGMENT_AREA_M2 = 2.0e-5
 """The smallest blob taken for a fragment, in the paper plane, m^2 (the smallest fragment
 drawn is about 8 x 3 mm = 1.9e-5 m^2 of ellipse; the tool's edges and slivers are smaller)."""
 COARSE_SCALE = 4
-"""The coarse pass renders at 1/COARSE_SCALE of the resolution in each direction."""
+"""The coarse pass renders at 1/COARSE_SCALE of the resolution in each direction, or less
+reduced where that would make it narrower than :data:`MIN_FRAGMENT_IMAGE_WIDTH_PX` (images
+under 320 px wide)."""
+MIN_FRAGMENT_IMAGE_WIDTH_PX = 80
+"""The narrowest image, pixels, in which the fragments are all found; the coarse pass is never
+narrower. Measured over 10 seeded Debridement-v0 resets of 8 fragments: 80/80 seeds and 80/80
+raisins seen in 80 px wide images, and with coarse passes 80 px wide (at 1/4 of 320, 1/2 of
+160); at 64 px, 80/80 seeds but 73/80 raisins, in both; at 48 px, fewer still. Before the
+coarse pass kept this width (a quarter of every size), 128 px saw 0-2 fragments of 8."""
 WINDOW_MARGIN_PX = 6
 """Full-resolution pixels added around a blob's scaled coarse bounding box."""
 PAPER_INSET_M = 0.001
@@ -161,7 +169,8 @@ class FragmentObserver:
 
     Args:
         camera: the stereo endoscope (its resolution is the one measured at).
-        coarse_scale: how much smaller the coarse pass renders, per direction.
+        coarse_scale: how much smaller the coarse pass renders, per direction, at most (less
+            where the coarse image would be narrower than :data:`MIN_FRAGMENT_IMAGE_WIDTH_PX`).
         pixel_noise_px: sd of the noise added to every centroid, at 1920 x 1080 (scaled
             with the resolution), pixels.
     """
@@ -169,7 +178,7 @@ class FragmentObserver:
     def __init__(self, camera: StereoCamera, coarse_scale: int = COARSE_SCALE, pixel_noise_px: float = 0.0) -> None:
         k = camera.intrinsics
         self.camera = camera
-        self.scale = int(coarse_scale)
+        self.scale = max(1, min(int(coarse_scale), k.width // MIN_FRAGMENT_IMAGE_WIDTH_PX))
         self.coarse = StereoCamera(
             k.scaled(max(16, k.width // self.scale), max(16, k.height // self.scale)),
             baseline_m=camera.baseline_m,
