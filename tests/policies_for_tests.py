@@ -24,3 +24,12 @@ def takes_nothing():
 def raises_type_error(env):
     """A factory with a bug of its own: its TypeError comes through as it is."""
     return len(42)
+
+
+def fails_on_its_first_step(env):
+    """A policy with a bug of its own that shows only once it runs (a RuntimeError)."""
+
+    def policy(observation):
+        raise RuntimeError("the policy's own bug")
+
+    return policy

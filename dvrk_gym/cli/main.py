@@ -118,6 +118,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         remove_empty_created_folders()
         print(f"dvrk-gym {_command(args)}: interrupted ({interrupted_note(args)})", file=sys.stderr)
         return 130
+    except BaseException:  # anything else (a policy of the user's raising, a bug): its traceback, and no empty folder
+        remove_empty_created_folders()
+        raise
 
 
 if __name__ == "__main__":

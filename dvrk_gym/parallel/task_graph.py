@@ -39,7 +39,7 @@ from tqdm.auto import tqdm
 from dvrk_gym.parallel.executors import Executor, local_executor, outcome_of
 from dvrk_gym.utils.atomic import read_json
 from dvrk_gym.utils.checks import check_file_stem
-from dvrk_gym.utils.run_folder import RunFolder, locate_in_folder
+from dvrk_gym.utils.run_folder import RunFolder
 from dvrk_gym.utils.torch_threads import torch_threads
 
 BAR_FORMAT = "{desc} {percentage:3.0f}%|{bar}| [{elapsed}<{remaining}{postfix}]"
@@ -75,6 +75,20 @@ class Task:
 
 class TaskError(RuntimeError):
     """A task raised, or its worker died; the message names it (finished tasks stay cached)."""
+
+
+def locate_in_folder(path: str | os.PathLike, folder: str | os.PathLike) -> Path:
+    """Where a file a run folder's result names lies now: ``path`` itself when it is inside
+    ``folder`` or no longer moved; in a folder moved or copied since the result was written
+    (results record absolute paths), the longest tail of ``path`` that is a file in ``folder``.
+    """
+    full, root = Path(os.path.abspath(path)), Path(os.path.abspath(folder))
+    if not full.is_relative_to(root):
+        for start in range(1, len(full.parts)):
+            moved = root / Path(*full.parts[start:])
+            if moved.is_file():
+                return moved
+    return full
 
 
 def call_task(

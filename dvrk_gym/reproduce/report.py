@@ -17,7 +17,7 @@ from dvrk_gym.baselines.curves import CurvePoint, plot_curves
 from dvrk_gym.calibration.benchmark import YAW_SETTINGS
 from dvrk_gym.calibration.search import SearchResult, plot_search
 from dvrk_gym.evaluation.trials import unpicked_note
-from dvrk_gym.utils.run_folder import locate_in_folder
+from dvrk_gym.parallel.task_graph import locate_in_folder
 
 PAPER_PHASE1 = {"raw": paper.PHASE1_RAW_SAMPLES, "kept": paper.PHASE1_KEPT_SAMPLES}
 """The paper's Phase I: raw samples and those both cameras saw at the same place."""

@@ -37,8 +37,8 @@ from dvrk_gym.sim.robot.bias_field import grid_rigid_means, plot_field
 from dvrk_gym.sim.robot.bias_statistics import bias_statistics
 from dvrk_gym.sim.robot.cables import CableModel
 from dvrk_gym.sim.table.contact import DEFAULT_CONTACT
+from dvrk_gym.utils.atomic import set_aside
 from dvrk_gym.utils.checks import check_endoscope_resolution
-from dvrk_gym.utils.run_folder import CORRUPT_SUFFIX
 
 logger = logging.getLogger(__name__)
 
@@ -205,7 +205,7 @@ def rl_agent(
     try:
         result = train(config, progress=False, state_path=state_path)
     except TrainingStateError as error:  # damaged, or unreadable by these libraries: as any cached result, set aside and made again
-        aside = state_path.replace(state_path.with_name(state_path.name + CORRUPT_SUFFIX))
+        aside = set_aside(state_path)
         logger.warning("%s; moved it to %s and trained %s from the start", error, aside, agent)
         result = train(config, progress=False, state_path=state_path)
     path = save_agent(result, folder / "model.zip")

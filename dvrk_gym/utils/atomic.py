@@ -32,6 +32,10 @@ logger = logging.getLogger(__name__)
 
 PARTIAL_MARK = ".partial"
 """What the name of a temporary file holds before the target's suffix."""
+CORRUPT_SUFFIX = ".corrupt"
+"""What :func:`set_aside` adds to the name of a damaged file it keeps."""
+MAX_SET_ASIDE = 1000
+"""The most damaged copies of one file :func:`set_aside` keeps."""
 
 
 def partial_path(path: str | os.PathLike) -> Path:
@@ -211,3 +215,20 @@ def atomic_savefig(figure: Any, path: str | os.PathLike, **options: Any) -> Path
     with atomic_path(path) as temporary:
         figure.savefig(temporary, **options)
     return Path(path)
+
+
+def set_aside(path: str | os.PathLike) -> Path:
+    """Move a damaged file (or whatever stands at ``path``) to the first free name of
+    ``<name>.corrupt``, ``<name>.corrupt.2``, ... beside it, and give that name: every copy set
+    aside is kept, and an earlier one (even a folder) never blocks the move.
+
+    Raises:
+        FileExistsError: :data:`MAX_SET_ASIDE` copies are there already (naming them, to delete).
+    """
+    path = Path(path)
+    for number in range(1, MAX_SET_ASIDE + 1):
+        aside = path.with_name(path.name + CORRUPT_SUFFIX + (f".{number}" if number > 1 else ""))
+        if not os.path.lexists(aside):  # the caller owns the folder (a run folder's lock): no race for the name
+            os.replace(path, aside)
+            return aside
+    raise FileExistsError(f"{MAX_SET_ASIDE} damaged copies of {path} are set aside already ({path.name}{CORRUPT_SUFFIX}*); delete them")

@@ -11,7 +11,7 @@ versions, or by one from before stamps had it, is refused too; and so is a folde
 holds files but no stamp (one deleted, say): their settings are unknown. Each result is a
 file: :meth:`RunFolder.cached` loads it when it is there, else makes and saves it, and one
 that cannot be read back (cut short by a full disk, edited by hand) is named in a warning,
-moved aside as ``<name>.corrupt`` and made again.
+set aside as ``<name>.corrupt`` (:func:`~dvrk_gym.utils.atomic.set_aside`) and made again.
 
 One run owns a folder at a time: opening it takes a lock (``run.lock``, a
 :class:`filelock.FileLock` holding the owner's process id), and a second process that
@@ -37,7 +37,7 @@ from typing import Any, TypeVar
 
 from filelock import FileLock, Timeout
 
-from dvrk_gym.utils.atomic import atomic_path, atomic_write_json, read_json, remove_partial_files
+from dvrk_gym.utils.atomic import atomic_path, atomic_write_json, read_json, remove_partial_files, set_aside
 from dvrk_gym.utils.source_fingerprint import SourceFingerprint, source_fingerprint
 
 logger = logging.getLogger(__name__)
@@ -46,8 +46,6 @@ T = TypeVar("T")
 
 LOCK_FILE = "run.lock"
 """The lock file of a run folder; it holds the owner's process id while a run owns the folder."""
-CORRUPT_SUFFIX = ".corrupt"
-"""A result that could not be read back is renamed to its name plus this."""
 UNREADABLE = (ValueError, OSError, EOFError, KeyError, TypeError, zipfile.BadZipFile)
 """What a loader raises on a file cut short or tampered with (JSON and model-file errors are ValueErrors)."""
 SOURCE_KEY = "dvrk_gym_source"
@@ -144,20 +142,6 @@ def check_made_here(folder: str | os.PathLike, stamp: str, remedy: str) -> None:
         _refuse_other_source(Path(folder) / stamp, found.get(SOURCE_KEY), source_fingerprint(), remedy)
 
 
-def locate_in_folder(path: str | os.PathLike, folder: str | os.PathLike) -> Path:
-    """Where a file a run folder's result names lies now: ``path`` itself when it is inside
-    ``folder`` or no longer moved; in a folder moved or copied since the result was written
-    (results record absolute paths), the longest tail of ``path`` that is a file in ``folder``.
-    """
-    full, root = Path(os.path.abspath(path)), Path(os.path.abspath(folder))
-    if not full.is_relative_to(root):
-        for start in range(1, len(full.parts)):
-            moved = root / Path(*full.parts[start:])
-            if moved.is_file():
-                return moved
-    return full
-
-
 MAX_LOCK_BYTES = 4096
 """The most of a lock file read, bytes (it holds a short JSON object)."""
 
@@ -215,6 +199,16 @@ def _unstamped_files(folder: Path) -> list[str]:
     return sorted(found)
 
 
+def _refuse_unstamped_files(folder: Path, stamp: Path) -> None:
+    """Refuse ``folder`` when it holds files and ``stamp`` is missing: nobody recorded their settings."""
+    if not stamp.exists() and (unknown := _unstamped_files(folder)):
+        listed = f"{unknown[:5]}{' ...' if len(unknown) > 5 else ''}"
+        raise ValueError(
+            f"{folder} holds files but no settings stamp ({stamp.name}): {listed} were made with settings nobody recorded; "
+            "use an empty folder, or delete these"
+        )
+
+
 def _holds_results(folder: Path, stamp: Path) -> bool:
     """Whether ``folder`` or one below it holds a file but stamps, locks and hidden (temporary) ones."""
     files = (Path(here) / name for here, _, names in os.walk(folder) for name in names if not name.startswith(".") and name != LOCK_FILE)
@@ -248,8 +242,11 @@ class RunFolder:
         self.path = Path(path)
         if self.path.exists() and not self.path.is_dir():
             raise NotADirectoryError(f"{self.path} is a file, not a folder; give a folder for the run")
-        self.path.mkdir(parents=True, exist_ok=True)
         self.stamp = self.path / stamp
+        if settings is not None and self.path.is_dir() and not (self.path / LOCK_FILE).exists():  # no run's folder yet:
+            # refused before a lock file is made in it (checked again under the lock, where a busy folder is named first)
+            _refuse_unstamped_files(self.path, self.stamp)
+        self.path.mkdir(parents=True, exist_ok=True)
         self.made_s: dict[str, float] = {}  # wall time of each result made (not loaded) by cached(), by stage, s
         self._lock = FileLock(self.path / LOCK_FILE, timeout=0, thread_local=False, is_singleton=True)
         self._held = False
@@ -320,12 +317,7 @@ class RunFolder:
         here = source_fingerprint()
         found = _read_stamp(self.stamp)
         if found is None:  # files already here were made with settings no stamp recorded: never taken as these
-            unknown = _unstamped_files(self.path)
-            if unknown:
-                raise ValueError(
-                    f"{self.path} holds files but no settings stamp ({self.stamp.name}): {unknown[:5]}"
-                    f"{' ...' if len(unknown) > 5 else ''} were made with settings nobody recorded; use an empty folder, or delete these"
-                )
+            _refuse_unstamped_files(self.path, self.stamp)
         else:
             try:
                 _refuse_other_source(self.stamp, found.pop(SOURCE_KEY, None), here, RESUME_REMEDY)
@@ -352,7 +344,8 @@ class RunFolder:
         """The result ``name`` read by ``load``; None when it is missing or unreadable.
 
         An unreadable file (``load`` raised one of :data:`UNREADABLE`, but not a permission
-        error) is named in a warning and renamed to ``<name>.corrupt``, so that it is made again.
+        error) is named in a warning and set aside as ``<name>.corrupt`` (``.corrupt.2`` beside an
+        earlier one: :func:`~dvrk_gym.utils.atomic.set_aside`), so that it is made again.
         """
         path = self.file(name)
         if not path.exists():
@@ -362,8 +355,7 @@ class RunFolder:
         except PermissionError:
             raise
         except UNREADABLE as error:
-            aside = path.with_name(path.name + CORRUPT_SUFFIX)
-            os.replace(path, aside)
+            aside = set_aside(path)
             logger.warning("%s is unreadable (%s: %s); moved it to %s and making it again", path, type(error).__name__, error, aside.name)
             return None
 

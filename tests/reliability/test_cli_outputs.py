@@ -306,6 +306,16 @@ def test_a_refused_command_does_not_remove_folders_an_earlier_call_made(capsys, 
     assert made.is_dir() and not (tmp_path / "other").exists()
 
 
+def test_a_policy_that_raises_leaves_its_traceback_and_no_empty_folder(tmp_path):
+    """A user's policy failing mid-run is no bad input: its error comes through as it is, and
+    the --out the command made (with nothing yet written in it) goes, as for a refused command."""
+    out = tmp_path / "new" / "sub"
+    argv = ["evaluate", "--policy", "policies_for_tests:fails_on_its_first_step", "--episodes", "1", "--out", str(out)]
+    with pytest.raises(RuntimeError, match="the policy's own bug"):
+        main([*argv, "--resolution", "320", "180", "--no-progress"])
+    assert not (tmp_path / "new").exists()
+
+
 def test_sweep_refuses_an_out_that_is_a_file_before_announcing_its_grid(capsys, tmp_path):
     """It printed "sweep: 5 instruments x 1 seeds = 5 units on ..." and then the refusal."""
     (tmp_path / "afile").write_text("x")

@@ -16,6 +16,7 @@ from faults import ROOT, environment
 from dvrk_gym.calibration.models.dnn import DNNCalibrator
 from dvrk_gym.calibration.phase2 import Phase2Data
 from dvrk_gym.parallel.task_graph import Task, run_tasks
+from dvrk_gym.utils import atomic
 from dvrk_gym.utils.atomic import PARTIAL_MARK, atomic_open, atomic_path, atomic_savefig, atomic_write_text, partial_path
 from dvrk_gym.utils.run_folder import LOCK_FILE, SOURCE_KEY, RunFolder, RunFolderBusy, check_made_here, read_settings
 from dvrk_gym.utils.source_fingerprint import source_fingerprint
@@ -164,6 +165,32 @@ def test_a_tampered_model_file_is_moved_aside_and_made_again(tmp_path, caplog):
         assert np.array_equal(DNNCalibrator.load(folder.file("dnn.zip")).predict(X), model.predict(X))
 
 
+def test_every_damaged_copy_is_kept_and_an_earlier_one_even_a_folder_does_not_block_the_next(tmp_path, caplog):
+    def load(path):
+        return json.loads(path.read_text())
+
+    def save(value, path):
+        path.write_text(json.dumps(value))
+
+    with RunFolder(tmp_path) as folder:
+        folder.file("a.json.corrupt").mkdir()  # set aside by hand, or a folder that stood at a.json
+        (folder.file("a.json.corrupt") / "kept.txt").write_text("evidence")
+        for damage in ("one", "two"):
+            folder.file("a.json").write_text(damage)
+            assert folder.cached("a.json", make=lambda: {"v": 1}, load=load, save=save) == {"v": 1}
+    assert [(tmp_path / f"a.json.corrupt.{n}").read_text() for n in (2, 3)] == ["one", "two"]
+    assert (tmp_path / "a.json.corrupt" / "kept.txt").read_text() == "evidence" and "a.json.corrupt.3" in caplog.text
+
+
+def test_set_aside_gives_up_with_a_clear_error_when_too_many_copies_are_kept(tmp_path, monkeypatch):
+    monkeypatch.setattr(atomic, "MAX_SET_ASIDE", 2)
+    for name in ("a.npz", "a.npz.corrupt", "a.npz.corrupt.2"):
+        (tmp_path / name).write_text(name)
+    with pytest.raises(FileExistsError, match=r"2 damaged copies of .*a\.npz are set aside already"):
+        atomic.set_aside(tmp_path / "a.npz")
+    assert (tmp_path / "a.npz").read_text() == "a.npz"
+
+
 def _record(name: str, log: str) -> dict:
     with open(log, "a") as handle:
         handle.write(name + "\n")
@@ -245,6 +272,7 @@ def test_a_refused_folder_keeps_its_temporary_files(tmp_path):
     with pytest.raises(ValueError, match="holds files but no settings stamp"):
         RunFolder(tmp_path, {"seed": 0})
     assert partial.read_text() == "being written"
+    assert sorted(path.name for path in tmp_path.iterdir()) == ["drafts", "notes.md"]  # nor a lock of the refused run
 
 
 def _stamped_by(folder: Path, source) -> dict[str, bytes]:
