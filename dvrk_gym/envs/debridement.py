@@ -58,7 +58,7 @@ from dvrk_gym.envs.grid_touch import ACTION_HIGH as PICK_HIGH
 from dvrk_gym.envs.grid_touch import ACTION_LOW as PICK_LOW
 from dvrk_gym.envs.grid_touch import tool_pose
 from dvrk_gym.envs.picks import ABORTED_PICK_INFO, CLOSED_JAW_RAD, PHASES, PickPrimitive, PickRun
-from dvrk_gym.sim.endoscope.fragment_detection import MAX_FRAGMENTS, MIN_FRAGMENT_IMAGE_WIDTH_PX, FragmentDetection, FragmentObserver
+from dvrk_gym.sim.endoscope.fragment_detection import MAX_FRAGMENTS, FragmentDetection, FragmentObserver, check_fragment_camera
 from dvrk_gym.sim.robot import ik
 from dvrk_gym.sim.robot import kinematics as kin
 from dvrk_gym.sim.robot.bias import BiasConfig
@@ -155,12 +155,7 @@ class DebridementEnv(DvrkEnv[DebridementConfig]):
     ) -> None:
         """Debridement-v0, set up by the fields of :class:`DebridementConfig` (listed below)."""
         config = DebridementConfig(**config_arguments(locals()))
-        width, height = config.camera_resolution
-        if width < MIN_FRAGMENT_IMAGE_WIDTH_PX:  # checked before the world is built: the detector would lose fragments
-            raise ValueError(
-                f"camera_resolution {width} x {height} is too small for the endoscope to see the fragments: they need at "
-                f"least {MIN_FRAGMENT_IMAGE_WIDTH_PX} px wide, e.g. 160 x 90 (render_resolution sets the picture alone)"
-            )
+        check_fragment_camera("camera_resolution", config.camera_resolution)  # before the world is built
         super().__init__(config, render_mode=render_mode)
         self.primitive = self.config.action_mode == "primitive"
         if self.primitive:
@@ -244,7 +239,6 @@ class DebridementEnv(DvrkEnv[DebridementConfig]):
         else:
             terminated = error is not None or (on_paper == 0 and not self.table.held())
             truncated = not terminated and episode.steps >= self.config.max_steps
-        if not self.primitive:
             self._capture_frame()
         return observation, float(reward), terminated, truncated, info
 
@@ -265,8 +259,7 @@ class DebridementEnv(DvrkEnv[DebridementConfig]):
     # ------------------------------------------------------------------ a pick
     def _pick(self, action: np.ndarray) -> tuple[float, dict[str, Any]]:
         target, yaw = action[:3].astype(float), float(action[3])
-        candidates = self._on_paper()
-        episode = self._episode
+        candidates, episode = self._on_paper(), self._episode
         run = self.picker.run(target, yaw, rng=self.np_random, pick=len(episode.outcomes), sizes=episode.sizes, candidates=candidates)
         return self._judge(run)
 

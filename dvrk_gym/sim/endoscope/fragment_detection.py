@@ -154,6 +154,22 @@ def detect_fragments(rgb: np.ndarray, min_area_px: float) -> list[FragmentBlob]:
     return sorted(blobs, key=lambda b: -b.area_px)
 
 
+def check_fragment_camera(name: str, resolution: tuple[int, int]) -> tuple[int, int]:
+    """``resolution`` (width, height), pixels, if an endoscope of that size sees the fragments.
+
+    Raises:
+        ValueError: narrower than :data:`MIN_FRAGMENT_IMAGE_WIDTH_PX` (naming ``name``), where
+            fragments would be lost without a word.
+    """
+    width, height = resolution
+    if width < MIN_FRAGMENT_IMAGE_WIDTH_PX:
+        raise ValueError(
+            f"{name} {width} x {height} is too small for the endoscope to see the fragments: they need at least "
+            f"{MIN_FRAGMENT_IMAGE_WIDTH_PX} px wide, e.g. 160 x 90 (render_resolution sets the picture alone)"
+        )
+    return resolution
+
+
 def paper_corners(inset_m: float = 0.0) -> np.ndarray:
     """The paper's four corners, inset by ``inset_m``, (4, 3) base frame, metres (in order around)."""
     half = PHANTOM_SIZE_M[:2] / 2 - inset_m
