@@ -67,7 +67,7 @@ def add_commands(subparsers: argparse._SubParsersAction) -> None:
         "(each table beside the paper's numbers, with the difference), results.json and PNG figures. Stages are "
         "cached in the output folder: a re-run resumes. --quick: a five-model search, 3 trials per debridement "
         "cell and a short RL run (a few minutes on 2 cores); the full run took 21 min with 2 workers on "
-        "a quiet 2-core machine, and 50 with other work beside it (README, Measured performance). --scheduler runs "
+        "a quiet 2-core machine, and 50 with other work beside it (README: Reproducing the paper, Measured performance). --scheduler runs "
         "the stages on a Dask cluster, with the same "
         "results; its workers must see --out at the same path (a shared disk).",
     )

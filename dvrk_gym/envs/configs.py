@@ -39,7 +39,7 @@ class EnvConfig:
             ``camera_resolution``. Only what is shown changes: the detections keep their
             images at ``camera_resolution``.
         renderer: what draws ``render()``'s images: "auto" (PyBullet's EGL renderer when it
-            runs here, 4-5x less CPU at 1920 x 1080, else TinyRenderer, with one log line saying why),
+            runs here, 3.1-4.6x less CPU at 1920 x 1080, else TinyRenderer, with one log line saying why),
             "egl" (an error if it cannot run) or "tiny" (TinyRenderer: at
             ``camera_resolution``, the detections' very pixels). Detections always use TinyRenderer.
     """

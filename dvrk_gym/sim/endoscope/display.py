@@ -3,7 +3,7 @@
 Perception never comes through here: the detections render with TinyRenderer in the
 world's own client (:meth:`StereoCamera.render`), bit for bit as before. What is drawn
 here (``env.render()``, videos) may use PyBullet's EGL renderer in a mirror client of its
-own (:class:`dvrk_gym.sim.physics.mirror.EglMirror`), 4-5x less CPU a frame, and may be
+own (:class:`dvrk_gym.sim.physics.mirror.EglMirror`), 3.1-4.6x less CPU a frame, and may be
 smaller than the detection image: its camera is the endoscope's, resampled.
 
 ``renderer``: "auto" uses EGL when it runs here and falls back to TinyRenderer (with one
