@@ -17,10 +17,10 @@ from gymnasium.utils.env_checker import check_env
 from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
 
-def _rollout(env, seed: int, n: int, action_seed: int = 123, keep_history: bool = False):
+def _rollout(env, seed: int, n: int, action_seed: int = 123, keep_history: bool = False, before_step=None):
     """Reset with ``seed`` (keeping the cable history if asked and the env has the
     option), then ``n`` steps of seeded random actions, resetting without a seed (the
-    history carries) after each episode."""
+    history carries) after each episode; ``before_step()`` is called before each step."""
     actions = np.random.default_rng(action_seed)
     space = env.action_space
     observations = []
@@ -29,6 +29,8 @@ def _rollout(env, seed: int, n: int, action_seed: int = 123, keep_history: bool 
     observations.append(obs)
     for _ in range(n):
         action = actions.uniform(space.low, space.high).astype(np.float32)
+        if before_step is not None:
+            before_step()
         obs, reward, terminated, truncated, _ = env.step(action)
         observations.append(obs)
         if terminated or truncated:
@@ -227,8 +229,14 @@ def test_two_envs_in_one_process_are_independent(make_env, env_id):
     a, b = make_env(env_id), make_env(env_id)
     reference = _flatten(_rollout(a, seed=5, n=2))
     b.reset(seed=11)
-    b.step(b.action_space.sample())
-    assert _flatten(_rollout(a, seed=5, n=2)) == reference
+    b.action_space.seed(11)
+
+    def b_steps() -> None:  # between a's seeded reset and each of a's steps, where state they shared would show
+        *_, terminated, truncated, _ = b.step(b.action_space.sample())
+        if terminated or truncated:
+            b.reset()
+
+    assert _flatten(_rollout(a, seed=5, n=2, before_step=b_steps)) == reference
     a.close()
     b.reset(seed=1)  # b survives a's close
     obs, *_ = b.step(b.action_space.sample())

@@ -67,14 +67,19 @@ def test_a_refused_grid_touch_reset_changes_nothing(made, options):
 
 
 def test_a_refused_reset_mid_episode_leaves_the_episode_going(made):
-    refused, twin = made(CalibrationExplorationEnv), made(CalibrationExplorationEnv)
+    """The same steps, and the episode ends where it would have: a refused reset that zeroed the
+    step count (not in the observation) would truncate the refused env later than its twin."""
+    refused, twin = made(CalibrationExplorationEnv, max_steps=3), made(CalibrationExplorationEnv, max_steps=3)
     action = np.zeros(refused.action_space.shape, dtype=np.float32)
     for env in (refused, twin):
         env.reset(seed=0)
         env.step(action)
     with pytest.raises(ValueError, match="corner"):
         refused.reset(seed=1, options={"corner": 9})
-    assert _same(refused.step(action)[0], twin.step(action)[0])
+    for _ in range(2):
+        got, expected = refused.step(action), twin.step(action)
+        assert _same(got[0], expected[0]) and got[2:4] == expected[2:4]
+    assert got[3], "the third step of the episode truncates it"
 
 
 @pytest.mark.parametrize(
