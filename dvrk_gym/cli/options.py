@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from dvrk_gym.utils.checks import check_endoscope_resolution, check_float, check_int
+from dvrk_gym.utils.run_folder import LOCK_FILE
 
 if TYPE_CHECKING:
     from dvrk_gym.parallel.executors import Executor
@@ -161,10 +162,15 @@ _created: list[Path] = []
 
 def remove_empty_created_folders() -> None:
     """Remove the folders :func:`writable_folder` made that are still empty, deepest first (a
-    command refused after making its ``--out`` leaves nothing behind); folders with files stay."""
+    command refused after making its ``--out`` leaves nothing behind); folders with files stay.
+    A released run lock (an empty ``run.lock``) counts as nothing: a run refused after it opened
+    the folder (an env setting checked when the env is built) leaves no folder either."""
     while _created:
         folder = _created.pop(0)
         with contextlib.suppress(OSError):  # not empty, or gone: leave it
+            lock = folder / LOCK_FILE
+            if [entry.name for entry in folder.iterdir()] == [LOCK_FILE] and lock.is_file() and lock.stat().st_size == 0:
+                lock.unlink()  # released (a held lock holds its owner's pid)
             folder.rmdir()
 
 

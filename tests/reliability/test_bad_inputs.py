@@ -18,6 +18,7 @@ from hypothesis import strategies as st
 from dvrk_gym.baselines.training import TrainConfig
 from dvrk_gym.calibration.pipeline import PipelineConfig
 from dvrk_gym.cli.main import main
+from dvrk_gym.cli.options import forget_created_folders, remove_empty_created_folders, writable_folder
 from dvrk_gym.envs.base import check_action
 from dvrk_gym.envs.debridement_config import DebridementConfig
 from dvrk_gym.envs.exploration import ExplorationConfig
@@ -282,3 +283,22 @@ def test_calibrate_refuses_another_aspect_without_making_its_folder(tmp_path, ca
         in capsys.readouterr().err
     )
     assert not (tmp_path / "run").exists()
+
+
+def test_a_run_refused_by_its_env_after_opening_its_folder_leaves_no_folder(tmp_path, capsys):
+    """The env checks its camera when it is built, after the run has opened (and locked) its
+    new folder: the refusal left the folder behind holding an empty ``run.lock``."""
+    out = tmp_path / "new" / "run"
+    assert main(["baseline", "train", "--algo", "sac_pick", "--resolution", "64", "36", "--out", str(out)]) == 2
+    assert "camera_resolution 64 x 36 is too small for the endoscope to see the fragments" in capsys.readouterr().err
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize(("lock_text", "kept"), [("", False), ("4242", True)], ids=["released", "held"])
+def test_a_made_folder_is_removed_with_its_released_lock_but_not_with_a_held_one(tmp_path, lock_text, kept):
+    forget_created_folders()
+    folder = writable_folder(tmp_path / "run")
+    (folder / "run.lock").write_text(lock_text)
+    remove_empty_created_folders()
+    assert (folder / "run.lock").exists() is kept
+    assert folder.exists() is kept
