@@ -48,16 +48,22 @@ ACTIVATIONS: dict[str, type[nn.Module]] = {"relu": nn.ReLU, "sigmoid": nn.Sigmoi
 # stop short on simulated Phase I data (training residual 1.31 mm against 0.41 mm at 3e-3
 # on the same 1,881 rows), and the real-data CV stays well inside its 2.2 mm^2 bound.
 DEFAULT_BATCH_SIZE = 2048
+"""Rows per gradient step: the authors' 1939 rows (and simulated Phase I) are one full batch."""
 DEFAULT_LEARNING_RATE = 3e-3
+"""Adam's learning rate."""
 _INPUT_FEATURES = 9
 _OUTPUTS = 3
 _PROGRESS_EVERY_EPOCHS = 25
 MAX_HIDDEN_LAYERS = 16
+"""The most hidden layers a network may have (the paper's has 3)."""
 MAX_UNITS = 4096
+"""The most units a hidden layer may have (the paper's have 300)."""
 MAX_PARAMETERS = 2**25
 """The largest network built, weights and biases (128 MiB in float32); the paper's 3 x 300 has 183,303."""
 MAX_EPOCHS = 10**7
+"""The most epochs a training may ask for (the paper's: 1000)."""
 MAX_BATCH_SIZE = 2**24
+"""The largest batch a training may ask for, rows (a batch never holds more than the data)."""
 
 
 def network_parameters(hidden_layers: int, units: int) -> int:
