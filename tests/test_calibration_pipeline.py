@@ -16,7 +16,7 @@ from dvrk_gym.calibration.models.dnn import DNNCalibrator
 from dvrk_gym.calibration.models.rigid import RigidBodyCalibrator
 from dvrk_gym.calibration.models.serialization import ModelFileError
 from dvrk_gym.calibration.phase2 import Phase2Data, collect_phase2
-from dvrk_gym.calibration.pipeline import SETTINGS_STAMP, PipelineConfig, read_pipeline_settings, run_calibration
+from dvrk_gym.calibration.pipeline import SETTINGS_STAMP, PipelineConfig, check_phase1_rows, read_pipeline_settings, run_calibration
 from dvrk_gym.calibration.policy import CalibratedPolicy, calibrator_input
 from dvrk_gym.cli.main import main
 from dvrk_gym.evaluation.episodes import as_policy, evaluate_policy, load_policy_factory, run_episodes, summarize
@@ -357,3 +357,17 @@ def test_asked_to_calibrate_a_folder_whose_model_is_damaged_the_pipeline_sets_it
     assert isinstance(model, RigidBodyCalibrator)
     assert (tmp_path / "rbt.zip.corrupt").read_bytes() == b"PK\x03\x04 cut short"
     assert load_calibrator(tmp_path, "rbt")[0].predict(np.zeros((1, 6))).shape == (1, 3)
+
+
+def test_a_phase1_too_small_to_fit_is_refused_with_what_to_change_and_a_small_one_is_warned_of(caplog):
+    """A profile at 320 x 180 kept no rows and failed with "X has no rows" from deep in the
+    rigid fit; three kept rows trained a DNN without a word."""
+    for kept in (0, 2):
+        with pytest.raises(ValueError, match=rf"Phase I kept {kept} of its 40 samples; the calibrators need at least 3: collect more"):
+            check_phase1_rows(n_kept=kept, n_raw=40)
+    with caplog.at_level("WARNING", logger="dvrk_gym.calibration.pipeline"):
+        check_phase1_rows(n_kept=3, n_raw=93)
+        assert "Phase I kept only 3 of its 93 samples (the authors kept 1939)" in caplog.text
+        caplog.clear()
+        check_phase1_rows(n_kept=100, n_raw=279)
+        assert caplog.text == ""

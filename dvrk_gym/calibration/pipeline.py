@@ -30,7 +30,7 @@ from dvrk_gym.calibration.benchmark import (
     table_summary,
 )
 from dvrk_gym.calibration.models.dnn import MAX_EPOCHS, DNNCalibrator
-from dvrk_gym.calibration.models.rigid import RigidBodyCalibrator
+from dvrk_gym.calibration.models.rigid import MIN_GROUP_ROWS, RigidBodyCalibrator
 from dvrk_gym.calibration.models.two_phase import TwoPhaseCalibrator
 from dvrk_gym.calibration.phase1 import MAX_STEPS_PER_TRAJECTORY, MAX_TRAJECTORIES, Phase1Data, run_paper_phase1
 from dvrk_gym.calibration.phase2 import Phase2Data, collect_phase2
@@ -119,6 +119,31 @@ def _save(value: Any, path: Path) -> None:
     value.save(path)
 
 
+FEW_PHASE1_ROWS = 100
+"""Fewer kept Phase I rows than this get a warning: the DNN's 183,303 weights (3 x 300) are
+fitted to a few points (the authors kept 1939; three trajectories at 640 x 360 keep about 107)."""
+
+
+def check_phase1_rows(n_kept: int, n_raw: int) -> None:
+    """Refuse a Phase I whose kept rows cannot fit the calibrators, and warn of one with few.
+
+    Raises:
+        ValueError: fewer than :data:`~dvrk_gym.calibration.models.rigid.MIN_GROUP_ROWS` kept
+            rows, with what to change (a small image loses the marker: 7 of 279 rows at 320 x 180).
+    """
+    advice = "collect more trajectories, or at a higher camera resolution (below 640 x 360 the marker is mostly lost)"
+    if n_kept < MIN_GROUP_ROWS:
+        raise ValueError(f"Phase I kept {n_kept} of its {n_raw} samples; the calibrators need at least {MIN_GROUP_ROWS}: {advice}")
+    if n_kept < FEW_PHASE1_ROWS:
+        logger.warning(
+            "Phase I kept only %d of its %d samples (the authors kept %d): its models fit few points; %s",
+            n_kept,
+            n_raw,
+            paper.PHASE1_KEPT_SAMPLES,
+            advice,
+        )
+
+
 def _run_phase1(config: PipelineConfig, progress: bool) -> Phase1Data:
     return run_paper_phase1(
         n_trajectories=config.n_trajectories,
@@ -157,6 +182,7 @@ def _run_stages(out: Path, folder: RunFolder, config: PipelineConfig, progress: 
         phase1 = folder.cached("phase1.npz", make=lambda: _run_phase1(config, progress), load=Phase1Data.load, save=_save)
         clean = phase1.cleaned()
         logger.info("Phase I: %d raw samples, %d kept (%.0f%%)", phase1.n_raw, phase1.n_kept, 100 * phase1.n_kept / max(phase1.n_raw, 1))
+        check_phase1_rows(phase1.n_kept, phase1.n_raw)
         rbt = folder.cached(
             CALIBRATOR_FILES["rbt"], make=lambda: RigidBodyCalibrator().fit(clean.X, clean.y), load=RigidBodyCalibrator.load, save=_save
         )

@@ -38,7 +38,11 @@ def _run_reproduce(args: argparse.Namespace) -> int:
         with executor:
             run = run_reproduce(config, executor)
     except TaskError as error:
-        print(f"dvrk-gym reproduce: {error}\n(the stages that finished are cached in {out}: the same command resumes)", file=sys.stderr)
+        print(
+            f"dvrk-gym reproduce: {error}\n(the stages that finished are cached in {out}: once the cause is mended, the "
+            "same command resumes from them; other settings need another --out)",
+            file=sys.stderr,
+        )
         return 1
     calibration = run.data["calibration"]
     print()
