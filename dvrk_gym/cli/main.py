@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import difflib
 import logging
 import re
 import sys
@@ -93,7 +94,31 @@ def build_parser() -> argparse.ArgumentParser:
     add_debridement_commands(subparsers)
     add_baseline_commands(subparsers)
     add_sweep_commands(subparsers)
+    for command in _leaf_parsers(parser):
+        command.set_defaults(command_parser=command)  # an unknown argument is named with the command's own usage
+        command.add_argument("-v", "--verbose", action="store_true", default=argparse.SUPPRESS, help="log progress details")
     return parser
+
+
+def _leaf_parsers(parser: argparse.ArgumentParser) -> list[argparse.ArgumentParser]:
+    """The parsers of the commands that run (``baseline train``, not ``baseline``)."""
+    groups = [action for action in parser._actions if isinstance(action, argparse._SubParsersAction)]
+    if not groups:
+        return [parser]
+    return [leaf for group in groups for command in dict.fromkeys(group.choices.values()) for leaf in _leaf_parsers(command)]
+
+
+def parse_arguments(parser: argparse.ArgumentParser, argv: Sequence[str] | None) -> argparse.Namespace:
+    """``argv`` parsed; an unknown argument is refused with its command's usage (not the top
+    level's) and the options it may have meant (``--qiuck``: did you mean ``--quick``?)."""
+    args, unknown = parser.parse_known_args(argv)
+    if unknown:
+        command: argparse.ArgumentParser = getattr(args, "command_parser", parser)
+        options = [option for action in command._actions for option in action.option_strings]
+        near = sorted({match for token in unknown for match in difflib.get_close_matches(token.split("=")[0], options, n=2, cutoff=0.75)})
+        hint = f" (did you mean {' or '.join(near)}?)" if near else ""
+        command.error(f"unrecognized arguments: {' '.join(unknown)}{hint}")
+    return args
 
 
 def _command(args: argparse.Namespace) -> str:
@@ -103,7 +128,7 @@ def _command(args: argparse.Namespace) -> str:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``dvrk-gym`` console script."""
-    args = build_parser().parse_args(argv)
+    args = parse_arguments(build_parser(), argv)
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
     forget_created_folders()  # only this command's folders are removed if it is refused
     import_pybullet_quietly()  # its build-time banner would make every error two lines

@@ -17,7 +17,7 @@ from hypothesis import strategies as st
 
 from dvrk_gym.baselines.training import TrainConfig
 from dvrk_gym.calibration.pipeline import PipelineConfig
-from dvrk_gym.cli.main import main
+from dvrk_gym.cli.main import build_parser, main
 from dvrk_gym.cli.options import forget_created_folders, remove_empty_created_folders, writable_folder
 from dvrk_gym.envs.base import check_action
 from dvrk_gym.envs.debridement_config import DebridementConfig
@@ -302,3 +302,33 @@ def test_a_made_folder_is_removed_with_its_released_lock_but_not_with_a_held_one
     remove_empty_created_folders()
     assert (folder / "run.lock").exists() is kept
     assert folder.exists() is kept
+
+
+@pytest.mark.parametrize(
+    ("argv", "usage", "said"),
+    [
+        (["reproduce", "--qiuck"], "usage: dvrk-gym reproduce [-h] [--quick]", "unrecognized arguments: --qiuck (did you mean --quick?)"),
+        (
+            ["baseline", "train", "--n-envz=2"],
+            "usage: dvrk-gym baseline train",
+            "unrecognized arguments: --n-envz=2 (did you mean --n-envs?)",
+        ),
+        (["demo", "--zzz"], "usage: dvrk-gym demo", "unrecognized arguments: --zzz\n"),
+    ],
+    ids=["typo", "subcommand", "nothing-near"],
+)
+def test_an_unknown_argument_is_refused_with_its_commands_usage_and_what_was_meant(argv, usage, said, capsys):
+    """They were refused with the top level's usage (``dvrk-gym [-h] [-v] [--version] COMMAND``)
+    and no suggestion."""
+    with pytest.raises(SystemExit) as exit_info:
+        main(argv)
+    assert exit_info.value.code == 2
+    err = capsys.readouterr().err
+    assert err.startswith(usage) and said in err
+
+
+@pytest.mark.parametrize(
+    ("argv", "verbose"), [(["demo"], False), (["-v", "demo"], True), (["demo", "-v"], True), (["baseline", "train", "--verbose"], True)]
+)
+def test_verbose_is_taken_before_or_after_the_command(argv, verbose):
+    assert build_parser().parse_args(argv).verbose is verbose
