@@ -4,6 +4,7 @@ profile on a 2-worker Dask LocalCluster giving what local processes give, file f
 
 import json
 import os
+import time
 from pathlib import Path
 
 import pytest
@@ -155,3 +156,37 @@ def test_an_item_alone_in_the_pool_that_kills_its_worker_runs_once(tmp_path):
     with LocalExecutor(workers=1) as executor:  # one worker: each item runs alone
         (outcome,) = executor.map_unordered(die_once, [str(flag)])
     assert type(outcome.error).__name__ == "BrokenProcessPool" and flag.exists()
+
+
+def test_a_dask_result_is_let_go_on_its_worker_once_its_outcome_is_taken():
+    """A held future keeps its result on its worker: a worker lost later took every finished
+    unit's result with it, and the cluster ran those units again (the scheduler's log:
+    "caused the cluster to lose already computed task(s), which will be recomputed")."""
+    distributed = pytest.importorskip("distributed")
+    from dvrk_gym.parallel.dask_executor import DaskExecutor
+
+    with (
+        distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False, dashboard_address=":0") as cluster,
+        DaskExecutor(cluster.scheduler_address) as dask,
+    ):
+        outcomes = dask.map_unordered(abs, [-1, -2, -3])
+        taken = [next(outcomes).result]
+        deadline = time.monotonic() + 30
+        while len(dask.client.futures) > 2 and time.monotonic() < deadline:  # the client releases on its own thread
+            time.sleep(0.05)
+        held = len(dask.client.futures)  # the results the cluster keeps for this client
+        taken += [outcome.result for outcome in outcomes]
+    assert held == 2  # the two outcomes not taken yet
+    assert sorted(taken) == [1, 2, 3]
+
+
+def test_a_failure_without_words_still_says_what_happened():
+    """A unit cancelled when the Dask scheduler died read ``CancelledError: `` and no more."""
+    import concurrent.futures as cf
+
+    from dvrk_gym.parallel.executors import Outcome
+
+    assert Outcome(item=1, error=ValueError("bad seed")).failure == "ValueError: bad seed"
+    assert "the scheduler, or the connection to it, was lost" in Outcome(item=1, error=cf.CancelledError()).failure
+    assert Outcome(item=1, error=RuntimeError()).failure == "RuntimeError: (no message)"
+    assert Outcome(item=1, result=2).failure == ""

@@ -20,6 +20,7 @@ from __future__ import annotations
 import concurrent.futures as cf
 import logging
 import socket
+import threading
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -35,6 +36,48 @@ logger = logging.getLogger(__name__)
 
 CONNECT_TIMEOUT_S = 10.0
 """How long to try to reach a scheduler before giving up, seconds."""
+
+
+CONNECT_MARGIN_S = 5.0
+"""How much longer than its timeout a connection may take before it is given up, seconds."""
+
+
+def _connect(address: str, timeout_s: float) -> Client:
+    """A client of the scheduler at ``address``, within ``timeout_s`` plus :data:`CONNECT_MARGIN_S`
+    seconds however the other end behaves: a port that takes the connection but speaks
+    another protocol (a scheduler's dashboard) never answers Dask's handshake, and
+    ``Client(address, timeout=...)`` waited for it for ever. A client made after it was given
+    up is closed.
+
+    Raises:
+        TimeoutError: nothing answered as a scheduler in time.
+        Exception: what ``Client`` raised.
+    """
+    made: dict[str, Any] = {}
+    lock = threading.Lock()
+
+    def connect() -> None:
+        try:
+            client = Client(address, timeout=timeout_s, set_as_default=False)
+        except BaseException as error:  # noqa: BLE001  (handed to the caller)
+            made["error"] = error
+            return
+        with lock:
+            if made.get("given_up"):
+                client.close()
+            else:
+                made["client"] = client
+
+    thread = threading.Thread(target=connect, name="dask-connect", daemon=True)
+    thread.start()
+    thread.join(timeout_s + CONNECT_MARGIN_S)
+    with lock:
+        if "client" in made:
+            return made["client"]
+        if "error" in made:
+            raise made["error"]
+        made["given_up"] = True
+    raise TimeoutError("what answered there is no Dask scheduler (a dashboard's port, say)")
 
 
 class WorkerSourceError(RuntimeError):
@@ -98,8 +141,8 @@ class DaskExecutor(FuturesExecutor):
         if protocol in ("tls", "wss"):  # these need certificates no option here takes
             raise ValueError(f"the scheduler address {address!r} uses {protocol}://, which needs TLS certificates; give a tcp:// address")
         try:
-            self.client = Client(address, timeout=connect_timeout_s, set_as_default=False)
-        except (OSError, TimeoutError, TypeError, ValueError) as error:  # tls:// without certificates raises a TypeError
+            self.client = _connect(address, connect_timeout_s)
+        except Exception as error:  # whatever answered is not a scheduler (a dashboard's HTTP, garbage read as a huge array)
             raise ValueError(
                 f"cannot reach a Dask scheduler at {address!r} within {connect_timeout_s:g} s ({type(error).__name__}: {error}); "
                 "expected the address of a running scheduler, such as tcp://host:8786"

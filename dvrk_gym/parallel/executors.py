@@ -13,6 +13,7 @@ Three implementations run the same functions with the same results:
 
 from __future__ import annotations
 
+import asyncio
 import concurrent.futures as cf
 import functools
 import multiprocessing
@@ -44,6 +45,19 @@ class Outcome(Generic[T]):
     item: T
     result: Any = None
     error: BaseException | None = None
+
+    @property
+    def failure(self) -> str:
+        """What went wrong, for people: ``"ValueError: ..."``; a call cancelled with no
+        words (a Dask scheduler lost mid-run) says so. Empty if nothing went wrong."""
+        if self.error is None:
+            return ""
+        words = str(self.error) or (
+            "cancelled before it finished (on Dask: the scheduler, or the connection to it, was lost)"
+            if isinstance(self.error, (cf.CancelledError, asyncio.CancelledError))
+            else "(no message)"
+        )
+        return f"{type(self.error).__name__}: {words}"
 
 
 class Executor(Protocol):
@@ -116,10 +130,15 @@ class FuturesExecutor:
         raise NotImplementedError
 
     def map_unordered(self, function: Callable[[T], Any], items: Sequence[T]) -> Iterator[Outcome[T]]:
+        """``function`` of each item, as each finishes. A finished call's future is let go
+        before its outcome is yielded: on Dask a held future keeps its result on its worker,
+        and a worker lost later took those results with it and the cluster ran them again."""
         futures = {self.submit(function, item): item for item in items}
         try:
             for future in cf.as_completed(futures):
-                yield outcome_of(futures[future], future.result)
+                outcome = outcome_of(futures.pop(future), future.result)
+                del future
+                yield outcome
         finally:
             self._abandon(futures)
 

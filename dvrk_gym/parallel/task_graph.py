@@ -296,7 +296,7 @@ class _GraphRun:
                 if isinstance(outcome.error, BrokenProcessPool):  # a worker was killed (or ran out of memory): none can say which
                     self.failure = TaskError(f"a worker process died while running {lost}: {outcome.error}")
                 else:
-                    self.failure = TaskError(f"task {task.name!r} failed: {type(outcome.error).__name__}: {outcome.error}")
+                    self.failure = TaskError(f"task {task.name!r} failed: {outcome.failure}")
                 self.failure.__cause__ = outcome.error
 
     def _finish(self, task: Task, result: dict[str, Any], seconds: float) -> None:

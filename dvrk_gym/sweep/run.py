@@ -160,7 +160,7 @@ def _run_units(
         for outcome in executor.map_unordered(run_unit, todo):
             name = Unit(bias_seed=outcome.item.bias_seed, seed=outcome.item.seed).name
             if outcome.error is not None:
-                failures[name] = f"{type(outcome.error).__name__}: {outcome.error}"
+                failures[name] = outcome.failure
                 logger.error("unit %s failed: %s", name, failures[name])
                 continue
             folder.write_json(_unit_file(name), outcome.result)

@@ -2,8 +2,10 @@
 ValueError naming what is wrong, never a silent NaN, a silent coercion or a raw traceback."""
 
 import csv
+import http.server
 import io
 import json
+import threading
 import zipfile
 
 import numpy as np
@@ -395,3 +397,28 @@ def test_a_dask_worker_running_other_dvrk_gym_source_refuses_the_call_before_run
         with pytest.raises(WorkerSourceError, match=r"runs dvrk_gym .* source sha256 000000000000: install the same commit"):
             future.result(timeout=60)
     assert not marker.exists()
+
+
+def test_a_port_that_is_no_scheduler_is_refused_in_about_the_connect_timeout():
+    """A port that takes the connection but speaks HTTP (a scheduler's dashboard: 8787 for
+    8786) never answers Dask's handshake: the client waited for ever, whatever the timeout."""
+    pytest.importorskip("distributed")
+    from dvrk_gym.parallel.dask_executor import DaskExecutor
+
+    with http.server.ThreadingHTTPServer(("127.0.0.1", 0), http.server.BaseHTTPRequestHandler) as server:
+        threading.Thread(target=server.serve_forever, daemon=True).start()
+        errors: list[BaseException] = []
+
+        def connect() -> None:
+            try:
+                DaskExecutor(f"tcp://127.0.0.1:{server.server_address[1]}", connect_timeout_s=1.0)
+            except BaseException as error:  # noqa: BLE001
+                errors.append(error)
+
+        attempt = threading.Thread(target=connect, daemon=True)
+        attempt.start()
+        attempt.join(120)  # a bound for the test only: it hung for ever
+        server.shutdown()
+    assert not attempt.is_alive()
+    assert len(errors) == 1 and isinstance(errors[0], ValueError)
+    assert "what answered there is no Dask scheduler" in str(errors[0])
