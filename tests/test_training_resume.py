@@ -280,3 +280,24 @@ def test_a_run_stopped_after_its_model_but_before_its_curve_resumes_and_writes_t
     assert args.func(args) == 0
     assert "resumed the training saved in" in capsys.readouterr().out
     assert (out / "learning_curve.png").exists() and not (out / TRAINING_STATE).exists()
+
+
+def test_an_interrupted_training_ends_its_progress_bar_so_the_next_line_is_its_own(monkeypatch, capsys):
+    """Ctrl-C mid-training left the bar's line open: the command's "interrupted" note was
+    printed on the end of it."""
+    import dvrk_gym.baselines.training as training
+
+    measure = training.curve_evaluator(_config("sac", 30))
+    calls = []
+
+    def interrupted_at_the_second(*args, **kwargs):
+        calls.append(1)
+        if len(calls) == 2:
+            raise KeyboardInterrupt
+        return measure(*args, **kwargs)
+
+    monkeypatch.setattr(training, "curve_evaluator", lambda config: interrupted_at_the_second)
+    with pytest.raises(KeyboardInterrupt):
+        train(_config("sac", 30), progress=True)
+    err = capsys.readouterr().err
+    assert "training" in err and err.endswith("\n")

@@ -236,7 +236,8 @@ class LearningCurve(BaseCallback):
         if not points or any(mark <= env_steps for mark in marks):
             raise ValueError(f"a learning curve's record at {env_steps} env steps must have points and only later marks")
         self.points, self.marks, self.eval_seconds, self.resumed = points, marks, eval_seconds, True
-        self._bar.update(env_steps)
+        self._bar.initial = self._bar.n = self._bar.last_print_n = env_steps  # the rate counts this run's steps only
+        self._bar.refresh()
 
     def evaluate(self) -> None:
         """Measure the model now; a measure at the env step of the last point replaces it."""
@@ -267,6 +268,11 @@ class LearningCurve(BaseCallback):
         updates = getattr(self.model, "_n_updates", None)
         if not self.points or self.points[-1].env_steps != self.num_timesteps or updates is None or updates != self._updates_measured:
             self.evaluate()
+        self.close()
+
+    def close(self) -> None:
+        """End the progress bar's line (at the training's end, or when it is interrupted: what
+        is printed next starts on a line of its own)."""
         self._bar.close()
 
 
@@ -295,6 +301,7 @@ def train(config: TrainConfig, *, progress: bool = True, state_path: str | Path 
 def _train(config: TrainConfig, progress: bool, state_path: Path | None, save_every: int) -> TrainResult:
     train_env = make_training_vec_env(config)  # seeded by the model (env i: seed + i)
     eval_env = make_agent_env(config, training=False)
+    curve: LearningCurve | None = None
     try:
         model = build_model(config.spec, train_env, seed=config.seed, overrides=config.overrides)
         curve = LearningCurve(
@@ -315,6 +322,8 @@ def _train(config: TrainConfig, progress: bool, state_path: Path | None, save_ev
         model.learn(total_timesteps=config.steps - model.num_timesteps, callback=CallbackList(callbacks), reset_num_timesteps=not resumed)
         wall = wall_before + time.perf_counter() - start
     finally:
+        if curve is not None:
+            curve.close()
         train_env.close()
         eval_env.close()
     result = TrainResult(model, config, curve.points, int(model.num_timesteps), wall - curve.eval_seconds, curve.eval_seconds)
