@@ -70,13 +70,15 @@ def _connect(address: str, timeout_s: float) -> Client:
 
     thread = threading.Thread(target=connect, name="dask-connect", daemon=True)
     thread.start()
-    thread.join(timeout_s + CONNECT_MARGIN_S)
-    with lock:
-        if "client" in made:
-            return made["client"]
-        if "error" in made:
-            raise made["error"]
-        made["given_up"] = True
+    try:
+        thread.join(timeout_s + CONNECT_MARGIN_S)
+    finally:  # given up in time, or interrupted (Ctrl-C) while waiting
+        with lock:
+            made.setdefault("given_up", "client" not in made)
+    if "client" in made:
+        return made["client"]
+    if "error" in made:
+        raise made["error"]
     raise TimeoutError("what answered there is no Dask scheduler (a dashboard's port, say)")
 
 
