@@ -371,3 +371,17 @@ def test_a_phase1_too_small_to_fit_is_refused_with_what_to_change_and_a_small_on
         caplog.clear()
         check_phase1_rows(n_kept=100, n_raw=279)
         assert caplog.text == ""
+
+
+def test_calibrate_again_says_its_stages_were_loaded_and_which_were_made(small_calibration, tmp_path, capsys):
+    """A re-run printed exactly what the first run printed: nothing said the models came from the cache."""
+    import shutil
+
+    folder = tmp_path / "cal"
+    shutil.copytree(small_calibration, folder)
+    small = ["--trajectories", "2", "--epochs", "20", "--resolution", "640", "360", "--no-progress", "--out", str(folder)]
+    assert main(["calibrate", *small]) == 0
+    assert f"every stage loaded from {folder}" in capsys.readouterr().out
+    (folder / "two_phase.zip").unlink()
+    assert main(["calibrate", *small]) == 0
+    assert f"made now: forests; the others loaded from {folder}" in capsys.readouterr().out

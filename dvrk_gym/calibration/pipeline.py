@@ -46,6 +46,8 @@ SETTINGS_STAMP = "pipeline_config.json"
 """The file of a calibration run folder that holds its settings (:class:`PipelineConfig`)."""
 CALIBRATOR_FILES = {"rbt": "rbt.zip", "dnn": "dnn.zip", "dnn+rf": "two_phase.zip"}
 """The model file of each calibrator in a calibration run folder, by the calibrator's name."""
+STAGES = ("phase1", "rbt", "dnn", "phase2", "forests")
+"""The cached stages of a calibration run, in order: the keys of ``timings_s`` for those made (not loaded)."""
 RETIRED_CALIBRATOR_FILES = {"rbt": "rbt.npz", "dnn": "dnn.npz", "dnn+rf": "two_phase.npz"}
 """The same in the retired ``.npz`` format, which is no longer read (``calibrate`` makes the new files beside them)."""
 BENCHMARK_SEED_OFFSET = BENCHMARK_SEED

@@ -92,7 +92,18 @@ def _run_calibrate(args: argparse.Namespace) -> int:
     phase1 = result["phase1"]
     print(f"Phase I: {phase1.n_raw} raw, {phase1.n_kept} kept; Phase II: {len(result['phase2'].circle)} corrections")
     print(f"models in {args.out}: {', '.join(CALIBRATOR_FILES.values())} (skops forests, safetensors weights: no pickles)")
+    print(_stages_note(result["timings_s"], args.out))
     return 0
+
+
+def _stages_note(timings_s: dict[str, float], out: Path) -> str:
+    """Which of the calibration's stages this run made, and that the others came from ``out``'s cache."""
+    from dvrk_gym.calibration.pipeline import STAGES
+
+    made = [stage for stage in timings_s if stage != "benchmark"]
+    if not made:
+        return f"every stage loaded from {out} (made by an earlier run with these settings)"
+    return f"made now: {', '.join(made)}" + ("" if len(made) == len(STAGES) else f"; the others loaded from {out}")
 
 
 def _run_evaluate(args: argparse.Namespace) -> int:
@@ -118,6 +129,7 @@ def _run_evaluate(args: argparse.Namespace) -> int:
     print(PROTOCOL_LINES[protocol])
     print(format_table(result["table"]))
     print(f"wrote {args.out / 'calibration_table.json'}, {args.out / 'calibration_table.txt'}, {args.out / 'calibration_error_maps.png'}")
+    print(_stages_note(result["timings_s"], args.out))
     return 0
 
 
