@@ -8,6 +8,7 @@ import logging
 import re
 import sys
 from collections.abc import Callable, Sequence
+from typing import Any
 
 from dvrk_gym import __version__
 from dvrk_gym.cli.baselines import TRAINING_STATE, training_folder
@@ -78,9 +79,26 @@ def interrupted_note(args: argparse.Namespace) -> str:
     return "cached stages are kept: the same command resumes" if keeps_work_when_interrupted(args) else "nothing is kept: run it again"
 
 
+class _CommandLineParser(argparse.ArgumentParser):
+    """The top-level parser: an unknown argument is refused with its command's usage (not the
+    top level's) and the options it may have meant (``--qiuck``: did you mean ``--quick``?)."""
+
+    def parse_args(self, args: Sequence[str] | None = None, namespace: Any = None) -> Any:  # type: ignore[override]
+        parsed, unknown = self.parse_known_args(args, namespace)
+        if unknown:
+            command: argparse.ArgumentParser = getattr(parsed, "command_parser", self)
+            options = [option for action in command._actions for option in action.option_strings]
+            near = sorted(
+                {match for token in unknown for match in difflib.get_close_matches(token.split("=")[0], options, n=2, cutoff=0.75)}
+            )
+            hint = f" (did you mean {' or '.join(near)}?)" if near else ""
+            command.error(f"unrecognized arguments: {' '.join(unknown)}{hint}")
+        return parsed
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of the ``dvrk-gym`` command."""
-    parser = argparse.ArgumentParser(
+    parser = _CommandLineParser(
         prog="dvrk-gym",
         description="Simulated dVRK calibration and debridement (Seita et al., ICRA 2018).",
     )
@@ -108,19 +126,6 @@ def _leaf_parsers(parser: argparse.ArgumentParser) -> list[argparse.ArgumentPars
     return [leaf for group in groups for command in dict.fromkeys(group.choices.values()) for leaf in _leaf_parsers(command)]
 
 
-def parse_arguments(parser: argparse.ArgumentParser, argv: Sequence[str] | None) -> argparse.Namespace:
-    """``argv`` parsed; an unknown argument is refused with its command's usage (not the top
-    level's) and the options it may have meant (``--qiuck``: did you mean ``--quick``?)."""
-    args, unknown = parser.parse_known_args(argv)
-    if unknown:
-        command: argparse.ArgumentParser = getattr(args, "command_parser", parser)
-        options = [option for action in command._actions for option in action.option_strings]
-        near = sorted({match for token in unknown for match in difflib.get_close_matches(token.split("=")[0], options, n=2, cutoff=0.75)})
-        hint = f" (did you mean {' or '.join(near)}?)" if near else ""
-        command.error(f"unrecognized arguments: {' '.join(unknown)}{hint}")
-    return args
-
-
 def _command(args: argparse.Namespace) -> str:
     """The command as typed: ``"baseline train"`` for a subcommand."""
     return " ".join(filter(None, (args.command, getattr(args, "baseline_command", None))))
@@ -128,7 +133,7 @@ def _command(args: argparse.Namespace) -> str:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``dvrk-gym`` console script."""
-    args = parse_arguments(build_parser(), argv)
+    args = build_parser().parse_args(argv)
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
     forget_created_folders()  # only this command's folders are removed if it is refused
     import_pybullet_quietly()  # its build-time banner would make every error two lines
