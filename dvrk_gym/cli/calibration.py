@@ -58,29 +58,35 @@ def _run_collect(args: argparse.Namespace) -> int:
     with other settings, or by another dvrk_gym, is refused before anything is collected."""
     import dataclasses
 
-    from dvrk_gym.calibration.phase1 import run_paper_phase1
+    from dvrk_gym.calibration.phase1 import Phase1Data, run_paper_phase1
     from dvrk_gym.calibration.pipeline import SETTINGS_STAMP
     from dvrk_gym.utils.run_folder import RunFolder
 
     config = _config(args)
     with RunFolder(writable_folder(args.out), dataclasses.asdict(config), stamp=SETTINGS_STAMP) as folder:
         path = folder.file("phase1.npz")
-        if path.exists() and not args.force:
-            raise FileExistsError(f"{path} exists; give --force to replace it, or another --out")
-        data = run_paper_phase1(
-            n_trajectories=config.n_trajectories,
-            seed=config.seed,
-            steps_per_trajectory=config.steps_per_trajectory,
-            **config.env_kwargs(),
-            progress=not args.no_progress,
-        )
-        data.save(path)
+
+        def collect() -> Phase1Data:
+            return run_paper_phase1(
+                n_trajectories=config.n_trajectories,
+                seed=config.seed,
+                steps_per_trajectory=config.steps_per_trajectory,
+                **config.env_kwargs(),
+                progress=not args.no_progress,
+            )
+
+        if args.force:  # the old file stays until the new one is written (atomically)
+            data = collect()
+            data.save(path)
+        else:  # one already there is these settings' (the folder's stamp): loaded, as calibrate would
+            data = folder.cached("phase1.npz", make=collect, load=Phase1Data.load, save=lambda value, where: value.save(where))
+        made = args.force or "phase1" in folder.made_s
     raw, kept = paper.PHASE1_RAW_SAMPLES, paper.PHASE1_KEPT_SAMPLES
     print(
         f"Phase I: {args.trajectories} trajectories, {data.n_raw} raw samples, {data.n_kept} kept "
         f"({data.n_kept / data.n_raw:.0%}; the paper: {raw} and {kept}, {kept / raw:.0%})"
     )
-    print(f"wrote {path}")
+    print(f"wrote {path}" if made else f"loaded {path}, made by an earlier run with these settings (--force collects again)")
     return 0
 
 
@@ -228,7 +234,11 @@ def add_commands(subparsers: argparse._SubParsersAction) -> None:
     )
     collect.add_argument("--out", type=Path, default=DEFAULT_CALIBRATION_OUT, help="output folder (default: %(default)s)")
     collect.add_argument("--trajectories", type=int, default=paper.PHASE1_TRAJECTORIES, help="trajectories (the paper: %(default)s)")
-    collect.add_argument("--force", action="store_true", help="replace a phase1.npz already in --out")
+    collect.add_argument(
+        "--force",
+        action="store_true",
+        help="collect again, replacing a phase1.npz already in --out (without it, one made with the same settings is loaded)",
+    )
     _add_world_options(collect)
     add_progress_option(collect)
     collect.set_defaults(func=_run_collect, epochs=paper.DNN_EPOCHS)  # no --epochs: its stamp holds calibrate's default

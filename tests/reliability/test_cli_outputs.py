@@ -82,7 +82,7 @@ def test_baseline_train_checks_its_folder_before_training(capsys, read_only_fold
     assert time.perf_counter() - start < 30.0  # 200,000 steps would take hours
 
 
-def test_collect_refuses_to_overwrite_phase1_without_force(capsys, tmp_path):
+def test_collect_refuses_unstamped_phase1_and_loads_its_own_again_unless_forced(capsys, tmp_path):
     (tmp_path / "phase1.npz").write_bytes(b"the old data")  # of no recorded settings: refused, --force or not
     for force in ([], ["--force"]):
         _fails_in_one_line(capsys, ["collect", "--out", str(tmp_path), "--trajectories", "1", *force], "no settings stamp", "phase1.npz")
@@ -90,9 +90,15 @@ def test_collect_refuses_to_overwrite_phase1_without_force(capsys, tmp_path):
     stamped = tmp_path / "stamped"
     assert main(["collect", "--out", str(stamped), "--trajectories", "1", "--resolution", "320", "180", "--no-progress"]) == 0
     capsys.readouterr()
-    _fails_in_one_line(
-        capsys, ["collect", "--out", str(stamped), "--trajectories", "1", "--resolution", "320", "180"], "phase1.npz exists", "--force"
-    )
+    first = (stamped / "phase1.npz").read_bytes()
+    again = ["collect", "--out", str(stamped), "--trajectories", "1", "--resolution", "320", "180", "--no-progress"]
+    assert main(again) == 0  # it refused a re-run ("phase1.npz exists; give --force"): a script re-run failed
+    assert f"loaded {stamped / 'phase1.npz'}, made by an earlier run with these settings" in capsys.readouterr().out
+    (stamped / "phase1.npz").write_bytes(first[: len(first) // 2])  # cut short: set aside and collected again
+    assert main(again) == 0
+    assert f"wrote {stamped / 'phase1.npz'}" in capsys.readouterr().out and (stamped / "phase1.npz").read_bytes() == first
+    assert main([*again, "--force"]) == 0
+    assert f"wrote {stamped / 'phase1.npz'}" in capsys.readouterr().out and (stamped / "phase1.npz").read_bytes() == first
 
 
 @pytest.mark.parametrize("exists", [False, True], ids=["missing-folder", "folder-without-model"])
