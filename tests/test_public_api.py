@@ -49,3 +49,24 @@ def test_version_is_the_installed_distributions_and_the_cli_prints_it(capsys):
         main(["--version"])
     assert exit_info.value.code == 0
     assert capsys.readouterr().out.strip() == f"dvrk-gym {dvrk_gym.__version__}"
+
+
+def test_every_commands_help_ends_with_examples_that_parse(capsys):
+    """No command's ``--help`` showed how it is run."""
+    import shlex
+
+    from dvrk_gym.cli.main import EXAMPLES, build_parser, main
+
+    for command, examples in EXAMPLES.items():
+        with pytest.raises(SystemExit):
+            main([*command.split(), "--help"])
+        shown = " ".join(capsys.readouterr().out.split())
+        assert f"example{'s' if len(examples) > 1 else ''}: {'; '.join(examples)}" in shown, command
+        for example in examples:
+            args = build_parser().parse_args(shlex.split(example)[1:])
+            assert args.command == command.split()[0]
+    with pytest.raises(SystemExit):
+        main(["--help"])
+    listed = " ".join(capsys.readouterr().out.split())
+    leaves = [c for c in EXAMPLES if " " not in c] + ["baseline"]
+    assert all(name in listed for name in leaves)

@@ -79,6 +79,22 @@ def interrupted_note(args: argparse.Namespace) -> str:
     return "cached stages are kept: the same command resumes" if keeps_work_when_interrupted(args) else "nothing is kept: run it again"
 
 
+EXAMPLES = {
+    "reproduce": ["dvrk-gym reproduce --quick", "dvrk-gym reproduce --out runs/paper"],
+    "demo": ["dvrk-gym demo --out runs/demo"],
+    "collect": ["dvrk-gym collect --trajectories 3 --resolution 640 360 --out runs/cal"],
+    "calibrate": ["dvrk-gym calibrate --out runs/cal"],
+    "evaluate": ["dvrk-gym evaluate --out runs/cal", "dvrk-gym evaluate --policy pkg.module:factory --episodes 20"],
+    "search": ["dvrk-gym search --out runs/search"],
+    "fidelity": ["dvrk-gym fidelity --bias paper --bias-seed 0 --out runs/fidelity"],
+    "debride": ["dvrk-gym debride --calibrator dnn+rf --fragment pumpkin_seed --trials 15 --calibration runs/cal"],
+    "baseline train": ["dvrk-gym baseline train --algo sac_her --out runs/sac_her"],
+    "baseline evaluate": ["dvrk-gym baseline evaluate --model runs/sac_her/model.zip --calibration runs/cal"],
+    "sweep": ["dvrk-gym sweep --bias-seeds 0-4 --seeds 0 --out runs/sweep"],
+}
+"""Each command's examples, shown under its ``--help`` (a test parses every one)."""
+
+
 class _CommandLineParser(argparse.ArgumentParser):
     """The top-level parser: an unknown argument is refused with its command's usage (not the
     top level's) and the options it may have meant (``--qiuck``: did you mean ``--quick``?)."""
@@ -114,6 +130,8 @@ def build_parser() -> argparse.ArgumentParser:
     add_sweep_commands(subparsers)
     for command in _leaf_parsers(parser):
         command.set_defaults(command_parser=command)  # an unknown argument is named with the command's own usage
+        examples = EXAMPLES[command.prog.removeprefix("dvrk-gym ")]
+        command.epilog = f"example{'s' if len(examples) > 1 else ''}: " + "; ".join(examples)
         command.add_argument("-v", "--verbose", action="store_true", default=argparse.SUPPRESS, help="log progress details")
     return parser
 
