@@ -56,3 +56,20 @@ def test_search_draws_its_bar_unless_told_not_to(linear_search, tmp_path, capsys
     arguments = ["search", "--quick", "--out", str(tmp_path), *(["--no-progress"] if flag else [])]
     assert main(arguments) == 0
     assert ("model search" in capsys.readouterr().err) is not flag
+
+
+def test_a_bar_into_a_log_file_is_redrawn_seldom(tmp_path):
+    """Into a pipe or a file, tqdm redrew each bar every 0.1 s: a long run's batch log filled
+    with megabytes of frames. Now every 10 s (PIPED_PROGRESS_INTERVAL_S), so three Phase I
+    trajectories of about a second each draw only the first and last frames (and the close)."""
+    import os
+    import subprocess
+    import sys
+
+    env = {key: value for key, value in os.environ.items() if key != "TQDM_MININTERVAL"}
+    command = [sys.executable, "-m", "dvrk_gym.cli.main", "collect", "--trajectories", "3", "--resolution", "320", "180"]
+    done = subprocess.run([*command, "--out", str(tmp_path)], capture_output=True, text=True, env=env, timeout=300)
+    assert done.returncode == 0, done.stderr[-2000:]
+    frames = [frame for frame in done.stderr.replace("\r", "\n").splitlines() if frame.startswith("Phase I trajectories")]
+    assert frames[0].startswith("Phase I trajectories:   0%") and "3/3" in frames[-1]
+    assert len(frames) <= 3, frames

@@ -3,12 +3,14 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import difflib
 import logging
+import os
 import re
 import sys
-from collections.abc import Callable, Sequence
-from typing import Any
+from collections.abc import Callable, Iterator, Sequence
+from typing import Any, TextIO
 
 from dvrk_gym import __version__
 from dvrk_gym.cli.baselines import TRAINING_STATE, training_folder
@@ -149,6 +151,25 @@ def _command(args: argparse.Namespace) -> str:
     return " ".join(filter(None, (args.command, getattr(args, "baseline_command", None))))
 
 
+PIPED_PROGRESS_INTERVAL_S = 10.0
+"""How often a progress bar is redrawn when standard error is no terminal (a batch job's log
+file, ``2>&1 | tee``), seconds: tqdm's 0.1 s wrote megabytes of redrawn bars into a long
+run's log. Read by tqdm from ``TQDM_MININTERVAL`` when it is imported; one set by the user wins."""
+
+
+@contextlib.contextmanager
+def _bars_for(stream: TextIO) -> Iterator[None]:
+    """Progress bars redrawn every :data:`PIPED_PROGRESS_INTERVAL_S` while ``stream`` is no terminal."""
+    piped = not stream.isatty() and "TQDM_MININTERVAL" not in os.environ
+    if piped:
+        os.environ["TQDM_MININTERVAL"] = f"{PIPED_PROGRESS_INTERVAL_S:g}"
+    try:
+        yield
+    finally:
+        if piped:
+            os.environ.pop("TQDM_MININTERVAL", None)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``dvrk-gym`` console script."""
     args = build_parser().parse_args(argv)
@@ -156,8 +177,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     forget_created_folders()  # only this command's folders are removed if it is refused
     import_pybullet_quietly()  # its build-time banner would make every error two lines
     try:
-        check_common_options(args)
-        return int(args.func(args))
+        with _bars_for(sys.stderr):  # before the checks, whose imports may bring tqdm in
+            check_common_options(args)
+            return int(args.func(args))
     except (ValueError, OSError, RunFolderBusy) as error:  # bad input, unwritable output, a folder in use: one line, status 2
         remove_empty_created_folders()
         print(f"dvrk-gym {_command(args)}: error: {_one_line(error, args)}", file=sys.stderr)
