@@ -268,11 +268,10 @@ class LearningCurve(BaseCallback):
         updates = getattr(self.model, "_n_updates", None)
         if not self.points or self.points[-1].env_steps != self.num_timesteps or updates is None or updates != self._updates_measured:
             self.evaluate()
-        self.close()
 
     def close(self) -> None:
-        """End the progress bar's line (at the training's end, or when it is interrupted: what
-        is printed next starts on a line of its own)."""
+        """End the progress bar's line (:func:`_train` calls it when the training ends or is
+        interrupted: what is printed next starts on a line of its own)."""
         self._bar.close()
 
 

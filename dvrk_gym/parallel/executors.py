@@ -13,7 +13,6 @@ Three implementations run the same functions with the same results:
 
 from __future__ import annotations
 
-import asyncio
 import concurrent.futures as cf
 import functools
 import multiprocessing
@@ -54,7 +53,7 @@ class Outcome(Generic[T]):
             return ""
         words = str(self.error) or (
             "cancelled before it finished (on Dask: the scheduler, or the connection to it, was lost)"
-            if isinstance(self.error, (cf.CancelledError, asyncio.CancelledError))
+            if isinstance(self.error, cf.CancelledError)  # Dask's FutureCancelledError among them
             else "(no message)"
         )
         return f"{type(self.error).__name__}: {words}"

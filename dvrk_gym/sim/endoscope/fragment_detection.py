@@ -154,8 +154,8 @@ def detect_fragments(rgb: np.ndarray, min_area_px: float) -> list[FragmentBlob]:
     return sorted(blobs, key=lambda b: -b.area_px)
 
 
-def check_fragment_camera(name: str, resolution: tuple[int, int]) -> tuple[int, int]:
-    """``resolution`` (width, height), pixels, if an endoscope of that size sees the fragments.
+def check_fragment_camera(name: str, resolution: tuple[int, int]) -> None:
+    """Check that an endoscope of ``resolution`` (width, height), pixels, sees the fragments.
 
     Raises:
         ValueError: narrower than :data:`MIN_FRAGMENT_IMAGE_WIDTH_PX` (naming ``name``), where
@@ -167,7 +167,6 @@ def check_fragment_camera(name: str, resolution: tuple[int, int]) -> tuple[int, 
             f"{name} {width} x {height} is too small for the endoscope to see the fragments: they need at least "
             f"{MIN_FRAGMENT_IMAGE_WIDTH_PX} px wide, e.g. 160 x 90 (render_resolution sets the picture alone)"
         )
-    return resolution
 
 
 def paper_corners(inset_m: float = 0.0) -> np.ndarray:
