@@ -34,13 +34,40 @@ def finished(tmp_path_factory):
     return out
 
 
-def test_a_finished_training_is_not_trained_again_without_force(finished):
-    model = (finished / "model.zip").read_bytes()
-    written = (finished / "model.zip").stat().st_mtime_ns
+def _written(folder):
+    return {path.name: (path.read_bytes(), path.stat().st_mtime_ns) for path in sorted(folder.iterdir()) if path.name != "run.lock"}
+
+
+def test_a_finished_training_run_again_is_reported_not_trained_again(finished, capsys):
+    before = _written(finished)
     args = _parse("--out", str(finished))
-    with pytest.raises(FileExistsError, match="model.zip exists.*--force"):
+    assert args.func(args) == 0
+    out = capsys.readouterr().out
+    assert "nothing to do (--force trains again)" in out
+    curve = load_curve(finished / "learning_curve.json")
+    first, final = curve[0], curve[-1]
+    assert out.startswith(f"learning curve: {first.mm_error:.2f} mm at 0 steps -> {final.mm_error:.2f} mm")  # from its file
+    assert _written(finished) == before  # nothing written, nothing touched
+
+
+def test_a_finished_training_of_other_settings_is_refused_without_force(finished):
+    before = _written(finished)
+    args = _parse("--out", str(finished), "--seed", "1")
+    with pytest.raises(FileExistsError, match="finished training of other settings or other code.*--force"):
         args.func(args)
-    assert (finished / "model.zip").read_bytes() == model and (finished / "model.zip").stat().st_mtime_ns == written
+    assert _written(finished) == before
+
+
+def test_a_finished_training_with_a_damaged_curve_is_refused_naming_it(finished, tmp_path):
+    out = tmp_path / "damaged"
+    out.mkdir()
+    for path in finished.iterdir():
+        (out / path.name).write_bytes(path.read_bytes())
+    for text in ('{"points": 3}', '{"points": []}', '{"points": [{"env_steps": -1}]}', "[]"):
+        (out / "learning_curve.json").write_text(text)
+        args = _parse("--out", str(out))
+        with pytest.raises(ValueError, match=r"learning_curve.json .*; give --force to train again$"):
+            args.func(args)
 
 
 def test_a_saved_state_that_cannot_be_resumed_is_refused_naming_the_way_out(tmp_path):

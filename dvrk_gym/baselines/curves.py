@@ -121,9 +121,19 @@ def save_curve(points: Sequence[CurvePoint], path: Path, meta: dict[str, Any]) -
 
 
 def load_curve(path: Path) -> list[CurvePoint]:
-    """Read the points written by :func:`save_curve` (null errors back to NaN)."""
-    rows = read_json(path)["points"]
-    return [CurvePoint.from_json({**dict.fromkeys(CurvePoint.NAN_FIELDS), **row}) for row in rows]  # a missing error is NaN too
+    """Read the points written by :func:`save_curve` (null errors back to NaN).
+
+    Raises:
+        ValueError: ``path`` is not such a file (too big, not JSON, or not a list of points), naming it.
+    """
+    record = read_json(path)
+    rows = record.get("points") if isinstance(record, dict) else None
+    if not isinstance(rows, list) or not all(isinstance(row, dict) for row in rows):
+        raise ValueError(f"{path} is not a learning curve: an object whose 'points' is a list of objects")
+    try:
+        return [CurvePoint.from_json({**dict.fromkeys(CurvePoint.NAN_FIELDS), **row}) for row in rows]  # a missing error is NaN too
+    except (TypeError, ValueError) as error:
+        raise ValueError(f"{path} is not a learning curve: {error}") from None
 
 
 def plot_curves(curves: Mapping[str, Sequence[CurvePoint]], path: Path, title: str = "", metric: str = "mm_error") -> Path:

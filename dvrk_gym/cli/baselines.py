@@ -7,7 +7,9 @@ that ``dvrk-gym baseline --help`` stays fast.
 from __future__ import annotations
 
 import argparse
+from collections.abc import Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from dvrk_gym import paper
 from dvrk_gym.baselines.budgets import DEFAULT_EVAL_POINTS, MAX_EVAL_POINTS
@@ -15,6 +17,9 @@ from dvrk_gym.cli.options import add_instrument_options, add_progress_option, wr
 from dvrk_gym.utils.atomic import atomic_write_json, atomic_write_text
 from dvrk_gym.utils.checks import check_int
 from dvrk_gym.utils.run_folder import RunFolder
+
+if TYPE_CHECKING:
+    from dvrk_gym.baselines.curves import CurvePoint
 
 TRAINING_STATE = "training_state.zip"
 """The file in a training's output folder that holds its state until its outputs are written
@@ -40,8 +45,8 @@ def training_folder(args: argparse.Namespace) -> Path:
 
 def _run_train(args: argparse.Namespace) -> int:
     from dvrk_gym.baselines.budgets import AGENT_ENVS, DEBRIDEMENT_ID, resolve_budget
-    from dvrk_gym.baselines.checkpoints import save_agent
-    from dvrk_gym.baselines.curves import plot_curves, save_curve
+    from dvrk_gym.baselines.checkpoints import finished_agent, save_agent
+    from dvrk_gym.baselines.curves import load_curve, plot_curves, save_curve
     from dvrk_gym.baselines.resume import TrainingStateError
     from dvrk_gym.baselines.training import TrainConfig, train
 
@@ -87,9 +92,20 @@ def _run_train(args: argparse.Namespace) -> int:
             state_path.unlink(missing_ok=True)  # train from the start: a saved state would be resumed
         resuming = state_path.exists()
         if not resuming and all((out / name).exists() for name in OUTPUTS):
-            raise FileExistsError(
-                f"{out / 'model.zip'} exists: {out} holds a finished training; give --force to train again, or another --out"
-            )
+            if finished_agent(out / "model.zip", config) is None:
+                raise FileExistsError(
+                    f"{out / 'model.zip'} exists: {out} holds a finished training of other settings or other code "
+                    "(or a damaged one); give --force to train again, or another --out"
+                )
+            try:
+                curve = load_curve(out / "learning_curve.json")
+                if not curve:
+                    raise ValueError(f"{out / 'learning_curve.json'} holds no points")
+            except ValueError as error:
+                raise ValueError(f"{error}; give --force to train again") from None
+            _print_curve(curve, picks=picks)
+            print(f"{out} holds this training, finished with these settings by this code: nothing to do (--force trains again)")
+            return 0
         # killed between its outputs before any save: the same training writes the same ones
         if not resuming and (out / "model.zip").exists():
             print(f"{out} holds a model but not all of {', '.join(OUTPUTS)}, and no saved state: training again from the start")
@@ -113,11 +129,18 @@ def _run_train(args: argparse.Namespace) -> int:
         # Every output is written: the saved state is not needed any more. (Killed before this,
         # the same command resumes from it and writes them all again.)
         state_path.unlink(missing_ok=True)
-    first, final = result.curve[0], result.curve[-1]
     print(
         f"{args.algo}: {result.env_steps} env steps in {result.train_seconds:.0f} s "
         f"({result.steps_per_second:.2f} steps/s; evaluations {result.eval_seconds:.0f} s more)"
     )
+    _print_curve(result.curve, picks=picks)
+    print(f"wrote {model_path}, {model_path.with_suffix('.json')}, {out / 'learning_curve.json'}, {out / 'learning_curve.png'}")
+    return 0
+
+
+def _print_curve(curve: Sequence[CurvePoint], *, picks: bool) -> None:
+    """One line: the learning curve's first and last points (touch error, or pick success)."""
+    first, final = curve[0], curve[-1]
     if picks:
         print(
             f"learning curve: success {first.success_rate:.0%}, grip offset {first.mm_error:.2f} mm at 0 steps -> "
@@ -129,8 +152,6 @@ def _run_train(args: argparse.Namespace) -> int:
             f"learning curve: {first.mm_error:.2f} mm at 0 steps -> "
             f"{final.mm_error:.2f} mm ({final.pixel_error:.1f} px) at {final.env_steps}"
         )
-    print(f"wrote {model_path}, {model_path.with_suffix('.json')}, {out / 'learning_curve.json'}, {out / 'learning_curve.png'}")
-    return 0
 
 
 def _run_evaluate(args: argparse.Namespace) -> int:
@@ -294,7 +315,10 @@ def _add_train(subparsers: argparse._SubParsersAction) -> None:
     train.add_argument(
         "--force",
         action="store_true",
-        help="train from the start even if --out holds a finished training (its model.zip) or a saved state; both are replaced",
+        help=(
+            "train from the start even if --out holds a finished training (its model.zip) or a saved state; both are replaced "
+            "(without it, a training finished there with the same settings is reported, not trained again)"
+        ),
     )
     add_progress_option(train)
     train.set_defaults(func=_run_train)
