@@ -4,6 +4,8 @@ profile on a 2-worker Dask LocalCluster giving what local processes give, file f
 
 import json
 import os
+import subprocess
+import sys
 import time
 from pathlib import Path
 
@@ -190,3 +192,20 @@ def test_a_failure_without_words_still_says_what_happened():
     assert "the scheduler, or the connection to it, was lost" in Outcome(item=1, error=cf.CancelledError()).failure
     assert Outcome(item=1, error=RuntimeError()).failure == "RuntimeError: (no message)"
     assert Outcome(item=1, result=2).failure == ""
+
+
+def test_workers_stopped_as_by_ctrl_c_leave_no_semaphore_behind():
+    """tqdm's default lock is a named semaphore; workers stopped mid-run cannot unlink it, and
+    the resource tracker warned of leaked semaphores as `reproduce` ended after Ctrl-C."""
+    script = (
+        "import sys; sys.path.insert(0, sys.argv[1])\n"
+        "from workers_for_tests import disabled_bar\n"
+        "from dvrk_gym.parallel.executors import LocalExecutor\n"
+        "if __name__ == '__main__':\n"
+        "    pool = LocalExecutor(2)\n"
+        "    print(sorted(outcome.result for outcome in pool.map_unordered(disabled_bar, [1, 2, 3, 4])))\n"
+        "    pool.stop()\n"
+    )
+    done = subprocess.run([sys.executable, "-c", script, str(Path(__file__).parent)], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0 and done.stdout.strip() == "[1, 2, 3, 4]", done.stderr
+    assert "leaked semaphore" not in done.stderr  # the tracker writes to the same stderr, before the pipe closes

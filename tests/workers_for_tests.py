@@ -41,3 +41,12 @@ def import_pybullet() -> bool:
     import pybullet  # noqa: F401
 
     return before
+
+
+def disabled_bar(n: int) -> int:
+    """``n``, after a disabled tqdm bar (the first bar makes tqdm's lock)."""
+    import tqdm
+
+    for _ in tqdm.tqdm(range(1), disable=True):
+        pass
+    return n

@@ -158,8 +158,19 @@ class FuturesExecutor:
 
 
 def _start_worker(parent_pid: int, setup: Callable[[], None] | None) -> None:
-    """A local worker's start: end with the parent, then the executor's ``setup``."""
+    """A local worker's start: end with the parent, give tqdm a thread lock, then the executor's ``setup``.
+
+    tqdm's default lock holds a multiprocessing semaphore, made by the first bar (even a
+    disabled one); a worker stopped by :meth:`LocalExecutor.stop` (Ctrl-C) cannot unlink it,
+    and the resource tracker warned of "leaked semaphore objects" as the command ended. A
+    spawned worker shares no lock with its parent anyway, so a thread lock loses nothing.
+    """
     end_with_parent(parent_pid)
+    import threading
+
+    import tqdm
+
+    tqdm.tqdm.set_lock(threading.RLock())
     if setup is not None:
         setup()
 
