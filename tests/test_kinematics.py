@@ -326,6 +326,20 @@ def test_euler_gimbal_lock_returns_equivalent_angles_without_warning() -> None:
     np.testing.assert_allclose(kin.pose_from_euler([0, 0, 0], yaw, pitch, roll), pose, atol=1e-12)
 
 
+def test_paper_pitch_roll_of_one_yaw_is_the_array_rules_value_bit_for_bit() -> None:
+    """One yaw takes a plain-float path (0.5 us, not 36): the same bits as the array path, Python floats."""
+    yaws = np.random.default_rng(0).uniform(-3.2, 3.2, 2000)
+    pitches, rolls = kin.paper_pitch_roll(yaws)
+    for yaw, pitch, roll in zip(yaws, pitches, rolls):
+        for one in (float(yaw), yaw):  # a Python float, an np.float64
+            got = kin.paper_pitch_roll(one)
+            assert [type(v) for v in got] == [float, float] and got == (pitch, roll)
+    assert kin.paper_pitch_roll(1) == tuple(v[0] for v in kin.paper_pitch_roll(np.array([1.0])))
+    for bad in (float("nan"), float("inf"), np.float64("-inf")):
+        with pytest.raises(ValueError, match="yaw_rad must be finite"):
+            kin.paper_pitch_roll(bad)
+
+
 def test_paper_pitch_roll_endpoints_and_midpoint() -> None:
     deg = np.deg2rad
     assert np.allclose(kin.paper_pitch_roll(deg(-90.0)), deg([0.0, -170.0]))
