@@ -388,8 +388,8 @@ def paper_pitch_roll(yaw_rad: float | np.ndarray) -> tuple[float | np.ndarray, f
     if isinstance(yaw_rad, (float, int)) and not isinstance(yaw_rad, bool):  # one yaw (np.float64 too): plain floats, same bits
         if not math.isfinite(yaw_rad):
             raise ValueError(f"yaw_rad must be finite, got {yaw_rad!r}")
-        fraction = (float(yaw_rad) - _FIRST_PAPER_YAW_RAD) / _PAPER_YAW_SPAN_RAD
-        return _PITCH_START_RAD + fraction * _PITCH_RISE_RAD, _ROLL_START_RAD + fraction * _ROLL_RISE_RAD
+        share = (float(yaw_rad) - _FIRST_PAPER_YAW_RAD) / _PAPER_YAW_SPAN_RAD
+        return _PITCH_START_RAD + share * _PITCH_RISE_RAD, _ROLL_START_RAD + share * _ROLL_RISE_RAD
     fraction = (finite_vector(yaw_rad, None, "yaw_rad") - _FIRST_PAPER_YAW_RAD) / _PAPER_YAW_SPAN_RAD
     pitch = _PITCH_START_RAD + fraction * _PITCH_RISE_RAD
     roll = _ROLL_START_RAD + fraction * _ROLL_RISE_RAD
