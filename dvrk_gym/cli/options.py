@@ -11,6 +11,8 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from filelock import FileLock, Timeout
+
 from dvrk_gym.utils.checks import check_endoscope_resolution, check_float, check_int
 from dvrk_gym.utils.run_folder import LOCK_FILE
 
@@ -163,14 +165,19 @@ _created: list[Path] = []
 def remove_empty_created_folders() -> None:
     """Remove the folders :func:`writable_folder` made that are still empty, deepest first (a
     command refused after making its ``--out`` leaves nothing behind); folders with files stay.
-    A released run lock (an empty ``run.lock``) counts as nothing: a run refused after it opened
-    the folder (an env setting checked when the env is built) leaves no folder either."""
+    A released run lock (an empty ``run.lock`` that nobody holds) counts as nothing: a run
+    refused after it opened the folder (an env setting checked when the env is built) leaves no
+    folder either. A lock another run holds is left, even empty (just taken, its owner's pid
+    not yet written): the lock is taken here before the file is removed, so it is removed only
+    while nobody else can hold it."""
     while _created:
         folder = _created.pop(0)
-        with contextlib.suppress(OSError):  # not empty, or gone: leave it
+        with contextlib.suppress(OSError, Timeout):  # not empty, gone, or another run's lock: leave it
             lock = folder / LOCK_FILE
             if [entry.name for entry in folder.iterdir()] == [LOCK_FILE] and lock.is_file() and lock.stat().st_size == 0:
-                lock.unlink()  # released (a held lock holds its owner's pid)
+                with FileLock(lock, timeout=0):  # Timeout if another run holds it
+                    if lock.stat().st_size == 0 and [entry.name for entry in folder.iterdir()] == [LOCK_FILE]:
+                        lock.unlink()
             folder.rmdir()
 
 

@@ -281,9 +281,7 @@ class RunFolder:
         lock_file = self.path / LOCK_FILE
         previous = _owner_pid(_lock_text(lock_file))
         if previous is not None and previous != os.getpid():
-            logger.warning(
-                "%s: taking over the stale lock of process %d, which no longer runs (it was killed or crashed)", self.path, previous
-            )
+            logger.warning("%s: taking over the lock process %d left without releasing it (it was killed or crashed)", self.path, previous)
         # Written in place, not atomically: a rename would give the lock path a new inode, which another
         # process could lock while this one holds the old one.
         lock_file.write_text(json.dumps({"pid": os.getpid(), "since": time.strftime("%Y-%m-%d %H:%M:%S")}))

@@ -8,6 +8,8 @@ ValueError that names the field, and each value in range accepted as it was give
 import copy
 import math
 import pickle
+import subprocess
+import sys
 
 import gymnasium as gym
 import numpy as np
@@ -28,6 +30,7 @@ from dvrk_gym.reproduce.profiles import Profile
 from dvrk_gym.sim.robot.motion import MotionLimits
 from dvrk_gym.sim.table.grasp import GripperConfig
 from dvrk_gym.sim.world import WorldConfig
+from dvrk_gym.utils.run_folder import RunFolder, RunFolderBusy
 
 FUZZ = settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 
@@ -302,6 +305,35 @@ def test_a_made_folder_is_removed_with_its_released_lock_but_not_with_a_held_one
     remove_empty_created_folders()
     assert (folder / "run.lock").exists() is kept
     assert folder.exists() is kept
+
+
+def test_a_made_folder_keeps_an_empty_lock_another_run_holds(tmp_path):
+    """A run that has just taken the lock has not yet written its pid into it: a refused run
+    that made the folder removed that empty lock, and a third run could then take the folder
+    beside the first."""
+    forget_created_folders()
+    folder = writable_folder(tmp_path / "run")
+    holder = subprocess.Popen(
+        [
+            sys.executable,
+            "-c",
+            "import sys, time, filelock; held = filelock.FileLock(sys.argv[1]); held.acquire(); print('holding', flush=True); "
+            "time.sleep(600)",
+            str(folder / "run.lock"),
+        ],
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        assert holder.stdout.readline().strip() == "holding"
+        assert (folder / "run.lock").read_text() == ""
+        remove_empty_created_folders()
+        assert (folder / "run.lock").exists() and folder.exists()
+        with pytest.raises(RunFolderBusy, match="in use by another process"):
+            RunFolder(folder)
+    finally:
+        holder.kill()
+        holder.wait()
 
 
 @pytest.mark.parametrize(

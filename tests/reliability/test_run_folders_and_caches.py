@@ -69,7 +69,7 @@ def test_a_killed_owners_lock_is_taken_over_with_a_message(held_folder, caplog):
     assert json.loads((folder / LOCK_FILE).read_text())["pid"] == holder.pid
     with caplog.at_level(logging.WARNING, logger="dvrk_gym.utils.run_folder"), RunFolder(folder, {"seed": 0}):
         assert json.loads((folder / LOCK_FILE).read_text())["pid"] == os.getpid()
-    assert f"taking over the stale lock of process {holder.pid}" in caplog.text and str(folder) in caplog.text
+    assert f"taking over the lock process {holder.pid} left without releasing it" in caplog.text and str(folder) in caplog.text
 
 
 def test_a_clean_release_leaves_no_stale_owner(tmp_path, caplog):
