@@ -22,8 +22,10 @@ from scipy.spatial.transform import Rotation
 from dvrk_gym.sim.endoscope.camera import PAPER_INTRINSICS, WORKSPACE_CENTER_M, StereoCamera
 from dvrk_gym.sim.endoscope.display import EGL_MAX_IMAGE_PX, EndoscopeDisplay, tiles
 from dvrk_gym.sim.physics import meshes
+from dvrk_gym.sim.physics import mirror as mirror_module
 from dvrk_gym.sim.physics.client import Physics
-from dvrk_gym.sim.physics.mirror import EglMirror, RendererUnavailable, egl_plugin_path, egl_usable, link_frame
+from dvrk_gym.sim.physics.egl_probe import egl_plugin_path, egl_usable
+from dvrk_gym.sim.physics.mirror import EglMirror, RendererUnavailable, link_frame
 from dvrk_gym.sim.world import DvrkWorld, WorldConfig
 
 SMALL = (640, 360)
@@ -367,12 +369,41 @@ def test_closing_an_env_frees_its_mirror_client_files_and_processes(tmp_path):
     env.render()
     mirror = env.unwrapped._display._mirror
     client_id = mirror.client._client
-    folder = Path(mirror._folder.name)
+    folder = Path(mirror_module._mesh_folder())  # the process's, kept until it exits: names repeat
     assert folder.is_dir() and pybullet.getConnectionInfo(physicsClientId=client_id)["isConnected"]
     env.close()
-    assert not folder.exists()
+    assert list(folder.iterdir()) == []  # each rebuild deletes its mesh files once read
     assert not pybullet.getConnectionInfo(physicsClientId=client_id)["isConnected"]
     assert {child.pid for child in psutil.Process().children(recursive=True)} <= before_children
+
+
+_NAMES_SCRIPT = """
+import gymnasium as gym, dvrk_gym
+from dvrk_gym.sim.physics import mirror
+written = []
+mirror.atomic_write_text = lambda path, text, _write=mirror.atomic_write_text: (written.append(path), _write(path, text))[1]
+for seed in range(3):  # three envs, one after another, each with its own mirror
+    env = gym.make("dvrk_gym/GridTouch-v0", camera_resolution=(256, 144), render_mode="rgb_array")
+    env.reset(seed=seed)
+    env.render()
+    env.close()
+    print(len(written), len(set(written)), flush=True)
+print(mirror._mesh_folder())
+"""
+
+
+@needs_egl
+def test_mirrors_of_envs_made_one_after_another_reuse_their_mesh_file_names():
+    """PyBullet keeps every mesh file name it is given: each mirror's own folder of meshes cost
+    0.18 MB for each env that rendered (a sweep of thousands of envs, hundreds of MB). The
+    process's one folder is deleted when it exits."""
+    done = subprocess.run([sys.executable, "-c", _NAMES_SCRIPT], capture_output=True, text=True, timeout=300, check=False)
+    assert done.returncode == 0, done.stderr
+    *counts, folder = done.stdout.split("\n")[:-1]
+    (first, distinct), *later = (tuple(map(int, line.split())) for line in counts)
+    assert first == distinct > 0 and later == [(2 * first, first), (3 * first, first)]  # the same names again
+    assert not Path(folder).exists()
+    assert "Exception ignored" not in done.stderr  # a closed env collected at exit frees nothing again
 
 
 _MEMORY_SCRIPT = """

@@ -21,17 +21,14 @@ such client (:class:`_SharedEglClient`), each rebuilding its copy there when ano
 built since.
 
 When the plugin cannot be loaded it calls ``exit()`` inside the process (without libEGL,
-for one), so :func:`egl_usable` first tries it in a child process.
+for one), so :func:`~dvrk_gym.sim.physics.egl_probe.egl_usable` first tries it in a child process.
 """
 
 from __future__ import annotations
 
-import functools
-import importlib.util
+import atexit
 import logging
 import os
-import subprocess
-import sys
 import threading
 import weakref
 from dataclasses import dataclass
@@ -43,14 +40,13 @@ import pybullet
 from pybullet_utils import bullet_client
 
 from dvrk_gym.sim.physics.client import Physics, quiet_output
+from dvrk_gym.sim.physics.egl_probe import EGL_PLUGIN_MODULE, egl_plugin_path, egl_usable
 from dvrk_gym.sim.physics.meshes import Mesh, box
 from dvrk_gym.utils.atomic import atomic_write_text
 from dvrk_gym.utils.parent_watch import ScratchFolder
 
 logger = logging.getLogger(__name__)
 
-EGL_PLUGIN_MODULE = "eglRenderer"
-"""The module pybullet's wheel ships its EGL renderer plugin as."""
 EGL_MAX_IMAGE_PX = (1024, 768)
 """The largest image (width, height) the EGL plugin draws as asked: it draws into a surface of
 this size, and stretches anything larger from it. Draw larger images in tiles."""
@@ -64,25 +60,6 @@ away leaves the whole scene beyond the shadow map's depth range: all of it is li
 EGL_LIGHT_POSITION = [LIGHT_DISTANCE_M * v / float(np.linalg.norm(TINY_LIGHT_DIRECTION)) for v in TINY_LIGHT_DIRECTION]
 SCRATCH_PREFIX = "dvrk_gym_display_"
 """How the renderer's scratch folders of meshes begin (:class:`~dvrk_gym.utils.parent_watch.ScratchFolder`)."""
-PROBE_TIMEOUT_S = 60.0
-"""How long the child process that tries the EGL plugin may take, seconds."""
-_PROBE_SENTINEL = "dvrk_gym-egl-probe-ok"
-# Loads the plugin, draws a red box filling a 32 x 24 frame, and says so if the centre is red.
-_PROBE_CODE = f"""
-import sys, numpy, pybullet
-from pybullet_utils import bullet_client
-c = bullet_client.BulletClient(connection_mode=pybullet.DIRECT)
-if c.loadPlugin(sys.argv[1], "_eglRendererPlugin") < 0:
-    sys.exit(3)
-box = c.createVisualShape(pybullet.GEOM_BOX, halfExtents=[1, 1, 0.1], rgbaColor=[1, 0, 0, 1])
-c.createMultiBody(0, baseVisualShapeIndex=box)
-view = pybullet.computeViewMatrix([0, 0, 2], [0, 0, 0], [0, 1, 0])
-proj = pybullet.computeProjectionMatrixFOV(40, 32 / 24, 0.1, 10)
-rgba = c.getCameraImage(32, 24, view, proj, renderer=pybullet.ER_BULLET_HARDWARE_OPENGL)[2]
-r, g, b = (int(v) for v in numpy.reshape(numpy.asarray(rgba, dtype=numpy.uint8), (24, 32, 4))[12, 16, :3])
-c.disconnect()
-print("{_PROBE_SENTINEL}" if r > 200 and g < 60 and b < 60 else f"centre pixel {{(r, g, b)}}", flush=True)
-"""
 
 
 class RendererUnavailable(RuntimeError):
@@ -104,35 +81,6 @@ def refuse_if_forked() -> None:
             "start an async vector env's workers with 'spawn' or 'forkserver' "
             "(gym.make_vec(..., vector_kwargs={'context': 'spawn'})), or render with renderer='tiny'"
         )
-
-
-def egl_plugin_path() -> str | None:
-    """Where pybullet's EGL renderer plugin is, or None if this pybullet has none."""
-    spec = importlib.util.find_spec(EGL_PLUGIN_MODULE)
-    return None if spec is None else spec.origin
-
-
-@functools.lru_cache(maxsize=8)
-def egl_usable(plugin_path: str) -> str | None:
-    """Try the EGL plugin at ``plugin_path`` in a child process (once per path and process).
-
-    Returns:
-        None if it loaded and drew a frame; otherwise why not, in one line.
-    """
-    try:
-        done = subprocess.run(
-            [sys.executable, "-c", _PROBE_CODE, plugin_path],
-            capture_output=True,
-            text=True,
-            timeout=PROBE_TIMEOUT_S,
-            check=False,
-        )
-    except subprocess.TimeoutExpired:
-        return f"trying it took more than {PROBE_TIMEOUT_S:g} s"
-    if _PROBE_SENTINEL in done.stdout:
-        return None
-    said = [line.strip() for line in (done.stderr + done.stdout).splitlines() if line.strip() and "build time" not in line]
-    return f"trying it exited with status {done.returncode}" + (f" ({said[-1]})" if said else "")
 
 
 @dataclass(frozen=True)
@@ -166,9 +114,8 @@ class EglMirror:
         if failure is not None:
             raise RendererUnavailable(f"PyBullet's EGL renderer ({path}) does not run here: {failure}")
         self._shared: _SharedEglClient | None = _SharedEglClient.acquire(path)
-        self._folder: ScratchFolder | None = ScratchFolder(SCRATCH_PREFIX)
-        # Gives the client back and deletes the folder when closed, collected, or at exit (while the streams still work).
-        self._release = weakref.finalize(self, _release, self._shared, self._folder, os.getpid())
+        # Gives the client back when closed, collected, or at exit (while the streams still work).
+        self._release = weakref.finalize(self, _release, self._shared, os.getpid())
         self._layout: int | None = None  # the layout_version of the Physics copied
         self._copies: list[_Copy] = []
         self._written: list[str] = []  # the OBJ files written for the rebuild under way
@@ -228,11 +175,10 @@ class EglMirror:
         return self._shared is not None and self._shared.holder is not self._release
 
     def close(self) -> None:
-        """Give the shared client back (the last mirror to close unloads the plugin and disconnects it)
-        and delete the mesh files; safe to call more than once."""
+        """Give the shared client back (the last mirror to close unloads the plugin and disconnects
+        it); safe to call more than once. (Each rebuild deletes its mesh files once read.)"""
         self._release()
         self._shared = None
-        self._folder = None
         self._copies = []
 
     # ------------------------------------------------------------------ building the copy
@@ -288,21 +234,20 @@ class EglMirror:
                 visualFrameOrientation=list(entry[6]),
             )
 
-    def _folder_path(self) -> str:
-        if self._folder is None:
-            raise RendererUnavailable("this EGL mirror has been closed")
-        return self._folder.name
-
     def _obj_file(self, mesh: Mesh) -> str:
         """The path of a new OBJ file holding ``mesh``, for this rebuild.
 
-        Files are numbered in the order of the rebuild, so each rebuild uses the same names:
-        pybullet keeps a reference to every file name it is given, and the same string
-        objects cost nothing more. The loader's cache is off, so a file is read when its
-        shape is made and can then be replaced.
+        Files are numbered in the order of the rebuild, in the process's one folder
+        (:func:`_mesh_folder`) under the shared client's slot, so every rebuild of every mirror
+        uses the same names: pybullet keeps every file name it is given for the life of the
+        process, and names it has seen cost nothing more (a folder of each mirror's own cost
+        0.18 MB for each env that rendered). The loader's cache is off, so a file is read when
+        its shape is made and can then be replaced.
         """
+        if self._shared is None:
+            raise RendererUnavailable("this EGL mirror has been closed")
         number = len(self._written)
-        path = self._names.setdefault(number, str(Path(self._folder_path()) / f"mesh{number}.obj"))
+        path = self._names.setdefault(number, str(Path(_mesh_folder()) / f"client{self._shared.slot}_mesh{number}.obj"))
         atomic_write_text(path, mesh.obj_text())
         self._written.append(path)
         return path
@@ -343,6 +288,8 @@ class _SharedEglClient:
         # fragments bring new meshes at every reset.
         self.client.setPhysicsEngineParameter(enableFileCaching=0)
         self.users = 0
+        self.slot = 0
+        """Its number among the clients alive at once (one a thread), which names its mesh files."""
         self.holder: object | None = None  # the release handle of the mirror whose copy the client holds
 
     @classmethod
@@ -352,6 +299,8 @@ class _SharedEglClient:
             shared = cls._by_key.get((path, threading.get_ident()))
             if shared is None:
                 shared = cls(path)
+                taken = {other.slot for other in cls._by_key.values()}
+                shared.slot = min(set(range(len(taken) + 1)) - taken)  # the lowest free: a new thread's client reuses names
                 cls._by_key[shared.key] = shared
             shared.users += 1
             return shared
@@ -371,13 +320,28 @@ class _SharedEglClient:
                 logger.debug("the EGL mirror's server was already disconnected")
 
 
-def _release(shared: _SharedEglClient, folder: ScratchFolder, pid: int) -> None:
-    """Give a mirror's share of the EGL client back and delete its mesh folder; nothing in a
-    process forked from the one (``pid``) that made the mirror: both are that one's."""
-    if os.getpid() != pid:
-        return
-    shared.give_back()
-    folder.cleanup()
+def _release(shared: _SharedEglClient, pid: int) -> None:
+    """Give a mirror's share of the EGL client back; nothing in a process forked from the one
+    (``pid``) that made the mirror: the client is that one's."""
+    if os.getpid() == pid:
+        shared.give_back()
+
+
+_MESH_FOLDERS: dict[int, ScratchFolder] = {}
+"""This process's folder of mesh files (by process id: a forked child does not use its parent's)."""
+_MESH_FOLDER_LOCK = threading.Lock()
+
+
+def _mesh_folder() -> str:
+    """The folder the EGL mirrors of this process write their mesh files into: made on first
+    use, deleted when the process exits (one a killed process left is deleted by the next
+    process that makes one, :class:`~dvrk_gym.utils.parent_watch.ScratchFolder`)."""
+    with _MESH_FOLDER_LOCK:
+        folder = _MESH_FOLDERS.get(os.getpid())
+        if folder is None:
+            folder = _MESH_FOLDERS[os.getpid()] = ScratchFolder(SCRATCH_PREFIX)
+            atexit.register(folder.cleanup)
+        return folder.name
 
 
 def _from_vertices(entry: tuple) -> bool:

@@ -371,10 +371,9 @@ def euler_from_pose(pose: np.ndarray) -> tuple[float, float, float]:
     return float(np.arctan2(r[1, 0], r[0, 0])), pitch, float(np.arctan2(r[2, 1], r[2, 2]))
 
 
-_PAPER_YAW_SPAN_RAD = math.radians(180.0)
+_FIRST_PAPER_YAW_RAD, _PAPER_YAW_SPAN_RAD = float(PAPER_YAWS_RAD[0]), math.radians(180.0)
 _PAPER_PITCH_RAD = np.deg2rad(paper.PITCH_AT_YAW_EXTREMES_DEG)  # at yaw -90 deg and +90 deg
 _PAPER_ROLL_RAD = np.deg2rad(paper.ROLL_AT_YAW_EXTREMES_DEG)
-_FIRST_PAPER_YAW_RAD = float(PAPER_YAWS_RAD[0])
 _PITCH_START_RAD, _PITCH_RISE_RAD = float(_PAPER_PITCH_RAD[0]), float(np.diff(_PAPER_PITCH_RAD)[0])
 _ROLL_START_RAD, _ROLL_RISE_RAD = float(_PAPER_ROLL_RAD[0]), float(np.diff(_PAPER_ROLL_RAD)[0])
 
@@ -385,17 +384,12 @@ def paper_pitch_roll(yaw_rad: float | np.ndarray) -> tuple[float | np.ndarray, f
     yaw -90 deg -> (pitch 0, roll -170) deg; yaw +90 deg -> (10, -165) deg. Works
     elementwise on arrays; ValueError for a yaw that is not finite.
     """
-    if isinstance(yaw_rad, (float, int)) and not isinstance(yaw_rad, bool):  # one yaw (np.float64 too): plain floats, same bits
-        if not math.isfinite(yaw_rad):
-            raise ValueError(f"yaw_rad must be finite, got {yaw_rad!r}")
+    if isinstance(yaw_rad, (float, int)) and not isinstance(yaw_rad, bool) and math.isfinite(yaw_rad):  # plain floats, same bits
         share = (float(yaw_rad) - _FIRST_PAPER_YAW_RAD) / _PAPER_YAW_SPAN_RAD
         return _PITCH_START_RAD + share * _PITCH_RISE_RAD, _ROLL_START_RAD + share * _ROLL_RISE_RAD
     fraction = (finite_vector(yaw_rad, None, "yaw_rad") - _FIRST_PAPER_YAW_RAD) / _PAPER_YAW_SPAN_RAD
-    pitch = _PITCH_START_RAD + fraction * _PITCH_RISE_RAD
-    roll = _ROLL_START_RAD + fraction * _ROLL_RISE_RAD
-    if np.ndim(pitch) == 0:
-        return float(pitch), float(roll)
-    return pitch, roll
+    pitch, roll = _PITCH_START_RAD + fraction * _PITCH_RISE_RAD, _ROLL_START_RAD + fraction * _ROLL_RISE_RAD
+    return (float(pitch), float(roll)) if np.ndim(pitch) == 0 else (pitch, roll)
 
 
 def nearest_paper_yaw(yaw_rad: float | np.ndarray) -> float | np.ndarray:
