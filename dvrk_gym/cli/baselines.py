@@ -310,7 +310,8 @@ def _add_train(subparsers: argparse._SubParsersAction) -> None:
         default=DEFAULT_SAVE_EVERY,
         help=f"env steps between saves of the training's state to OUT/{TRAINING_STATE} (default: %(default)s; at each multiple of it, "
         "or at the first moment after it when every training env is between episodes); a killed run given the same "
-        "command resumes from it and ends as if never stopped, bit for bit; it is deleted once every output is written",
+        "command resumes from it and ends with the weights, optimiser states and learning curve of a run never stopped, bit "
+        "for bit (not SB3's logging statistics of recent episodes); it is deleted once every output is written",
     )
     train.add_argument(
         "--force",

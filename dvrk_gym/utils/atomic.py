@@ -65,7 +65,9 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     For writers that take a path (``savefig``, ``np.savez``, stable-baselines3's ``save``).
 
     Raises:
-        OSError: the folder is missing or read-only, ``path`` is a folder, or the block wrote nothing.
+        OSError: the folder is missing or read-only, ``path`` is a folder, or the block wrote
+            nothing; an error of the writing that names no file (a full disk) is raised again
+            naming ``path``.
     """
     path = Path(path)
     temporary = partial_path(path)
@@ -75,9 +77,11 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
             raise OSError(f"nothing was written to {path}")
         _fsync_path(temporary)
         os.replace(temporary, path)
-    except BaseException:
+    except BaseException as error:
         with contextlib.suppress(OSError):
             temporary.unlink()
+        if isinstance(error, OSError) and error.filename is None and error.errno is not None:
+            raise OSError(error.errno, error.strerror, str(path)) from error  # "No space left on device: 'path'"
         raise
     _fsync_path(path.parent, directory=True)
 

@@ -1,6 +1,7 @@
 """Run folders: one owner at a time, stale locks taken over, every write whole or absent,
 and cached results cut short or tampered with named, moved aside and made again."""
 
+import errno
 import json
 import logging
 import os
@@ -95,6 +96,17 @@ def test_a_writer_that_fails_half_way_leaves_the_old_file(tmp_path):
         raise RuntimeError("disk full")
     assert path.read_text() == '{"old": true}'
     assert [p.name for p in tmp_path.iterdir()] == ["result.json"]  # no temporary file left
+
+
+def test_a_full_disk_names_the_file_it_could_not_write(tmp_path):
+    """A write's ENOSPC names no file: the command line's one line said only "No space left on device"."""
+    path = atomic_write_text(tmp_path / "result.json", '{"old": true}')
+    with pytest.raises(OSError, match=r"\[Errno 28\] No space left on device: '.*result\.json'$") as raised, atomic_open(path, "w"):
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+    assert raised.value.errno == errno.ENOSPC and raised.value.filename == str(path)
+    with pytest.raises(PermissionError, match="other.txt"), atomic_open(tmp_path / "b.txt", "w"):
+        raise PermissionError(errno.EACCES, "Permission denied", "other.txt")  # one that names its file is kept as it is
+    assert path.read_text() == '{"old": true}' and sorted(p.name for p in tmp_path.iterdir()) == ["result.json"]
 
 
 def test_a_figure_that_cannot_be_drawn_leaves_nothing(tmp_path):
