@@ -385,3 +385,34 @@ def test_calibrate_again_says_its_stages_were_loaded_and_which_were_made(small_c
     (folder / "two_phase.zip").unlink()
     assert main(["calibrate", *small]) == 0
     assert f"made now: forests; the others loaded from {folder}" in capsys.readouterr().out
+
+
+def test_a_phase1_put_in_from_another_run_is_refused_not_loaded_beside_the_models_made_from_another(small_calibration, tmp_path, capsys):
+    """Another run's phase1.npz copied in was loaded (its counts printed) beside models fitted on the first one's rows."""
+    import dataclasses
+    import json
+    import shutil
+
+    from dvrk_gym.calibration.phase1 import Phase1Data
+    from dvrk_gym.calibration.pipeline import MADE_FROM
+
+    folder = tmp_path / "cal"
+    shutil.copytree(small_calibration, folder)
+    record = json.loads((folder / MADE_FROM).read_text())
+    assert set(record) == {"rbt.zip", "dnn.zip", "phase2.npz", "two_phase.zip"} and set(record["two_phase.zip"]) == {
+        "dnn.zip",
+        "phase2.npz",
+    }
+    phase1 = Phase1Data.load(folder / "phase1.npz")
+    other = dataclasses.replace(phase1, reported_position=phase1.reported_position + 1e-4)  # another run's rows
+    other.save(folder / "phase1.npz")
+    models = {name: (folder / name).read_bytes() for name in ("rbt.zip", "dnn.zip", "two_phase.zip")}
+    small = ["--trajectories", "2", "--epochs", "20", "--resolution", "640", "360", "--no-progress", "--out", str(folder)]
+    assert main(["calibrate", *small]) == 2
+    assert "rbt.zip was made from another phase1.npz than the one in" in capsys.readouterr().err
+    assert {name: (folder / name).read_bytes() for name in models} == models  # nothing lost
+    (folder / MADE_FROM).unlink()  # a folder from before the record: taken as it is, and recorded
+    phase1.save(folder / "phase1.npz")
+    assert main(["calibrate", *small]) == 0
+    assert f"every stage loaded from {folder}" in capsys.readouterr().out
+    assert json.loads((folder / MADE_FROM).read_text()) == record

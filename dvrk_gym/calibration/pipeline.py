@@ -10,6 +10,7 @@ records its source fingerprint: :mod:`dvrk_gym.utils.source_fingerprint`).
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import logging
 import os
 import time
@@ -36,7 +37,7 @@ from dvrk_gym.calibration.phase1 import MAX_STEPS_PER_TRAJECTORY, MAX_TRAJECTORI
 from dvrk_gym.calibration.phase2 import Phase2Data, collect_phase2
 from dvrk_gym.evaluation.table_protocol import PROTOCOL_LINES, PROTOCOLS
 from dvrk_gym.sim.robot.bias import BIAS_PRESETS
-from dvrk_gym.utils.atomic import atomic_write_text
+from dvrk_gym.utils.atomic import atomic_write_text, check_regular_file
 from dvrk_gym.utils.checks import check_choice, check_endoscope_resolution, check_int_fields
 from dvrk_gym.utils.run_folder import RunFolder, read_settings
 
@@ -48,6 +49,12 @@ CALIBRATOR_FILES = {"rbt": "rbt.zip", "dnn": "dnn.zip", "dnn+rf": "two_phase.zip
 """The model file of each calibrator in a calibration run folder, by the calibrator's name."""
 STAGES = ("phase1", "rbt", "dnn", "phase2", "forests")
 """The cached stages of a calibration run, in order: the keys of ``timings_s`` for those made (not loaded)."""
+MADE_FROM = "made_from.json"
+"""The file of a calibration run folder recording the inputs each result was made from:
+``{result file: {input file: SHA-256}}``. A result whose input has changed since (a file of
+another run put in) is refused, not loaded beside it."""
+MAX_INPUT_BYTES = 2**30
+"""The largest stage input hashed, bytes (a Phase I of the paper's budget is under 1 MB)."""
 RETIRED_CALIBRATOR_FILES = {"rbt": "rbt.npz", "dnn": "dnn.npz", "dnn+rf": "two_phase.npz"}
 """The same in the retired ``.npz`` format, which is no longer read (``calibrate`` makes the new files beside them)."""
 BENCHMARK_SEED_OFFSET = BENCHMARK_SEED
@@ -177,6 +184,40 @@ def run_calibration(
         return _run_stages(out, folder, config, progress, protocol if benchmark else None)
 
 
+def _file_sha256(path: Path) -> str:
+    """The SHA-256 of a stage's input, a regular file of at most :data:`MAX_INPUT_BYTES`."""
+    check_regular_file(path, MAX_INPUT_BYTES, "a calibration stage's input")
+    digest = hashlib.sha256()
+    with open(path, "rb") as file:
+        for chunk in iter(lambda: file.read(2**20), b""):
+            digest.update(chunk)
+    return digest.hexdigest()
+
+
+def _cached_from(folder: RunFolder, inputs: list[str], name: str, **cached: Any) -> Any:
+    """``folder.cached(name, **cached)`` for a result made from the files ``inputs`` of the
+    folder, recording their digests in :data:`MADE_FROM` (a result there from before the
+    record is taken as it is, and recorded).
+
+    Raises:
+        ValueError: the result is there, but an input is not the file it was made from.
+    """
+    records = folder.read_json(MADE_FROM)
+    records = records if isinstance(records, dict) else {}
+    digests = {input_name: _file_sha256(folder.file(input_name)) for input_name in inputs}
+    recorded = records.get(name)
+    if folder.file(name).exists() and isinstance(recorded, dict) and recorded != digests:
+        changed = ", ".join(input_name for input_name in inputs if recorded.get(input_name) != digests[input_name])
+        raise ValueError(
+            f"{folder.file(name)} was made from another {changed} than the one in {folder.path} now (another run's file "
+            f"put in?); restore it, or delete {name} and the results made after it to make them again from it"
+        )
+    value = folder.cached(name, **cached)
+    if recorded != digests:
+        folder.write_json(MADE_FROM, {**records, name: digests})
+    return value
+
+
 def _run_stages(out: Path, folder: RunFolder, config: PipelineConfig, progress: bool, protocol: str | None) -> dict[str, Any]:
     """The stages; ``protocol`` is the benchmark's, or None for no benchmark."""
     grid = gym.make("dvrk_gym/GridTouch-v0", **config.env_kwargs())
@@ -185,24 +226,38 @@ def _run_stages(out: Path, folder: RunFolder, config: PipelineConfig, progress: 
         clean = phase1.cleaned()
         logger.info("Phase I: %d raw samples, %d kept (%.0f%%)", phase1.n_raw, phase1.n_kept, 100 * phase1.n_kept / max(phase1.n_raw, 1))
         check_phase1_rows(phase1.n_kept, phase1.n_raw)
-        rbt = folder.cached(
-            CALIBRATOR_FILES["rbt"], make=lambda: RigidBodyCalibrator().fit(clean.X, clean.y), load=RigidBodyCalibrator.load, save=_save
+        rbt = _cached_from(
+            folder,
+            ["phase1.npz"],
+            CALIBRATOR_FILES["rbt"],
+            make=lambda: RigidBodyCalibrator().fit(clean.X, clean.y),
+            load=RigidBodyCalibrator.load,
+            save=_save,
         )
-        dnn = folder.cached(
+        dnn = _cached_from(
+            folder,
+            ["phase1.npz"],
             CALIBRATOR_FILES["dnn"],
             make=lambda: DNNCalibrator(epochs=config.dnn_epochs, seed=config.seed, progress=progress).fit(clean.X, clean.y),
             load=DNNCalibrator.load,
             save=_save,
         )
-        phase2 = folder.cached(
-            "phase2.npz", make=lambda: collect_phase2(grid, dnn, seed=config.seed, progress=progress), load=Phase2Data.load, save=_save
+        phase2 = _cached_from(
+            folder,
+            [CALIBRATOR_FILES["dnn"]],
+            "phase2.npz",
+            make=lambda: collect_phase2(grid, dnn, seed=config.seed, progress=progress),
+            load=Phase2Data.load,
+            save=_save,
         )
         if not phase2.in_authors_tour:  # cached before the tour: its forests learned another order's hysteresis
             raise ValueError(
                 f"{folder.file('phase2.npz')} touched the circles in another order than the authors' tour (a run made before "
                 f"dvrk-gym took it); delete it and {CALIBRATOR_FILES['dnn+rf']} to make them again, or use another --out"
             )
-        two_phase = folder.cached(
+        two_phase = _cached_from(
+            folder,
+            [CALIBRATOR_FILES["dnn"], "phase2.npz"],
             CALIBRATOR_FILES["dnn+rf"],
             make=lambda: TwoPhaseCalibrator(dnn=dnn, seed=config.seed).fit_phase2(phase2.X, phase2.corrected),
             load=TwoPhaseCalibrator.load,
