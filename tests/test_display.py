@@ -395,7 +395,7 @@ print(mirror._mesh_folder())
 @needs_egl
 def test_mirrors_of_envs_made_one_after_another_reuse_their_mesh_file_names():
     """PyBullet keeps every mesh file name it is given: each mirror's own folder of meshes cost
-    0.18 MB for each env that rendered (a sweep of thousands of envs, hundreds of MB). The
+    0.14 MB for each env that rendered, for good (a sweep of thousands of envs, hundreds of MB). The
     process's one folder is deleted when it exits."""
     done = subprocess.run([sys.executable, "-c", _NAMES_SCRIPT], capture_output=True, text=True, timeout=300, check=False)
     assert done.returncode == 0, done.stderr

@@ -327,7 +327,7 @@ def test_euler_gimbal_lock_returns_equivalent_angles_without_warning() -> None:
 
 
 def test_paper_pitch_roll_of_one_yaw_is_the_array_rules_value_bit_for_bit() -> None:
-    """One yaw takes a plain-float path (0.5 us, not 36): the same bits as the array path, Python floats."""
+    """One yaw takes a plain-float path (0.35 us, against 13 to 16 timed beside it): the array path's bits, as Python floats."""
     yaws = np.random.default_rng(0).uniform(-3.2, 3.2, 2000)
     pitches, rolls = kin.paper_pitch_roll(yaws)
     for yaw, pitch, roll in zip(yaws, pitches, rolls):

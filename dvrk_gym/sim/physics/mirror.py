@@ -241,7 +241,7 @@ class EglMirror:
         (:func:`_mesh_folder`) under the shared client's slot, so every rebuild of every mirror
         uses the same names: pybullet keeps every file name it is given for the life of the
         process, and names it has seen cost nothing more (a folder of each mirror's own cost
-        0.18 MB for each env that rendered). The loader's cache is off, so a file is read when
+        0.14 MB for each env that rendered, for good). The loader's cache is off, so a file is read when
         its shape is made and can then be replaced.
         """
         if self._shared is None:
