@@ -23,6 +23,21 @@ def test_any_method_name_lines_up_and_a_method_without_a_paper_figure_shows_a_da
     assert summary[1].split()[-2:] == ["2.14", "-16%"]
 
 
+def test_every_column_of_the_error_tables_lines_up_under_its_setting_even_with_three_digit_errors():
+    """Cells of 29 to 36 characters were padded to 26, so no row lined up with the settings above it."""
+    small = CircleErrors(pixel=np.full(35, 4.0), mm=np.full(35, 0.2), yaw=np.zeros(35), width_px=640)
+    large = CircleErrors(pixel=np.linspace(50, 900, 35), mm=np.linspace(5, 99, 35), yaw=np.zeros(35), width_px=640)
+    text = format_table({"RBT": {label: small for label, _ in YAW_SETTINGS}, "DNN": {label: large for label, _ in YAW_SETTINGS}})
+    for section in text.split("\n\n")[:2]:  # pixels, millimetres
+        rows = [line for line in section.splitlines() if line.startswith(("method", "RBT", "DNN", "  paper"))]
+        assert len(rows) == 5 if "pixels" in section else len(rows) == 3
+        assert len({len(line) for line in rows}) == 1, rows  # every row ends where the header does
+        header = rows[0]
+        ends = [header.index(label) + len(label) for label, _ in YAW_SETTINGS]
+        for row in rows[1:]:
+            assert all(row[end - 1] != " " and (end == len(row) or row[end] == " ") for end in ends), row  # a cell ends under each label
+
+
 def test_the_papers_pixels_are_scaled_to_the_width_the_touches_were_judged_in():
     from dvrk_gym import paper
 

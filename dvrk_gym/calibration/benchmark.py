@@ -186,13 +186,14 @@ def format_table(table: dict[str, dict[str, CircleErrors]]) -> str:
                 if width_px is None
                 else f"(pixels of a {width_px}-px-wide image; the paper's, of 1920 x 1080, scaled to it)"
             )
-        lines.append(f"{'method':<{width}}" + "".join(f"{label:>26}" for label, _ in YAW_SETTINGS))
-        for method, rows in summary.items():
-            cells = "".join(_cell(rows[label][key]).rjust(26) for label, _ in YAW_SETTINGS)
-            lines.append(f"{method:<{width}}{cells}")
+        cells = {method: [_cell(rows[label][key]).strip() for label, _ in YAW_SETTINGS] for method, rows in summary.items()}
+        column = max([12, *(len(cell) + 2 for row in cells.values() for cell in row)])  # the widest cell lines up too
+        lines.append(f"{'method':<{width}}" + "".join(label.rjust(column) for label, _ in YAW_SETTINGS))
+        for method, row in cells.items():
+            lines.append(f"{method:<{width}}" + "".join(cell.rjust(column) for cell in row))
             if key == "pixel" and method in paper.CALIBRATION_PIXELS and width_px is not None:
                 scale = width_px / PAPER_WIDTH_PX
-                lines.append(f"{'  paper':<{width}}" + "".join(f"{v * scale:>26.1f}" for v in paper.CALIBRATION_PIXELS[method]))
+                lines.append(f"{'  paper':<{width}}" + "".join(f"{v * scale:.1f}".rjust(column) for v in paper.CALIBRATION_PIXELS[method]))
         lines.append("")
     lines.append(f"{'method':<{width}}{'sim mean mm':>14}{'paper mm':>10}{'difference':>12}")
     for method, rows in summary.items():
