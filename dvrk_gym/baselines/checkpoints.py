@@ -20,7 +20,6 @@ with the recorded values, and :attr:`LoadedAgent.env_changes` says what differed
 from __future__ import annotations
 
 import dataclasses
-import hashlib
 import io
 import json
 import pickle
@@ -37,7 +36,7 @@ from dvrk_gym.baselines.training import TrainConfig, TrainResult, make_agent_env
 from dvrk_gym.baselines.wrappers import GOAL_CENTER_M, GOAL_HALF_RANGE_M
 from dvrk_gym.envs import ENV_CONFIGS
 from dvrk_gym.sim.robot.bias import resolve_bias
-from dvrk_gym.utils.atomic import atomic_path, atomic_write_json, check_regular_file, read_json
+from dvrk_gym.utils.atomic import atomic_path, atomic_write_json, file_sha256, read_json
 from dvrk_gym.utils.bounded_zip import ArchiveLimits, open_archive, read_member
 from dvrk_gym.utils.checks import check_int
 from dvrk_gym.utils.run_folder import flatten_settings
@@ -143,19 +142,8 @@ def save_agent(result: TrainResult, path: Path) -> Path:
 
 
 def _zip_sha256(path: Path) -> str:
-    """The SHA-256 of an agent's zip, read in chunks after checking it is a regular file of a
-    bounded size (a FIFO or a link to a device there would block or never end), reading no
-    more than that bound should it grow meanwhile."""
-    limit = AGENT_FILE_LIMITS.max_file_bytes
-    check_regular_file(path, limit, "an agent's zip")
-    digest, read = hashlib.sha256(), 0
-    with open(path, "rb") as file:
-        for chunk in iter(lambda: file.read(2**20), b""):
-            read += len(chunk)
-            if read > limit:
-                raise ValueError(f"{path} grew past {limit:,} bytes while it was read; an agent's zip has at most that")
-            digest.update(chunk)
-    return digest.hexdigest()
+    """The SHA-256 of an agent's zip, a regular file of at most :data:`AGENT_FILE_LIMITS`' file size."""
+    return file_sha256(path, AGENT_FILE_LIMITS.max_file_bytes, "an agent's zip")
 
 
 def env_record(config: TrainConfig) -> dict[str, Any]:

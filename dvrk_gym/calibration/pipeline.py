@@ -10,7 +10,6 @@ records its source fingerprint: :mod:`dvrk_gym.utils.source_fingerprint`).
 from __future__ import annotations
 
 import dataclasses
-import hashlib
 import logging
 import os
 import time
@@ -37,7 +36,7 @@ from dvrk_gym.calibration.phase1 import MAX_STEPS_PER_TRAJECTORY, MAX_TRAJECTORI
 from dvrk_gym.calibration.phase2 import Phase2Data, collect_phase2
 from dvrk_gym.evaluation.table_protocol import PROTOCOL_LINES, PROTOCOLS
 from dvrk_gym.sim.robot.bias import BIAS_PRESETS
-from dvrk_gym.utils.atomic import atomic_write_text, check_regular_file
+from dvrk_gym.utils.atomic import atomic_write_text, file_sha256
 from dvrk_gym.utils.checks import check_choice, check_endoscope_resolution, check_int_fields
 from dvrk_gym.utils.run_folder import RunFolder, read_settings
 
@@ -184,16 +183,6 @@ def run_calibration(
         return _run_stages(out, folder, config, progress, protocol if benchmark else None)
 
 
-def _file_sha256(path: Path) -> str:
-    """The SHA-256 of a stage's input, a regular file of at most :data:`MAX_INPUT_BYTES`."""
-    check_regular_file(path, MAX_INPUT_BYTES, "a calibration stage's input")
-    digest = hashlib.sha256()
-    with open(path, "rb") as file:
-        for chunk in iter(lambda: file.read(2**20), b""):
-            digest.update(chunk)
-    return digest.hexdigest()
-
-
 def _cached_from(folder: RunFolder, inputs: list[str], name: str, **cached: Any) -> Any:
     """``folder.cached(name, **cached)`` for a result made from the files ``inputs`` of the
     folder, recording their digests in :data:`MADE_FROM` (a result there from before the
@@ -204,7 +193,7 @@ def _cached_from(folder: RunFolder, inputs: list[str], name: str, **cached: Any)
     """
     records = folder.read_json(MADE_FROM)
     records = records if isinstance(records, dict) else {}
-    digests = {input_name: _file_sha256(folder.file(input_name)) for input_name in inputs}
+    digests = {input_name: file_sha256(folder.file(input_name), MAX_INPUT_BYTES, "a calibration stage's input") for input_name in inputs}
     recorded = records.get(name)
     if folder.file(name).exists() and isinstance(recorded, dict) and recorded != digests:
         changed = ", ".join(input_name for input_name in inputs if recorded.get(input_name) != digests[input_name])

@@ -174,7 +174,7 @@ def remove_empty_created_folders() -> None:
         folder = _created.pop(0)
         with contextlib.suppress(OSError, Timeout):  # not empty, gone, or another run's lock: leave it
             lock = folder / LOCK_FILE
-            if [entry.name for entry in folder.iterdir()] == [LOCK_FILE] and lock.is_file() and lock.stat().st_size == 0:
+            if lock.is_file():
                 with FileLock(lock, timeout=0):  # Timeout if another run holds it
                     if lock.stat().st_size == 0 and [entry.name for entry in folder.iterdir()] == [LOCK_FILE]:
                         lock.unlink()

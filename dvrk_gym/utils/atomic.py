@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import collections
 import contextlib
+import hashlib
 import json
 import logging
 import os
@@ -162,6 +163,24 @@ def _object_without_repeats(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
         repeated = sorted(key for key, count in collections.Counter(key for key, _ in pairs).items() if count > 1)
         raise ValueError(f"an object names {repeated[:5]} more than once")
     return found
+
+
+def file_sha256(path: str | os.PathLike, max_bytes: int, what: str) -> str:
+    """The SHA-256 of ``path`` (hex), read in chunks after checking it is a regular file of at
+    most ``max_bytes`` (:func:`check_regular_file`), reading no more than that should it grow meanwhile.
+
+    Raises:
+        ValueError: not such a file, or it grew past ``max_bytes`` while it was read.
+    """
+    check_regular_file(path, max_bytes, what)
+    digest, read = hashlib.sha256(), 0
+    with open(path, "rb") as file:
+        for chunk in iter(lambda: file.read(2**20), b""):
+            read += len(chunk)
+            if read > max_bytes:
+                raise ValueError(f"{path} grew past {max_bytes:,} bytes while it was read; {what} has at most that")
+            digest.update(chunk)
+    return digest.hexdigest()
 
 
 def read_json(path: str | os.PathLike, max_bytes: int = MAX_JSON_BYTES) -> Any:
