@@ -2,16 +2,18 @@
 executor, a worker without the run folder refused, ``--scheduler`` checked, and the quick
 profile on a 2-worker Dask LocalCluster giving what local processes give, file for file."""
 
+import io
 import json
 import os
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
 import pytest
 from reproduction_files import files_that_differ
-from workers_for_tests import die_once, import_pybullet, record, square_or_die
+from workers_for_tests import die_once, import_pybullet, record, sleep_for, square_or_die
 
 from dvrk_gym.cli.main import main
 from dvrk_gym.parallel.executors import InlineExecutor, LocalExecutor
@@ -62,6 +64,32 @@ def test_the_progress_bar_counts_each_tasks_cost_so_its_estimate_is_not_thrown_b
     assert (bars[0].total, bars[0].n) == (6.0, 6.0)
     assert (bars[1].total, bars[1].initial, sorted(bars[1].steps)) == (10.0, 6.0, [1.0, 1.0, 2.0])
     assert bars[1].desc == "run: 5/5 tasks" and "100%|" in capsys.readouterr().err
+
+
+def test_the_progress_bar_clock_runs_while_a_long_task_runs(tmp_path, monkeypatch, capsys):
+    """It was redrawn only when a task ended: reproduce --quick showed 0% at 00:00 for
+    minutes, like a hung run."""
+    from dvrk_gym.parallel import progress_clock
+
+    monkeypatch.setattr(progress_clock, "MIN_REDRAW_S", 0.25)
+    with LocalExecutor(workers=1) as executor:
+        run_tasks([Task("long", sleep_for, {"seconds": 1.6})], cache_dir=tmp_path / "cache", executor=executor)
+    drawn = capsys.readouterr().err.split("\r")
+    assert any("run: 0/1 tasks" in line and "[00:01<" in line for line in drawn), drawn  # the clock, before it ended
+
+
+def test_a_disabled_bar_gets_no_clock_thread_and_a_clock_thread_ends_with_its_block():
+    from dvrk_gym.parallel.progress_clock import running_clock
+    from dvrk_gym.parallel.task_graph import tqdm
+
+    def clocks():
+        return [thread for thread in threading.enumerate() if thread.name == "progress-clock"]
+
+    with tqdm(total=1, disable=True) as bar, running_clock(bar):
+        assert not clocks()
+    with tqdm(total=1, file=io.StringIO()) as bar, running_clock(bar):
+        assert len(clocks()) == 1
+    assert not clocks()
 
 
 def test_a_task_that_does_not_see_the_shared_folder_fails_saying_so(tmp_path):

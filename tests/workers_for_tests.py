@@ -50,3 +50,9 @@ def disabled_bar(n: int) -> int:
     for _ in tqdm.tqdm(range(1), disable=True):
         pass
     return n
+
+
+def sleep_for(seconds: float) -> dict:
+    """Sleep ``seconds`` (a long task's stand-in) and say how long."""
+    time.sleep(seconds)
+    return {"slept_s": seconds}

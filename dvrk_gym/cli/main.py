@@ -8,7 +8,9 @@ import difflib
 import logging
 import os
 import re
+import signal
 import sys
+import threading
 from collections.abc import Callable, Iterator, Sequence
 from typing import Any, TextIO
 
@@ -170,6 +172,31 @@ def _bars_for(stream: TextIO) -> Iterator[None]:
             os.environ.pop("TQDM_MININTERVAL", None)
 
 
+class Terminated(KeyboardInterrupt):
+    """SIGTERM arrived (``kill``, ``timeout``, a batch system ending the job): stop as Ctrl-C does."""
+
+
+@contextlib.contextmanager
+def _terminate_as_interrupt() -> Iterator[None]:
+    """While in the block, SIGTERM raises :class:`Terminated` in the main thread, so a
+    terminated command stops its workers, keeps its finished stages and says so, as after
+    Ctrl-C (by default SIGTERM ended the process at once: no note, and the multiprocessing
+    semaphores of its pool left behind). Off the main thread, where no handler can be set,
+    nothing changes."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def terminate(signum: int, frame: object) -> None:
+        raise Terminated
+
+    previous = signal.signal(signal.SIGTERM, terminate)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``dvrk-gym`` console script."""
     args = build_parser().parse_args(argv)
@@ -177,17 +204,18 @@ def main(argv: Sequence[str] | None = None) -> int:
     forget_created_folders()  # only this command's folders are removed if it is refused
     import_pybullet_quietly()  # its build-time banner would make every error two lines
     try:
-        with _bars_for(sys.stderr):  # before the checks, whose imports may bring tqdm in
+        with _terminate_as_interrupt(), _bars_for(sys.stderr):  # before the checks, whose imports may bring tqdm in
             check_common_options(args)
             return int(args.func(args))
     except (ValueError, OSError, RunFolderBusy) as error:  # bad input, unwritable output, a folder in use: one line, status 2
         remove_empty_created_folders()
         print(f"dvrk-gym {_command(args)}: error: {_one_line(error, args)}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as stop:
         remove_empty_created_folders()
-        print(f"dvrk-gym {_command(args)}: interrupted ({interrupted_note(args)})", file=sys.stderr)
-        return 130
+        terminated = isinstance(stop, Terminated)
+        print(f"dvrk-gym {_command(args)}: {'terminated' if terminated else 'interrupted'} ({interrupted_note(args)})", file=sys.stderr)
+        return 128 + (signal.SIGTERM if terminated else signal.SIGINT)  # 143 or 130, as the shells report a death by it
     except BaseException:  # anything else (a policy of the user's raising, a bug): its traceback, and no empty folder
         remove_empty_created_folders()
         raise

@@ -148,7 +148,8 @@ def make_executor(args: argparse.Namespace) -> Executor:
             from dvrk_gym.parallel.dask_executor import DaskExecutor
         except ImportError as error:
             raise ValueError(
-                f"--scheduler needs dask.distributed ({error}); install it with: pip install -e '.[dask]' in a checkout of dvrk-gym"
+                f"--scheduler needs dask.distributed ({error}); install it with: pip install 'dask[distributed]>=2024.1' "
+                "(in a checkout of dvrk-gym: pip install -e '.[dask]')"
             ) from None
         return DaskExecutor(args.scheduler, connect_timeout_s=args.connect_timeout)
     from dvrk_gym.parallel.executors import MAX_LOCAL_WORKERS, local_executor

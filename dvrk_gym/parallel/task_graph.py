@@ -37,6 +37,7 @@ from typing import Any
 from tqdm.auto import tqdm
 
 from dvrk_gym.parallel.executors import Executor, local_executor, outcome_of
+from dvrk_gym.parallel.progress_clock import running_clock
 from dvrk_gym.utils.atomic import read_json
 from dvrk_gym.utils.checks import check_file_stem
 from dvrk_gym.utils.run_folder import RunFolder
@@ -234,17 +235,8 @@ class _GraphRun:
 
     def run(self) -> dict[str, dict[str, Any]]:
         try:
-            self._queue_ready()
-            while self.ready or self.running:
-                if self.failure is None:
-                    self._submit()
-                if not self.running:
-                    break
-                self._show(task.name for task in self.running.values())
-                done, _ = cf.wait(self.running, return_when=cf.FIRST_COMPLETED)
-                self._collect(done)
-                if self.failure is None:
-                    self._queue_ready()
+            with running_clock(self.bar):  # its elapsed time moves while a long task runs
+                self._loop()
         except BaseException:  # Ctrl-C or an error here: stop the workers now; finished tasks are cached
             self.executor.stop()
             raise
@@ -253,6 +245,20 @@ class _GraphRun:
         if self.failure is not None:
             raise self.failure
         return {task.name: self.results[task.name] for task in self.tasks}
+
+    def _loop(self) -> None:
+        """Submit what is ready, collect what ends, until every task is done or one failed."""
+        self._queue_ready()
+        while self.ready or self.running:
+            if self.failure is None:
+                self._submit()
+            if not self.running:
+                break
+            self._show(task.name for task in self.running.values())
+            done, _ = cf.wait(self.running, return_when=cf.FIRST_COMPLETED)
+            self._collect(done)
+            if self.failure is None:
+                self._queue_ready()
 
     def _tasks_done(self) -> str:
         return f"{self.label}: {len(self.results)}/{len(self.tasks)} tasks"

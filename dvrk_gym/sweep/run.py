@@ -22,6 +22,7 @@ from tqdm.auto import tqdm
 
 from dvrk_gym.calibration.pipeline import PipelineConfig
 from dvrk_gym.parallel.executors import Executor
+from dvrk_gym.parallel.progress_clock import running_clock
 from dvrk_gym.sweep.grid import CALIBRATORS, SweepSettings, Unit
 from dvrk_gym.sweep.table import plot_errors, sweep_rows, unit_rows, write_csv
 from dvrk_gym.sweep.unit import run_unit
@@ -156,7 +157,8 @@ def _run_units(
     failures: dict[str, str] = {}
     if not todo:
         return (), failures
-    with tqdm(total=total, initial=total - len(todo), desc="sweep", unit="unit", disable=not progress) as bar:
+    bar = tqdm(total=total, initial=total - len(todo), desc="sweep", unit="unit", disable=not progress)
+    with bar, running_clock(bar):  # its elapsed time moves while the units (minutes each) run
         for outcome in executor.map_unordered(run_unit, todo):
             name = Unit(bias_seed=outcome.item.bias_seed, seed=outcome.item.seed).name
             if outcome.error is not None:

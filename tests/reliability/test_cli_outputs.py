@@ -362,6 +362,23 @@ def test_debride_refuses_an_instrument_other_than_its_calibrations(small_calibra
     assert not out.exists()
 
 
+def _main_running(monkeypatch, func):
+    """The command line's ``main``, each command's work replaced by ``func(args)``."""
+    from dvrk_gym.cli import main as cli_main
+
+    parser = cli_main.build_parser()
+    parse = parser.parse_args
+
+    def parse_and_replace(arguments=None):
+        args = parse(arguments)
+        args.func = func
+        return args
+
+    monkeypatch.setattr(parser, "parse_args", parse_and_replace)
+    monkeypatch.setattr(cli_main, "build_parser", lambda: parser)
+    return cli_main.main
+
+
 @pytest.mark.parametrize(
     "argv, resumes",
     [
@@ -377,24 +394,31 @@ def test_debride_refuses_an_instrument_other_than_its_calibrations(small_calibra
     ],
 )
 def test_ctrl_c_says_the_command_resumes_only_where_it_keeps_its_stages(capsys, tmp_path, monkeypatch, argv, resumes):
-    from dvrk_gym.cli import main as cli_main
-
     def interrupted(args):
         raise KeyboardInterrupt
 
-    parser = cli_main.build_parser()
-    parse = parser.parse_args
-
-    def parse_and_interrupt(arguments=None):
-        args = parse(arguments)
-        args.func = interrupted
-        return args
-
-    monkeypatch.setattr(parser, "parse_args", parse_and_interrupt)
-    monkeypatch.setattr(cli_main, "build_parser", lambda: parser)
-    assert cli_main.main([*argv, "--out", str(tmp_path / "out")]) == 130
+    main = _main_running(monkeypatch, interrupted)
+    assert main([*argv, "--out", str(tmp_path / "out")]) == 130
     err = capsys.readouterr().err
     assert ("the same command resumes" in err) is resumes and ("nothing is kept" in err) is not resumes, err
+
+
+def test_sigterm_stops_a_command_as_ctrl_c_does_and_says_so(capsys, tmp_path, monkeypatch):
+    """SIGTERM (timeout, kill, a batch system) ended the process at once: no note, and its
+    pool's semaphores left behind. Now it stops as Ctrl-C does, with the shell's status 143."""
+    import signal
+    import time
+
+    def terminated(args):
+        os.kill(os.getpid(), signal.SIGTERM)
+        time.sleep(10)  # the signal's exception ends this at once
+        raise AssertionError("SIGTERM did not stop the command")
+
+    main = _main_running(monkeypatch, terminated)
+    before = signal.getsignal(signal.SIGTERM)
+    assert main(["collect", "--trajectories", "1", "--out", str(tmp_path / "out")]) == 143
+    assert "dvrk-gym collect: terminated (nothing is kept: run it again)" in capsys.readouterr().err
+    assert signal.getsignal(signal.SIGTERM) is before  # the handler is the command's only
 
 
 def test_ctrl_c_of_a_training_says_it_resumes_only_once_a_state_was_saved(capsys, tmp_path, monkeypatch):
