@@ -2,9 +2,10 @@
 
 Start a scheduler and workers wherever they may run (``dask scheduler`` on one machine,
 ``dask worker tcp://HOST:8786 --nthreads 1`` on each of the others, or a job queue's
-``dask-jobqueue``), with dvrk-gym installed at the same version on every worker (each call
-checks first that its worker runs the same dvrk_gym source as the process that sent it,
-and fails naming both if not: results of two simulators are never mixed); then
+``dask-jobqueue``), with dvrk-gym installed at the same version on every worker (the
+workers are asked at connect, and each call checks first, that they run the same dvrk_gym
+source as the process that sends the work, and are named if not: results of two
+simulators are never mixed); then
 ``dvrk-gym sweep --scheduler tcp://HOST:8786`` or ``dvrk-gym reproduce --scheduler ...``.
 A sweep's units need no shared disk (each sends its numbers back and the process that runs
 the sweep writes them); a reproduction's tasks write their models, tables and figures
@@ -25,7 +26,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-from distributed import Client
+from distributed import Client, get_worker
 from distributed.comm import get_address_host_port, parse_address
 
 from dvrk_gym.parallel.executors import FuturesExecutor
@@ -107,10 +108,51 @@ class SameSourceCall:
         found = source_fingerprint()
         if found.sha256 != self.sha256:
             raise WorkerSourceError(
-                f"the Dask worker on {socket.gethostname()} runs {found.short()}, the process that sent the work source "
+                f"the Dask worker {_worker_name()} runs {found.short()}, the process that sent the work source "
                 f"sha256 {self.sha256[:SHORT_DIGEST_CHARS]}: install the same commit of dvrk-gym on every worker"
             )
         return self.function(*args, **kwargs)
+
+
+def _worker_name() -> str:
+    """This Dask worker's address and host (several workers may share a host), for messages."""
+    try:
+        return f"{get_worker().address} on {socket.gethostname()}"
+    except ValueError:  # not on a worker (a call run here)
+        return f"on {socket.gethostname()}"
+
+
+def worker_source_sha256() -> str:
+    """The dvrk_gym source a worker runs (the full SHA-256): asked of every worker at connect."""
+    return source_fingerprint().sha256
+
+
+def _check_workers_source(client: Client, sha256: str) -> None:
+    """Refuse a cluster whose workers run other dvrk_gym source than ``sha256``, or none.
+
+    Each call checks its worker too (:class:`SameSourceCall`), but a worker that refuses its
+    calls in a moment is given the next ones at once: one such worker failed 9 units of a
+    sweep of 10. Asked here, it is named before any work is sent. (A worker that joins later
+    is still checked by each call.)
+
+    Raises:
+        ValueError: naming each worker whose source differs or that cannot import dvrk_gym.
+    """
+    answers = client.run(worker_source_sha256, on_error="return")
+    others = {worker: answer for worker, answer in answers.items() if answer != sha256}
+    if not others:
+        return
+    described = "; ".join(
+        f"{worker}: source sha256 {answer[:SHORT_DIGEST_CHARS]}"
+        if isinstance(answer, str)
+        else f"{worker}: cannot say which it runs ({answer})"
+        for worker, answer in sorted(others.items())
+    )
+    raise ValueError(
+        f"{len(others)} of {len(answers)} Dask workers do not run this dvrk_gym source (sha256 {sha256[:SHORT_DIGEST_CHARS]}), "
+        f"so their results would mix two simulators: {described}. Install the same commit of dvrk-gym on every worker, "
+        "or stop those workers"
+    )
 
 
 class DaskExecutor(FuturesExecutor):
@@ -127,7 +169,8 @@ class DaskExecutor(FuturesExecutor):
         connect_timeout_s: how long to try to reach it, seconds.
 
     Raises:
-        ValueError: the address is malformed, or the scheduler could not be reached in time.
+        ValueError: the address is malformed, the scheduler could not be reached in time,
+            or a worker runs other dvrk_gym source (or none).
     """
 
     def __init__(self, address: str, connect_timeout_s: float = CONNECT_TIMEOUT_S) -> None:
@@ -149,8 +192,13 @@ class DaskExecutor(FuturesExecutor):
                 f"cannot reach a Dask scheduler at {address!r} within {connect_timeout_s:g} s ({type(error).__name__}: {error}); "
                 "expected the address of a running scheduler, such as tcp://host:8786"
             ) from None
-        self._executor = self.client.get_executor(pure=False)
         self._source = source_fingerprint().sha256
+        try:
+            _check_workers_source(self.client, self._source)
+        except BaseException:
+            self.client.close()
+            raise
+        self._executor = self.client.get_executor(pure=False)
         threads = self._threads()
         self.description = f"Dask scheduler {address} ({len(threads)} workers, {sum(threads.values())} threads)"
         if not threads:

@@ -399,6 +399,30 @@ def test_a_dask_worker_running_other_dvrk_gym_source_refuses_the_call_before_run
     assert not marker.exists()
 
 
+def test_a_cluster_with_a_worker_of_other_dvrk_gym_source_is_refused_at_connect_naming_it(monkeypatch):
+    """Checked only by each call, such a worker refused its calls in a moment and so was
+    given the next at once: one of two workers failed 9 units of a sweep of 10."""
+    distributed = pytest.importorskip("distributed")
+    from dvrk_gym.parallel import dask_executor
+
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=False, dashboard_address=":0") as cluster:
+        with dask_executor.DaskExecutor(cluster.scheduler_address) as dask:  # the same source everywhere: taken
+            assert dask.submit(divmod, 7, 2).result(timeout=60) == (3, 1)
+        monkeypatch.setattr(dask_executor, "worker_source_sha256", lambda: "0" * 64)  # as workers of another commit answer
+        with pytest.raises(
+            ValueError, match=r"2 of 2 Dask workers do not run this dvrk_gym source .*inproc://.*: source sha256 000000000000"
+        ):
+            dask_executor.DaskExecutor(cluster.scheduler_address)
+
+        def broken() -> str:
+            raise ModuleNotFoundError("No module named 'dvrk_gym'")
+
+        monkeypatch.setattr(dask_executor, "worker_source_sha256", broken)  # as a worker without the package answers
+        with pytest.raises(ValueError, match=r"inproc://.*: cannot say which it runs \(.*No module named 'dvrk_gym'"):
+            dask_executor.DaskExecutor(cluster.scheduler_address)
+        assert len(cluster.scheduler.clients) == 1  # the refused clients were closed (the cluster's own is left)
+
+
 def test_a_port_that_is_no_scheduler_is_refused_in_about_the_connect_timeout():
     """A port that takes the connection but speaks HTTP (a scheduler's dashboard: 8787 for
     8786) never answers Dask's handshake: the client waited for ever, whatever the timeout."""
