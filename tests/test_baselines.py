@@ -596,3 +596,19 @@ def test_agents_benchmarked_at_another_seed_than_the_calibrators_rows_are_noted(
         assert args.func(args) == 0
         notes = json.loads((tmp_path / "eval" / "comparison.json").read_text())["notes"]
         assert any("the calibrators' rows with the calibration run's seed 0" in note for note in notes) == noted, extra
+
+
+def test_the_learning_curve_figure_marks_each_agents_table_error_at_its_last_step(tmp_path, monkeypatch) -> None:
+    """The curve's points touch each circle once, the table 210 times: the figure's curves
+    ended at 1.76 and 1.69 mm beside a table of 1.18 and 1.13 mm, with nothing to say so."""
+    from dvrk_gym.baselines import curves
+
+    drawn = {}
+    monkeypatch.setattr(curves, "atomic_savefig", lambda figure, path, dpi: drawn.setdefault("figure", figure) and path)
+    points = [curves.CurvePoint(0, 20.0, 200.0, 0.0), curves.CurvePoint(5476, 1.76, 20.0, 0.2)]
+    curves.plot_curves({"sac_her": points}, tmp_path / "c.png", table_mm={"sac_her": 1.18})
+    (axes,) = drawn["figure"].axes
+    diamonds = [line for line in axes.lines if line.get_marker() == "D" and len(line.get_xdata())]
+    assert [(list(line.get_xdata()), list(line.get_ydata())) for line in diamonds] == [([5476], [1.18])]
+    assert diamonds[0].get_color() == axes.lines[0].get_color()  # in its curve's colour
+    assert "calibration table, 210 touches" in [text.get_text() for text in axes.get_legend().get_texts()]

@@ -293,3 +293,16 @@ def test_nan_command_raises_naming_the_element(index: int) -> None:
 def test_wrong_shaped_command_raises() -> None:
     with pytest.raises(ValueError, match=r"shape \(6,\)"):
         CableModel(BIAS_PRESETS["paper"]).true_joints(np.zeros(5))
+
+
+@pytest.mark.parametrize("longest_mm", [0.003, 0.34, 0.8, 1.0, 4.7, 30.0])
+def test_the_bias_figure_draws_its_longest_arrow_between_a_third_and_most_of_the_grid_spacing(longest_mm) -> None:
+    """Drawn 1:1, the paper preset's 0.3 mm errors on a grid 12 mm apart were dots."""
+    from dvrk_gym.sim.robot.bias_field import ARROW_FILL, arrow_magnification, round_down
+
+    spacing_mm = 11.7
+    magnification = arrow_magnification(longest_mm, spacing_mm)
+    drawn = longest_mm * magnification
+    assert ARROW_FILL * spacing_mm / 2.5 < drawn <= ARROW_FILL * spacing_mm  # 1-2-5 steps: within 2.5 times of the fill
+    assert round_down(magnification) == magnification  # a round number, said in the title
+    assert arrow_magnification(0.0, spacing_mm) == 1.0  # no error: nothing to scale

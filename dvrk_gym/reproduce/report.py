@@ -113,7 +113,9 @@ def write_figures(folder: Path, data: dict[str, Any]) -> dict[str, str]:
         figures["model_search"] = "figures/model_search.png"
     if data["rl"]:
         curves = {agent["label"]: [CurvePoint.from_json(point) for point in agent["curve"]] for agent in data["rl"]}
-        plot_curves(curves, folder / "learning_curves.png", title="RL agents on GridTouch-v0: touch error against robot moves")
+        table_mm = {agent["label"]: agent["mean_mm"] for agent in data["rl"]}
+        title = "RL agents on GridTouch-v0: touch error against robot moves"
+        plot_curves(curves, folder / "learning_curves.png", title=title, table_mm=table_mm)
         figures["learning_curves"] = "figures/learning_curves.png"
     for cell in data["debridement"]:
         figures[Path(cell["figure"]).stem] = cell["figure"]

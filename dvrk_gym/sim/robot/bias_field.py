@@ -28,6 +28,21 @@ GRID_Z_M = -0.159
 """Height of the grid: the middle of the paper's workspace, metres (base frame)."""
 FIELDS = ("rigid", "raw")
 MM_PER_M = 1e3
+ARROW_FILL = 0.8
+"""The figure's longest arrow spans at most this share of the grid's spacing: drawn 1:1, a
+0.3 mm error on a 12 mm grid was a dot."""
+
+
+def round_down(value: float) -> float:
+    """The largest of 1, 2 or 5 times a power of ten that is at most ``value`` (> 0)."""
+    decade = 10.0 ** np.floor(np.log10(value))
+    return float(max(step * decade for step in (1.0, 2.0, 5.0) if step * decade <= value * (1.0 + 1e-12)))
+
+
+def arrow_magnification(longest_mm: float, spacing_mm: float) -> float:
+    """How many times their length the figure draws the errors (a round number): the longest
+    then spans at most :data:`ARROW_FILL` of the grid's spacing (both lengths in mm)."""
+    return round_down(ARROW_FILL * spacing_mm / longest_mm) if longest_mm > 0.0 else 1.0
 
 
 def grid_errors(model: CableModel, yaw_rad: float) -> tuple[np.ndarray, np.ndarray]:
@@ -75,10 +90,13 @@ def plot_field(model: CableModel, path: Path, field: str = "rigid") -> Path:
     fields = [grid_field(model, yaw, field) for yaw in kin.PAPER_YAWS_RAD]
     norms_mm = [np.linalg.norm(errors, axis=1) * MM_PER_M for _, errors in fields]
     vmax = max(norm.max() for norm in norms_mm)
+    spacing_mm = MM_PER_M * min(np.ptp(WORKSPACE_X_M) / (GRID_SHAPE[0] - 1), np.ptp(WORKSPACE_Y_M) / (GRID_SHAPE[1] - 1))
+    longest_mm = max(np.linalg.norm(errors[:, :2], axis=1).max() for _, errors in fields) * MM_PER_M
+    magnification = arrow_magnification(longest_mm, spacing_mm)
     figure = Figure(figsize=(20, 4.6), layout="constrained")
     axes = figure.subplots(1, len(kin.PAPER_YAWS_RAD))
     for ax, yaw, (reported, errors), norm_mm in zip(axes, kin.PAPER_YAWS_RAD, fields, norms_mm):
-        tails, arrows = reported[:, :2] * MM_PER_M, errors[:, :2] * MM_PER_M
+        tails, arrows = reported[:, :2] * MM_PER_M, errors[:, :2] * MM_PER_M * magnification
         quiver = ax.quiver(
             tails[:, 0],
             tails[:, 1],
@@ -96,14 +114,18 @@ def plot_field(model: CableModel, path: Path, field: str = "rigid") -> Path:
         pad_mm = 3.0  # room for the arrow heads
         ax.set_xlim(ends[:, 0].min() - pad_mm, ends[:, 0].max() + pad_mm)
         ax.set_ylim(ends[:, 1].min() - pad_mm, ends[:, 1].max() + pad_mm)
-        ax.set_title(f"yaw {np.rad2deg(yaw):+.0f} deg: mean {norm_mm.mean():.2f} mm")
+        ax.set_title(f"yaw {np.rad2deg(yaw):+.0f} deg: mean {norm_mm.mean():.2f} mm (3-D)")
         ax.set_xlabel("base x (mm)")
         ax.set_aspect("equal")
     axes[0].set_ylabel("base y (mm)")
+    if longest_mm > 0.0:  # a key arrow of a round length, as long as the longest or a little shorter
+        key_mm = round_down(longest_mm)
+        axes[-1].quiverkey(quiver, 0.85, 1.12, key_mm * magnification, f"{key_mm:g} mm", labelpos="W", coordinates="axes")
     label = "after a rigid fit per yaw" if field == "rigid" else "raw"
     figure.colorbar(quiver, ax=axes, label="3-D norm (mm)")
     figure.suptitle(
         f"Cable model '{model_name(model)}', bias seed {model.bias_seed}: tip error {label} "
-        "(arrows: its x-y part, 1:1 in mm; paper's pitch and roll for each yaw; noiseless)"
+        f"(arrows: its x-y part, drawn {magnification:g} times its length; colour: its 3-D norm; "
+        "grid of 35 points, paper's pitch and roll for each yaw; noiseless)"
     )
     return atomic_savefig(figure, path, dpi=110)
