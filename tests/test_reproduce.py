@@ -241,6 +241,33 @@ def test_a_tampered_cached_result_is_a_clear_error_and_leaves_the_last_outputs(t
     assert {name: (out / name).read_bytes() for name in before} == before  # nothing half-written, no call logged
 
 
+def test_an_interrupted_call_counts_in_the_wall_time_of_the_run_it_resumes(tiny_reproduction, tmp_path, monkeypatch):
+    """Only the call that finished was counted: a run interrupted after 17 minutes and
+    resumed for 2 reported a wall time of 2 minutes."""
+    from dvrk_gym.reproduce import run as reproduce_run
+
+    out = tmp_path / "run"
+    shutil.copytree(tiny_reproduction.report.parent, out)
+    (out / "tasks" / "bias_field.json").unlink()
+    real_run_tasks = reproduce_run.run_tasks
+
+    def run_then_interrupt(*args, **kwargs):
+        real_run_tasks(*args, **kwargs)  # bias_field runs again, and is cached
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(reproduce_run, "run_tasks", run_then_interrupt)
+    with pytest.raises(KeyboardInterrupt):
+        run_reproduce(ReproduceConfig(out=out, profile=TINY, workers=1, progress=False))
+    interrupted = json.loads((out / "calls.json").read_text())[-1]
+    assert interrupted["interrupted"] is True and interrupted["tasks_run"] == 1 and interrupted["wall_s"] > 0
+    monkeypatch.setattr(reproduce_run, "run_tasks", real_run_tasks)
+    again = run_reproduce(ReproduceConfig(out=out, profile=TINY, workers=1, progress=False))
+    calls = again.data["calls"]
+    assert calls[-2] == interrupted and calls[-1]["interrupted"] is False and calls[-1]["tasks_run"] == 0
+    assert again.data["wall_s"]["all_calls"] == pytest.approx(sum(call["wall_s"] for call in calls))
+    assert f"{interrupted['wall_s'] / 60:.1f} min for 1 tasks on {interrupted['executor']}, interrupted" in again.report.read_text()
+
+
 @pytest.mark.parametrize("figure", ["/dev/zero", "fifo"])
 def test_a_cached_result_naming_a_figure_that_is_no_file_of_the_run_is_refused(tiny_reproduction, tmp_path, figure):
     """Its bytes were read whole into the report's figures: a FIFO blocked the run, /dev/zero ate the memory."""

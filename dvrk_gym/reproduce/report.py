@@ -164,8 +164,11 @@ def render_report(data: dict[str, Any]) -> str:
 
 
 def _timing_sentence(data: dict[str, Any]) -> str:
-    calls = [call for call in data["calls"] if call["tasks_run"]]
-    runs = "; ".join(f"{call['wall_s'] / 60:.1f} min for {call['tasks_run']} tasks on {_where(call)}" for call in calls)
+    calls = [call for call in data["calls"] if call["tasks_run"] or call.get("interrupted")]
+    runs = "; ".join(
+        f"{call['wall_s'] / 60:.1f} min for {call['tasks_run']} tasks on {_where(call)}{', interrupted' if call.get('interrupted') else ''}"
+        for call in calls
+    )
     return f"Wall time: {runs or 'every task was cached'} (the tasks' own times add up to {data['wall_s']['tasks_total'] / 60:.1f} min)."
 
 

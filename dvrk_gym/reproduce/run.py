@@ -216,9 +216,16 @@ def _reproduce(config: ReproduceConfig, folder: RunFolder, executor: Executor) -
     start = time.perf_counter()
     (config.out / "figures").mkdir(parents=True, exist_ok=True)
     graph = build_tasks(config, nested_progress=isinstance(executor, InlineExecutor))
-    task_results = run_tasks(
-        graph, cache_dir=config.out / "tasks", progress=config.progress, executor=executor, shared_folder=config.out, label="reproduce"
-    )
+    finished_before = _finished(graph, config.out)
+    try:
+        task_results = run_tasks(
+            graph, cache_dir=config.out / "tasks", progress=config.progress, executor=executor, shared_folder=config.out, label="reproduce"
+        )
+    except KeyboardInterrupt:  # Ctrl-C or SIGTERM: the call's time is kept beside its finished tasks, for the report
+        tasks_run = len(_finished(graph, config.out) - finished_before)
+        wall = time.perf_counter() - start
+        folder.write_json("calls.json", _calls_with_this_one(folder, config, executor, wall, tasks_run=tasks_run, interrupted=True))
+        raise
     # Everything the outputs hold is made before any is written: a cached result that was
     # edited or damaged fails here, clearly, and leaves the outputs of the last good call.
     try:
@@ -273,15 +280,22 @@ def _read_calls(path: Path) -> list[dict[str, Any]]:
     return calls
 
 
+def _finished(graph: list[Task], out: Path) -> set[str]:
+    """The graph's tasks whose results are cached in the run folder now."""
+    return {task.name for task in graph if (out / "tasks" / f"{task.name}.json").is_file()}
+
+
 def _calls_with_this_one(
-    folder: RunFolder, config: ReproduceConfig, executor: Executor, wall_s: float, tasks_run: int
+    folder: RunFolder, config: ReproduceConfig, executor: Executor, wall_s: float, *, tasks_run: int, interrupted: bool = False
 ) -> list[dict[str, Any]]:
-    """The calls of ``calls.json`` in the run folder (a resumed run has several) and this one, to be written."""
+    """The calls of ``calls.json`` in the run folder (a resumed run has several) and this one,
+    to be written (an interrupted one too: its time counts in the report's wall time)."""
     calls = folder.load("calls.json", _read_calls) or []
     calls.append(
         {
             "wall_s": wall_s,
             "tasks_run": tasks_run,
+            "interrupted": interrupted,
             "workers": config.workers,
             "executor": executor.description,
             "finished": time.strftime("%Y-%m-%d %H:%M:%S"),
