@@ -23,6 +23,7 @@ from dvrk_gym.evaluation.episodes import as_policy, evaluate_policy, load_policy
 from dvrk_gym.sim.robot import kinematics as kin
 from dvrk_gym.sim.robot.bias import BIAS_PRESETS
 from dvrk_gym.utils.run_folder import SOURCE_KEY, RunFolder
+from dvrk_gym.utils.source_fingerprint import source_fingerprint
 
 SMALL = (640, 360)
 
@@ -207,7 +208,9 @@ def test_pipeline_runs_end_to_end_resumes_and_refuses_other_settings(tmp_path):
     assert set(again["timings_s"]) == {"benchmark"}  # every other stage came from the cache
     np.testing.assert_array_equal(again["table"]["DNN"]["yaw 0"].mm, first["table"]["DNN"]["yaw 0"].mm)
     assert "paper" in format_table(first["table"])
-    assert json.loads((tmp_path / "calibration_table.json").read_text())["protocol"] == "paper"
+    table_file = json.loads((tmp_path / "calibration_table.json").read_text())
+    assert table_file["protocol"] == "paper" and table_file["paper"]["pixels_image_px"] == [1920, 1080]
+    assert table_file["source"] == source_fingerprint().to_json()  # which dvrk_gym made it
     assert (tmp_path / "calibration_table.txt").read_text().startswith("Protocol: paper (the rigid body's heights lifted")
     raw = run_calibration(tmp_path, config, progress=False, protocol="raw")  # not a setting: the same folder, evaluated raw
     assert set(raw["timings_s"]) == {"benchmark"} and raw["protocol"] == "raw"

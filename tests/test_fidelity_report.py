@@ -14,6 +14,7 @@ from dvrk_gym.fidelity.comparison import RELATIVE_TOLERANCE, SHARE_TOLERANCE, co
 from dvrk_gym.fidelity.statistics import FidelityStatistics, fidelity_statistics
 from dvrk_gym.sim import identified
 from dvrk_gym.utils.atomic import atomic_path, atomic_write_text
+from dvrk_gym.utils.source_fingerprint import source_fingerprint
 
 REFERENCE = FidelityStatistics(
     rows=100,
@@ -148,6 +149,7 @@ def test_fidelity_command_writes_finite_numbers_with_the_real_rows_in_the_real_c
     report = json.loads((out / "fidelity.json").read_text())
     assert (out / "fidelity.png").stat().st_size > 10_000
     assert sorted(p.name for p in out.iterdir()) == ["fidelity.json", "fidelity.png"]
+    assert report["source"] == source_fingerprint().to_json()  # which dvrk_gym made it
     assert report["settings"] == {
         "bias": "paper",
         "bias_seed": 0,

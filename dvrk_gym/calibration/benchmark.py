@@ -26,6 +26,7 @@ from dvrk_gym.sim.endoscope.noise import PAPER_WIDTH_PX
 from dvrk_gym.sim.physics.scene import GRID_COLUMNS, GRID_ROWS
 from dvrk_gym.utils.atomic import atomic_savefig, atomic_write_json
 from dvrk_gym.utils.checks import check_int
+from dvrk_gym.utils.source_fingerprint import source_fingerprint
 
 logger = logging.getLogger(__name__)
 
@@ -238,6 +239,7 @@ def save_table(table: dict[str, dict[str, CircleErrors]], path: Path, protocol: 
     data = {
         "protocol": protocol,
         "notes": list(notes),
+        "source": source_fingerprint().to_json(),  # which dvrk_gym made it
         "summary": table_summary(table),
         "per_circle": {
             method: {
@@ -246,6 +248,10 @@ def save_table(table: dict[str, dict[str, CircleErrors]], path: Path, protocol: 
             }
             for method, settings in table.items()
         },
-        "paper": {"mean_mm": paper.CALIBRATION_MEAN_MM, "pixels": paper.CALIBRATION_PIXELS},
+        "paper": {
+            "mean_mm": paper.CALIBRATION_MEAN_MM,
+            "pixels": paper.CALIBRATION_PIXELS,
+            "pixels_image_px": paper.ENDOSCOPE_RESOLUTION_PX,
+        },
     }
     return atomic_write_json(path, data, indent=1)

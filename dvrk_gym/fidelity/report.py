@@ -24,6 +24,7 @@ from dvrk_gym.fidelity.comparison import (
 )
 from dvrk_gym.fidelity.statistics import PAPER_YAWS_DEG, finite_or_none, rigid_residuals_camera
 from dvrk_gym.utils.atomic import atomic_savefig, atomic_write_text
+from dvrk_gym.utils.source_fingerprint import source_fingerprint
 
 __all__ = ["JSON_NAME", "PNG_NAME", "format_table", "plot_fidelity", "report_dict", "write_report"]
 
@@ -87,6 +88,7 @@ def report_dict(run: FidelityRun) -> dict[str, Any]:
     """The report as JSON-ready data: settings, both statistics, the comparison rows."""
     return {
         "settings": run.settings,
+        "source": source_fingerprint().to_json(),  # which dvrk_gym made it
         "targets": {
             "relative_tolerance": RELATIVE_TOLERANCE,
             "share_tolerance": SHARE_TOLERANCE,

@@ -18,6 +18,7 @@ from dvrk_gym.calibration.benchmark import YAW_SETTINGS
 from dvrk_gym.calibration.search import SearchResult, plot_search
 from dvrk_gym.evaluation.trials import unpicked_note
 from dvrk_gym.parallel.task_graph import locate_in_folder
+from dvrk_gym.utils.source_fingerprint import SHORT_DIGEST_CHARS, source_fingerprint
 
 PAPER_PHASE1 = {"raw": paper.PHASE1_RAW_SAMPLES, "kept": paper.PHASE1_KEPT_SAMPLES}
 """The paper's Phase I: raw samples and those both cameras saw at the same place."""
@@ -31,6 +32,7 @@ def _versions() -> dict[str, str]:
             versions[name] = metadata.version(name)
         except metadata.PackageNotFoundError:
             versions[name] = "not installed"
+    versions["dvrk_gym source sha256"] = source_fingerprint().sha256[:SHORT_DIGEST_CHARS]  # the run folder's stamp holds it whole
     return versions
 
 
