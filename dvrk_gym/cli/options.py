@@ -119,14 +119,15 @@ def add_executor_options(parser: argparse.ArgumentParser, what: str) -> None:
         parser: the command's parser.
         what: what runs side by side, for the help texts ("units", "stages").
     """
-    parser.add_argument(
+    where = parser.add_mutually_exclusive_group()  # --workers beside --scheduler was ignored without a word
+    where.add_argument(
         "--workers",
         type=int,
         default=min(2, os.cpu_count() or 1),
         help=f"local processes running {what} side by side, without --scheduler (1: in this process); "
         "results do not depend on it (default: %(default)s)",
     )
-    parser.add_argument(
+    where.add_argument(
         "--scheduler",
         metavar="ADDRESS",
         help=f"run the {what} on a Dask cluster instead, e.g. tcp://host:8786 (pip install -e '.[dask]' in a checkout)",

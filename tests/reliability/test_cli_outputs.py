@@ -457,3 +457,14 @@ def test_search_on_a_collection_that_keeps_too_few_rows_names_the_file(capsys, t
     assert main(["search", "--data", str(data), "--folds", "2", "--out", str(tmp_path / "search")]) == 2
     assert f"--folds 2: {data} has only 0 rows that the cleaning keeps" in capsys.readouterr().err
     assert not (tmp_path / "search").exists()
+
+
+@pytest.mark.parametrize("command", ["sweep", "reproduce"])
+def test_workers_beside_a_scheduler_is_refused_not_ignored(capsys, tmp_path, command):
+    """--workers 3 --scheduler ADDRESS ran on the cluster, the 3 ignored without a word."""
+    from dvrk_gym.cli.main import main
+
+    with pytest.raises(SystemExit) as stopped:
+        main([command, "--workers", "3", "--scheduler", "tcp://127.0.0.1:1", "--out", str(tmp_path / "out")])
+    assert stopped.value.code == 2 and "argument --scheduler: not allowed with argument --workers" in capsys.readouterr().err
+    assert not (tmp_path / "out").exists()
