@@ -106,3 +106,19 @@ def test_a_calibration_folder_whose_phase_ii_went_row_major_is_refused_not_mixed
     with pytest.raises(ValueError, match="another order than the authors' tour.*delete it and two_phase.zip"):
         run_calibration(stale, config, progress=False)
     assert (stale / "two_phase.zip").read_bytes() == forests  # nothing made or moved in the folder
+
+
+def test_the_error_maps_and_the_sweep_figure_say_which_budget_made_them(tmp_path, monkeypatch):
+    """A 3-trajectory, 20-epoch run's figures looked like the paper's budget's."""
+    from dvrk_gym.calibration import benchmark
+    from dvrk_gym.sweep import table as sweep_table
+
+    titles = []
+    monkeypatch.setattr(benchmark, "atomic_savefig", lambda figure, path, dpi: titles.append(figure._suptitle.get_text()))
+    monkeypatch.setattr(sweep_table, "atomic_savefig", lambda figure, path, dpi: titles.append(figure.axes[0].get_title()))
+    config = pipeline.PipelineConfig(n_trajectories=3, dnn_epochs=20, camera_resolution=(640, 360))
+    assert config.budget() == "bias paper; 3 trajectories of 93, 20 epochs; 640 x 360 px"
+    benchmark.plot_error_maps(_table("DNN"), tmp_path / "maps.png", subtitle=config.budget())
+    rows = [{"bias_seed": 0, "calibrator": "dnn", "mean_mm": 2.0}]
+    sweep_table.plot_errors(rows, tmp_path / "sweep.png", subtitle=config.budget())
+    assert all(title.endswith("\nbias paper; 3 trajectories of 93, 20 epochs; 640 x 360 px") for title in titles) and len(titles) == 2

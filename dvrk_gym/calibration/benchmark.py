@@ -206,8 +206,9 @@ def format_table(table: dict[str, dict[str, CircleErrors]]) -> str:
     return "\n".join(lines)
 
 
-def plot_error_maps(table: dict[str, dict[str, CircleErrors]], path: Path) -> Path:
-    """Per-circle error maps: one row per method, one column per setting (mm, shared scale)."""
+def plot_error_maps(table: dict[str, dict[str, CircleErrors]], path: Path, *, subtitle: str = "") -> Path:
+    """Per-circle error maps: one row per method, one column per setting (mm, shared scale);
+    ``subtitle``, under the title: the settings that made them."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -225,7 +226,7 @@ def plot_error_maps(table: dict[str, dict[str, CircleErrors]], path: Path) -> Pa
             ax.set_yticks([])
             ax.set_title(f"{method}, {label}\nmean {np.nanmean(errors):.2f} mm", fontsize=8)
     fig.colorbar(image, ax=axes, shrink=0.8, label="touch error (mm)")
-    fig.suptitle("Per-circle calibration error (grid as printed: x right, y up)")
+    fig.suptitle("Per-circle calibration error (grid as printed: x right, y up)" + (f"\n{subtitle}" if subtitle else ""), fontsize=10)
     try:
         return atomic_savefig(fig, path, dpi=110)
     finally:

@@ -97,6 +97,12 @@ class PipelineConfig:
             self, "camera_resolution", check_endoscope_resolution("PipelineConfig.camera_resolution", self.camera_resolution)
         )
 
+    def budget(self) -> str:
+        """The bias preset and the budgets in a line, for figures (a quick run's look like the paper's)."""
+        width, height = self.camera_resolution
+        trajectories = f"{self.n_trajectories} trajectories of {self.steps_per_trajectory}"
+        return f"bias {self.bias}; {trajectories}, {self.dnn_epochs} epochs; {width} x {height} px"
+
     def env_kwargs(self) -> dict[str, Any]:
         return {"bias": self.bias, "bias_seed": self.bias_seed, "camera_resolution": tuple(self.camera_resolution)}
 
@@ -264,7 +270,11 @@ def _run_stages(out: Path, folder: RunFolder, config: PipelineConfig, progress: 
     finally:
         grid.close()
     save_table(table, out / "calibration_table.json", protocol=protocol)
-    plot_error_maps(table, out / "calibration_error_maps.png")
+    plot_error_maps(
+        table,
+        out / "calibration_error_maps.png",
+        subtitle=f"instrument {config.bias_seed}, seed {config.seed}, {config.budget()}; protocol {protocol}",
+    )
     atomic_write_text(out / "calibration_table.txt", f"{PROTOCOL_LINES[protocol]}\n{format_table(table)}\n")
     return {
         "protocol": protocol,

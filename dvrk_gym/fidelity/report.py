@@ -125,10 +125,20 @@ def _angle_from_view_axis_deg(residual: np.ndarray) -> np.ndarray:
 
 def _histograms(axes: Any, real: np.ndarray, sim: np.ndarray, title: str, xlabel: str) -> None:
     edges = np.histogram_bin_edges(np.concatenate([real, sim]), bins=_BINS)
-    for label, values in (("real", real), ("sim", sim)):
-        axes.hist(values, bins=edges, density=True, histtype="step", linewidth=1.5, color=_COLOURS[label], label=f"{label} ({len(values)})")
+    for (label, values), style in zip((("real", real), ("sim", sim)), ("-", "--")):  # dashed: told apart in greyscale too
+        axes.hist(
+            values,
+            bins=edges,
+            density=True,
+            histtype="step",
+            linewidth=1.5,
+            linestyle=style,
+            color=_COLOURS[label],
+            label=f"{label} ({len(values)})",
+        )
     axes.set_title(title, fontsize=9)
     axes.set_xlabel(xlabel)
+    axes.set_ylabel(f"density (per {xlabel.split(' (')[0]})", fontsize=8)  # the unit, without a note on it
     axes.legend(fontsize=7)
 
 

@@ -132,7 +132,7 @@ def run_sweep(settings: SweepSettings, out: str | os.PathLike, executor: Executo
         csv_path, figure = folder.file(CSV_NAME), folder.file(FIGURE_NAME)
         if rows:
             write_csv(rows, csv_path)
-            plot_errors(rows, figure)
+            plot_errors(rows, figure, subtitle=settings.pipeline.budget())
         else:  # every unit of this grid failed: another grid's table and figure would not be this one's,
             csv_path.unlink(missing_ok=True)  # and an empty table would be a result, keeping the folder's settings
             figure.unlink(missing_ok=True)

@@ -122,8 +122,9 @@ def _by_calibrator(rows: Sequence[Mapping[str, Any]]) -> dict[str, list[float]]:
     return grouped
 
 
-def plot_errors(rows: Sequence[Mapping[str, Any]], path: str | os.PathLike) -> Path:
-    """Mean touch error per instrument, one line per calibrator, the paper's mean dashed.
+def plot_errors(rows: Sequence[Mapping[str, Any]], path: str | os.PathLike, *, subtitle: str = "") -> Path:
+    """Mean touch error per instrument, one line per calibrator, the paper's mean dashed;
+    ``subtitle``, under the title: the settings every unit shared.
 
     With several seeds a point is the mean over them, its bar spans the lowest to the
     highest seed and each seed is a small dot.
@@ -155,7 +156,8 @@ def plot_errors(rows: Sequence[Mapping[str, Any]], path: str | os.PathLike) -> P
     ax.set_xlabel("instrument (bias seed)")
     ax.set_ylabel("mean touch error (mm)")
     ax.set_ylim(bottom=0.0)
-    ax.set_title("Calibration error per instrument (6 settings x 35 circles; dashed: the paper)", fontsize=9)
+    title = "Calibration error per instrument (6 settings x 35 circles; dashed: the paper)"
+    ax.set_title(title + (f"\n{subtitle}" if subtitle else ""), fontsize=9)
     ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.0, 1.0))
     fig.tight_layout()
     path = Path(path)
