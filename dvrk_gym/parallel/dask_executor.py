@@ -188,8 +188,12 @@ class DaskExecutor(FuturesExecutor):
         try:
             self.client = _connect(address, connect_timeout_s)
         except Exception as error:  # whatever answered is not a scheduler (a dashboard's HTTP, garbage read as a huge array)
+            # Bytes of another protocol, read as the length of Dask's first message, asked for exbibytes.
+            reason = (
+                "what answered does not speak Dask's protocol" if isinstance(error, MemoryError) else f"{type(error).__name__}: {error}"
+            )
             raise ValueError(
-                f"cannot reach a Dask scheduler at {address!r} within {connect_timeout_s:g} s ({type(error).__name__}: {error}); "
+                f"cannot reach a Dask scheduler at {address!r} within {connect_timeout_s:g} s ({reason}); "
                 "expected the address of a running scheduler, such as tcp://host:8786"
             ) from None
         self._source = source_fingerprint().sha256

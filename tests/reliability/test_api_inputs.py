@@ -5,6 +5,7 @@ import csv
 import http.server
 import io
 import json
+import socket
 import threading
 import zipfile
 
@@ -421,6 +422,27 @@ def test_a_cluster_with_a_worker_of_other_dvrk_gym_source_is_refused_at_connect_
         with pytest.raises(ValueError, match=r"inproc://.*: cannot say which it runs \(.*No module named 'dvrk_gym'"):
             dask_executor.DaskExecutor(cluster.scheduler_address)
         assert len(cluster.scheduler.clients) == 1  # the refused clients were closed (the cluster's own is left)
+
+
+def test_a_port_that_sends_bytes_of_another_protocol_is_refused_saying_so_not_with_a_memory_error():
+    """Its first bytes, read as the length of Dask's first message, made the refusal say
+    "MemoryError: Unable to allocate 2.64 EiB"."""
+    pytest.importorskip("distributed")
+    from dvrk_gym.parallel.dask_executor import DaskExecutor
+
+    with socket.create_server(("127.0.0.1", 0)) as server:
+        accepted = []
+
+        def babble() -> None:
+            connection, _ = server.accept()
+            accepted.append(connection)  # kept open until the test ends
+            connection.sendall(b"\x2a" * 64)
+
+        threading.Thread(target=babble, daemon=True).start()
+        with pytest.raises(ValueError, match="what answered does not speak Dask's protocol"):
+            DaskExecutor(f"tcp://127.0.0.1:{server.getsockname()[1]}", connect_timeout_s=3.0)
+        for connection in accepted:
+            connection.close()
 
 
 def test_a_port_that_is_no_scheduler_is_refused_in_about_the_connect_timeout():
