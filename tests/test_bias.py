@@ -296,7 +296,7 @@ def test_wrong_shaped_command_raises() -> None:
 
 
 @pytest.mark.parametrize("longest_mm", [0.003, 0.34, 0.8, 1.0, 4.7, 30.0])
-def test_the_bias_figure_draws_its_longest_arrow_between_a_third_and_most_of_the_grid_spacing(longest_mm) -> None:
+def test_the_bias_figure_draws_its_longest_arrow_over_two_fifths_to_four_fifths_of_the_grid_spacing(longest_mm) -> None:
     """Drawn 1:1, the paper preset's 0.3 mm errors on a grid 12 mm apart were dots."""
     from dvrk_gym.sim.robot.bias_field import ARROW_FILL, arrow_magnification, round_down
 

@@ -224,7 +224,8 @@ def _reproduce(config: ReproduceConfig, folder: RunFolder, executor: Executor) -
     except KeyboardInterrupt:  # Ctrl-C or SIGTERM: the call's time is kept beside its finished tasks, for the report
         tasks_run = len(_finished(graph, config.out) - finished_before)
         wall = time.perf_counter() - start
-        folder.write_json("calls.json", _calls_with_this_one(folder, config, executor, wall, tasks_run=tasks_run, interrupted=True))
+        with contextlib.suppress(OSError, ValueError):  # a record that cannot be written (a full disk) does not hide the interrupt
+            folder.write_json("calls.json", _calls_with_this_one(folder, config, executor, wall, tasks_run=tasks_run, interrupted=True))
         raise
     # Everything the outputs hold is made before any is written: a cached result that was
     # edited or damaged fails here, clearly, and leaves the outputs of the last good call.
