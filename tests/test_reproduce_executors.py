@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 from reproduction_files import files_that_differ
-from workers_for_tests import die_once, import_pybullet, record, sleep_for, square_or_die
+from workers_for_tests import die_once, import_pybullet, record, scratch_then_wait, sleep_for, square_or_die
 
 from dvrk_gym.cli.main import main
 from dvrk_gym.parallel.executors import InlineExecutor, LocalExecutor
@@ -237,3 +237,18 @@ def test_workers_stopped_as_by_ctrl_c_leave_no_semaphore_behind():
     done = subprocess.run([sys.executable, "-c", script, str(Path(__file__).parent)], capture_output=True, text=True, timeout=120)
     assert done.returncode == 0 and done.stdout.strip() == "[1, 2, 3, 4]", done.stderr
     assert "leaked semaphore" not in done.stderr  # the tracker writes to the same stderr, before the pipe closes
+
+
+def test_a_worker_stopped_as_by_ctrl_c_deletes_its_scratch_folder(tmp_path, monkeypatch):
+    """A stopped worker ended at once and left its unit's folder (0.76 MB at a quick budget)
+    in the temporary folder until the next sweep on the host deleted it."""
+    monkeypatch.setenv("TMPDIR", str(tmp_path))  # the worker, spawned after this, makes its folder here
+    with LocalExecutor(workers=1) as pool:
+        future = pool.submit(scratch_then_wait, 60.0)
+        deadline = time.monotonic() + 60
+        while not list(tmp_path.glob("dvrk_gym_sweep_*/phase1.npz")) and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert list(tmp_path.glob("dvrk_gym_sweep_*")), "the worker made no scratch folder"
+        pool.stop()
+    assert future.cancelled() or future.exception(timeout=30) is not None  # it did not finish its wait
+    assert not list(tmp_path.glob("dvrk_gym_sweep_*"))

@@ -56,3 +56,13 @@ def sleep_for(seconds: float) -> dict:
     """Sleep ``seconds`` (a long task's stand-in) and say how long."""
     time.sleep(seconds)
     return {"slept_s": seconds}
+
+
+def scratch_then_wait(seconds: float) -> str:
+    """Make a sweep's scratch folder, then wait ``seconds`` in it (a unit stopped midway)."""
+    from dvrk_gym.utils.parent_watch import ScratchFolder
+
+    with ScratchFolder("dvrk_gym_sweep_") as folder:
+        (Path(folder) / "phase1.npz").write_bytes(b"x" * 1000)
+        time.sleep(seconds)
+        return folder

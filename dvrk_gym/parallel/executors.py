@@ -23,7 +23,7 @@ from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 from typing import Any, Generic, Protocol, TypeVar
 
-from dvrk_gym.utils.parent_watch import end_with_parent
+from dvrk_gym.utils.parent_watch import clean_up_on_sigterm, end_with_parent
 
 T = TypeVar("T")
 
@@ -158,7 +158,8 @@ class FuturesExecutor:
 
 
 def _start_worker(parent_pid: int, setup: Callable[[], None] | None) -> None:
-    """A local worker's start: end with the parent, give tqdm a thread lock, then the executor's ``setup``.
+    """A local worker's start: end with the parent, delete its scratch folders when stopped,
+    give tqdm a thread lock, then the executor's ``setup``.
 
     tqdm's default lock holds a multiprocessing semaphore, made by the first bar (even a
     disabled one); a worker stopped by :meth:`LocalExecutor.stop` (Ctrl-C) cannot unlink it,
@@ -166,6 +167,7 @@ def _start_worker(parent_pid: int, setup: Callable[[], None] | None) -> None:
     spawned worker shares no lock with its parent anyway, so a thread lock loses nothing.
     """
     end_with_parent(parent_pid)
+    clean_up_on_sigterm()  # stopped (Ctrl-C), it deletes its scratch folders first
     import threading
 
     import tqdm

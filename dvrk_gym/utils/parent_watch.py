@@ -11,9 +11,10 @@ worker (a pool's ``initializer``), makes sure they do not:
   runs (the same process: its pid and start time) and ends the worker at once if not.
 
 Files the worker was writing are written atomically (:mod:`dvrk_gym.utils.atomic`), so
-ending it mid-write loses nothing that was finished. A process ended with SIGKILL cannot
-delete its temporary folders, so a :class:`ScratchFolder` is named for its host and process,
-and first deletes those of this host's processes that are gone.
+ending it mid-write loses nothing that was finished. A worker stopped with SIGTERM deletes
+its scratch folders first (:func:`clean_up_on_sigterm`); one ended with SIGKILL cannot, so
+a :class:`ScratchFolder` is named for its host and process, and first deletes those of this
+host's processes that are gone.
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ import logging
 import os
 import re
 import shutil
+import signal
 import socket
 import sys
 import tempfile
@@ -58,7 +60,24 @@ def _watch(parent: psutil.Process, poll_s: float) -> None:
     stop = threading.Event()
     while not stop.wait(poll_s):
         if not parent.is_running():  # pid gone, or reused by another process (start time differs)
+            remove_own_scratch()
             os._exit(ORPHAN_EXIT_STATUS)
+
+
+def clean_up_on_sigterm() -> None:
+    """Make SIGTERM delete this process's scratch folders, then end it (status 143).
+
+    A local pool's workers are stopped with SIGTERM (Ctrl-C of the command that runs them);
+    by default a worker ended at once, and left its unit's folder behind until the next
+    sweep on the host deleted it. The folder is deleted from the signal's handler, in the
+    main thread, while the work that writes into it waits.
+    """
+
+    def end(signum: int, frame: object) -> None:
+        remove_own_scratch()
+        os._exit(128 + signal.SIGTERM)
+
+    signal.signal(signal.SIGTERM, end)
 
 
 def end_with_parent(parent_pid: int, poll_s: float = DEFAULT_POLL_S) -> None:
@@ -80,6 +99,18 @@ def end_with_parent(parent_pid: int, poll_s: float = DEFAULT_POLL_S) -> None:
     threading.Thread(target=_watch, args=(parent, poll_s), name="parent-watch", daemon=True).start()
 
 
+_LIVE_SCRATCH: dict[str, int] = {}
+"""The scratch folders not yet deleted, by path: the process that made each (a forked child holds a copy)."""
+
+
+def remove_own_scratch() -> None:
+    """Delete the scratch folders this process made and has not deleted (it is ending)."""
+    for name, pid in list(_LIVE_SCRATCH.items()):
+        if pid == os.getpid():
+            shutil.rmtree(name, ignore_errors=True)
+            _LIVE_SCRATCH.pop(name, None)
+
+
 class ScratchFolder:
     """A temporary folder of this process, ``{prefix}{host}_{pid}_...`` in the temporary
     folder; first the folders of ``prefix`` that ended processes on this host left are
@@ -98,11 +129,13 @@ class ScratchFolder:
         self._pid = os.getpid()
         self.name = tempfile.mkdtemp(prefix=f"{prefix}{host_label()}_{self._pid}_")
         """The folder's path."""
+        _LIVE_SCRATCH[self.name] = self._pid
 
     def cleanup(self) -> None:
         """Delete the folder and what it holds, if this is the process that made it."""
         if os.getpid() == self._pid:
             shutil.rmtree(self.name, ignore_errors=True)
+            _LIVE_SCRATCH.pop(self.name, None)
 
     def __enter__(self) -> str:
         return self.name
