@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 from reproduction_files import files_that_differ
-from workers_for_tests import die_once, import_pybullet, record, scratch_then_wait, sleep_for, square_or_die
+from workers_for_tests import deaf_to_sigterm, die_once, import_pybullet, record, scratch_then_wait, sleep_for, square_or_die
 
 from dvrk_gym.cli.main import main
 from dvrk_gym.parallel.executors import InlineExecutor, LocalExecutor
@@ -252,3 +252,24 @@ def test_a_worker_stopped_as_by_ctrl_c_deletes_its_scratch_folder(tmp_path, monk
         pool.stop()
     assert future.cancelled() or future.exception(timeout=30) is not None  # it did not finish its wait
     assert not list(tmp_path.glob("dvrk_gym_sweep_*"))
+
+
+def test_stop_kills_a_worker_that_does_not_end_on_sigterm_within_its_grace(tmp_path, monkeypatch):
+    """Its SIGTERM handler runs only once a long C call returns: stop() waited 5 s and left
+    the worker running its call."""
+    from dvrk_gym.parallel import executors
+
+    monkeypatch.setattr(executors, "STOP_GRACE_S", 0.5)
+    pool = LocalExecutor(workers=1)
+    try:
+        future = pool.submit(deaf_to_sigterm, 60.0, str(tmp_path / "began"))
+        deadline = time.monotonic() + 60
+        while not (tmp_path / "began").exists() and time.monotonic() < deadline:  # the call has begun
+            time.sleep(0.05)
+        processes = list(pool._pool._processes.values())
+        began = time.monotonic()
+        pool.stop()
+        assert time.monotonic() - began < 10.0 and not any(process.is_alive() for process in processes)
+        assert future.cancelled() or future.exception(timeout=30) is not None
+    finally:
+        pool.close()

@@ -66,3 +66,14 @@ def scratch_then_wait(seconds: float) -> str:
         (Path(folder) / "phase1.npz").write_bytes(b"x" * 1000)
         time.sleep(seconds)
         return folder
+
+
+def deaf_to_sigterm(seconds: float, began: str) -> str:
+    """Ignore SIGTERM, write the file ``began``, then wait ``seconds`` (as a worker deep in a
+    long C call is, for a while)."""
+    import signal
+
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    Path(began).write_text("deaf")
+    time.sleep(seconds)
+    return "finished"

@@ -127,19 +127,46 @@ def worker_source_sha256() -> str:
     return source_fingerprint().sha256
 
 
-def _check_workers_source(client: Client, sha256: str) -> None:
+def _ask_workers(client: Client, timeout_s: float) -> dict[str, Any] | None:
+    """Each worker's answer to :func:`worker_source_sha256` (a string, or the error it raised),
+    or None if they did not all answer within ``timeout_s`` seconds (a worker stopped or cut
+    off: ``Client.run`` waits for every worker, without a time limit of its own)."""
+    answers: dict[str, Any] = {}
+
+    def ask() -> None:
+        try:
+            answers.update(client.run(worker_source_sha256, on_error="return"))
+        except Exception:  # noqa: BLE001  (the scheduler lost meanwhile: unanswered, as a hung worker)
+            answers.clear()
+
+    thread = threading.Thread(target=ask, name="dask-source-check", daemon=True)
+    thread.start()
+    thread.join(timeout_s)
+    return None if thread.is_alive() or not answers else dict(answers)
+
+
+def _check_workers_source(client: Client, sha256: str, timeout_s: float) -> None:
     """Refuse a cluster whose workers run other dvrk_gym source than ``sha256``, or none.
 
     Each call checks its worker too (:class:`SameSourceCall`), but a worker that refuses its
     calls in a moment is given the next ones at once: one such worker failed 9 units of a
-    sweep of 10. Asked here, it is named before any work is sent. (A worker that joins later
-    is still checked by each call.)
+    sweep of 10. Asked here, it is named before any work is sent. Workers that do not answer
+    within ``timeout_s`` seconds, or whose connection fails, are left to the check of each
+    call, with a warning (a worker that joins later is checked by each call too).
 
     Raises:
         ValueError: naming each worker whose source differs or that cannot import dvrk_gym.
     """
-    answers = client.run(worker_source_sha256, on_error="return")
-    others = {worker: answer for worker, answer in answers.items() if answer != sha256}
+    if not client.nthreads():
+        return  # no worker yet: each call checks the one that runs it
+    answers = _ask_workers(client, timeout_s)
+    if answers is None:
+        logger.warning("not every Dask worker said within %g s which dvrk_gym it runs; each call still checks its own", timeout_s)
+        return
+    unreachable = sorted(worker for worker, answer in answers.items() if isinstance(answer, OSError))  # lost or cut off
+    if unreachable:
+        logger.warning("Dask workers %s could not be asked which dvrk_gym they run; each call still checks its own", unreachable)
+    others = {worker: answer for worker, answer in answers.items() if worker not in unreachable and answer != sha256}
     if not others:
         return
     described = "; ".join(
@@ -198,7 +225,7 @@ class DaskExecutor(FuturesExecutor):
             ) from None
         self._source = source_fingerprint().sha256
         try:
-            _check_workers_source(self.client, self._source)
+            _check_workers_source(self.client, self._source, connect_timeout_s)
         except BaseException:
             self.client.close()
             raise

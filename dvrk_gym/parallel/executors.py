@@ -29,6 +29,9 @@ T = TypeVar("T")
 
 MAX_LOCAL_WORKERS = 1024
 """The most processes a local pool starts (each imports torch and PyBullet: some 300 MB)."""
+STOP_GRACE_S = 3.0
+"""How long :meth:`LocalExecutor.stop` lets a worker delete its scratch folders after SIGTERM
+before it kills it, seconds (the handler runs once a long C call returns)."""
 
 
 @dataclass(frozen=True)
@@ -272,7 +275,10 @@ class LocalExecutor(FuturesExecutor):
             if process.is_alive():
                 process.terminate()
         for process in processes:
-            process.join(timeout=5)
+            process.join(timeout=STOP_GRACE_S)
+            if process.is_alive():  # its handler waits for a long C call to return: not for ever
+                process.kill()
+                process.join(timeout=STOP_GRACE_S)
 
     def close(self) -> None:
         if self._pool is not None:

@@ -16,6 +16,11 @@ from tqdm.auto import tqdm
 MIN_REDRAW_S = 1.0
 """The bar is redrawn this often, seconds, or at its ``mininterval`` if longer (10 s when
 the command line's output is piped to a file)."""
+JOIN_TIMEOUT_S = 5.0
+"""How long the block's end waits for the thread, seconds: a Ctrl-C that ends a draw in the
+waiting thread leaves tqdm's lock held (tqdm releases it without ``finally``), and the
+thread, a daemon, would wait for it for ever. (A non-blocking refresh is no way out:
+tqdm's write lock takes its locks one by one and does not say if one failed.)"""
 
 
 @contextlib.contextmanager
@@ -32,7 +37,7 @@ def running_clock(bar: tqdm) -> Iterator[tqdm]:
 
     def redraw() -> None:
         while not stop.wait(interval_s):
-            bar.refresh()  # under the bar's lock, as the updates from the waiting thread are
+            bar.refresh()  # under the bar's lock, as the waiting thread's updates are
 
     thread = threading.Thread(target=redraw, name="progress-clock", daemon=True)
     thread.start()
@@ -40,4 +45,4 @@ def running_clock(bar: tqdm) -> Iterator[tqdm]:
         yield bar
     finally:
         stop.set()
-        thread.join()
+        thread.join(timeout=JOIN_TIMEOUT_S)

@@ -5,8 +5,11 @@ import csv
 import http.server
 import io
 import json
+import os
+import signal
 import socket
 import threading
+import time
 import zipfile
 
 import numpy as np
@@ -422,6 +425,27 @@ def test_a_cluster_with_a_worker_of_other_dvrk_gym_source_is_refused_at_connect_
         with pytest.raises(ValueError, match=r"inproc://.*: cannot say which it runs \(.*No module named 'dvrk_gym'"):
             dask_executor.DaskExecutor(cluster.scheduler_address)
         assert len(cluster.scheduler.clients) == 1  # the refused clients were closed (the cluster's own is left)
+
+
+def test_a_stopped_dask_worker_does_not_hang_the_connect_check(caplog):
+    """Client.run waits for every worker without a time limit: one worker stopped with
+    SIGSTOP held the connect for good (still waiting after 165 s)."""
+    distributed = pytest.importorskip("distributed")
+    from dvrk_gym.parallel.dask_executor import DaskExecutor
+
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=":0") as cluster:
+        with distributed.Client(cluster.scheduler_address) as probe:
+            (worker_pid,) = probe.run(os.getpid).values()
+        os.kill(worker_pid, signal.SIGSTOP)
+        try:
+            began = time.monotonic()
+            with DaskExecutor(cluster.scheduler_address, connect_timeout_s=2.0) as dask:
+                took_s = time.monotonic() - began
+                assert dask.description.startswith("Dask scheduler")
+        finally:
+            os.kill(worker_pid, signal.SIGCONT)
+    assert took_s < 30.0
+    assert "not every Dask worker said within 2 s which dvrk_gym it runs" in caplog.text
 
 
 def test_a_port_that_sends_bytes_of_another_protocol_is_refused_saying_so_not_with_a_memory_error():
