@@ -161,7 +161,7 @@ def _check_workers_source(client: Client, sha256: str, timeout_s: float) -> None
         return  # no worker yet: each call checks the one that runs it
     answers = _ask_workers(client, timeout_s)
     if answers is None:
-        logger.warning("not every Dask worker said within %g s which dvrk_gym it runs; each call still checks its own", timeout_s)
+        logger.warning("could not ask every Dask worker within %g s which dvrk_gym it runs; each call still checks its own", timeout_s)
         return
     unreachable = sorted(worker for worker, answer in answers.items() if isinstance(answer, OSError))  # lost or cut off
     if unreachable:

@@ -445,7 +445,7 @@ def test_a_stopped_dask_worker_does_not_hang_the_connect_check(caplog):
         finally:
             os.kill(worker_pid, signal.SIGCONT)
     assert took_s < 30.0
-    assert "not every Dask worker said within 2 s which dvrk_gym it runs" in caplog.text
+    assert "could not ask every Dask worker within 2 s which dvrk_gym it runs" in caplog.text
 
 
 def test_a_port_that_sends_bytes_of_another_protocol_is_refused_saying_so_not_with_a_memory_error():
