@@ -24,7 +24,7 @@ import socket
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, TypeVar
 
 from distributed import Client, get_worker
 from distributed.comm import get_address_host_port, parse_address
@@ -35,12 +35,54 @@ from dvrk_gym.utils.source_fingerprint import SHORT_DIGEST_CHARS, source_fingerp
 
 logger = logging.getLogger(__name__)
 
+T = TypeVar("T")
+
 CONNECT_TIMEOUT_S = 10.0
 """How long to try to reach a scheduler before giving up, seconds."""
 
 
 CONNECT_MARGIN_S = 5.0
 """How much longer than its timeout a connection may take before it is given up, seconds."""
+
+
+def _within(seconds: float, function: Callable[[], T], *, name: str, timeout_message: str, late: Callable[[T], None] | None = None) -> T:
+    """``function()`` run in a daemon thread named ``name`` and waited for ``seconds`` at most:
+    its value, or what it raised. ``Client(...)`` and ``Client.run`` have no time limit that
+    holds however the other end behaves, hence the thread.
+
+    Raises:
+        TimeoutError: ``timeout_message``, when it has not returned in time; a value it
+            returns later is handed to ``late`` (a client made late is closed).
+        BaseException: what ``function`` raised.
+    """
+    made: dict[str, Any] = {}
+    lock = threading.Lock()
+
+    def call() -> None:
+        try:
+            value = function()
+        except BaseException as error:  # noqa: BLE001  (handed to the caller)
+            made["error"] = error
+            return
+        with lock:
+            if made.get("given_up"):
+                if late is not None:
+                    late(value)
+            else:
+                made["value"] = value
+
+    thread = threading.Thread(target=call, name=name, daemon=True)
+    thread.start()
+    try:
+        thread.join(seconds)
+    finally:  # given up in time, or interrupted (Ctrl-C) while waiting
+        with lock:
+            made.setdefault("given_up", "value" not in made)
+    if "value" in made:
+        return made["value"]
+    if "error" in made:
+        raise made["error"]
+    raise TimeoutError(timeout_message)
 
 
 def _connect(address: str, timeout_s: float) -> Client:
@@ -54,33 +96,13 @@ def _connect(address: str, timeout_s: float) -> Client:
         TimeoutError: nothing answered as a scheduler in time.
         Exception: what ``Client`` raised.
     """
-    made: dict[str, Any] = {}
-    lock = threading.Lock()
-
-    def connect() -> None:
-        try:
-            client = Client(address, timeout=timeout_s, set_as_default=False)
-        except BaseException as error:  # noqa: BLE001  (handed to the caller)
-            made["error"] = error
-            return
-        with lock:
-            if made.get("given_up"):
-                client.close()
-            else:
-                made["client"] = client
-
-    thread = threading.Thread(target=connect, name="dask-connect", daemon=True)
-    thread.start()
-    try:
-        thread.join(timeout_s + CONNECT_MARGIN_S)
-    finally:  # given up in time, or interrupted (Ctrl-C) while waiting
-        with lock:
-            made.setdefault("given_up", "client" not in made)
-    if "client" in made:
-        return made["client"]
-    if "error" in made:
-        raise made["error"]
-    raise TimeoutError("what answered there is no Dask scheduler (a dashboard's port, say)")
+    return _within(
+        timeout_s + CONNECT_MARGIN_S,
+        lambda: Client(address, timeout=timeout_s, set_as_default=False),
+        name="dask-connect",
+        timeout_message="what answered there is no Dask scheduler (a dashboard's port, say)",
+        late=lambda client: client.close(),
+    )
 
 
 class WorkerSourceError(RuntimeError):
@@ -131,18 +153,16 @@ def _ask_workers(client: Client, timeout_s: float) -> dict[str, Any] | None:
     """Each worker's answer to :func:`worker_source_sha256` (a string, or the error it raised),
     or None if they did not all answer within ``timeout_s`` seconds (a worker stopped or cut
     off: ``Client.run`` waits for every worker, without a time limit of its own)."""
-    answers: dict[str, Any] = {}
-
-    def ask() -> None:
-        try:
-            answers.update(client.run(worker_source_sha256, on_error="return"))
-        except Exception:  # noqa: BLE001  (the scheduler lost meanwhile: unanswered, as a hung worker)
-            answers.clear()
-
-    thread = threading.Thread(target=ask, name="dask-source-check", daemon=True)
-    thread.start()
-    thread.join(timeout_s)
-    return None if thread.is_alive() or not answers else dict(answers)
+    try:
+        answers = _within(
+            timeout_s,
+            lambda: client.run(worker_source_sha256, on_error="return"),
+            name="dask-source-check",
+            timeout_message=f"the workers did not all answer within {timeout_s:g} s",
+        )
+    except Exception:  # noqa: BLE001  (not in time, or the scheduler lost meanwhile: unanswered, as a hung worker)
+        return None
+    return dict(answers) or None
 
 
 def _check_workers_source(client: Client, sha256: str, timeout_s: float) -> None:

@@ -216,13 +216,14 @@ def _reproduce(config: ReproduceConfig, folder: RunFolder, executor: Executor) -
     start = time.perf_counter()
     (config.out / "figures").mkdir(parents=True, exist_ok=True)
     graph = build_tasks(config, nested_progress=isinstance(executor, InlineExecutor))
-    finished_before = _finished(graph, config.out)
+    cache_dir = config.out / "tasks"
+    finished_before = _finished(graph, cache_dir)
     try:
         task_results = run_tasks(
-            graph, cache_dir=config.out / "tasks", progress=config.progress, executor=executor, shared_folder=config.out, label="reproduce"
+            graph, cache_dir=cache_dir, progress=config.progress, executor=executor, shared_folder=config.out, label="reproduce"
         )
     except KeyboardInterrupt:  # Ctrl-C or SIGTERM: the call's time is kept beside its finished tasks, for the report
-        tasks_run = len(_finished(graph, config.out) - finished_before)
+        tasks_run = len(_finished(graph, cache_dir) - finished_before)
         wall = time.perf_counter() - start
         with contextlib.suppress(OSError, ValueError):  # a record that cannot be written (a full disk) does not hide the interrupt
             folder.write_json("calls.json", _calls_with_this_one(folder, config, executor, wall, tasks_run=tasks_run, interrupted=True))
@@ -281,9 +282,9 @@ def _read_calls(path: Path) -> list[dict[str, Any]]:
     return calls
 
 
-def _finished(graph: list[Task], out: Path) -> set[str]:
-    """The graph's tasks whose results are cached in the run folder now."""
-    return {task.name for task in graph if (out / "tasks" / f"{task.name}.json").is_file()}
+def _finished(graph: list[Task], cache_dir: Path) -> set[str]:
+    """The graph's tasks whose results are cached in ``cache_dir`` (by task name, as :func:`run_tasks` keeps them) now."""
+    return {task.name for task in graph if (cache_dir / f"{task.name}.json").is_file()}
 
 
 def _calls_with_this_one(

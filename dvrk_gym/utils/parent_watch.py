@@ -99,16 +99,14 @@ def end_with_parent(parent_pid: int, poll_s: float = DEFAULT_POLL_S) -> None:
     threading.Thread(target=_watch, args=(parent, poll_s), name="parent-watch", daemon=True).start()
 
 
-_LIVE_SCRATCH: dict[str, int] = {}
-"""The scratch folders not yet deleted, by path: the process that made each (a forked child holds a copy)."""
+_LIVE_SCRATCH: set[ScratchFolder] = set()
+"""The scratch folders not yet deleted (a forked child holds a copy: each deletes only its maker's)."""
 
 
 def remove_own_scratch() -> None:
     """Delete the scratch folders this process made and has not deleted (it is ending)."""
-    for name, pid in list(_LIVE_SCRATCH.items()):
-        if pid == os.getpid():
-            shutil.rmtree(name, ignore_errors=True)
-            _LIVE_SCRATCH.pop(name, None)
+    for folder in list(_LIVE_SCRATCH):
+        folder.cleanup()
 
 
 class ScratchFolder:
@@ -129,13 +127,13 @@ class ScratchFolder:
         self._pid = os.getpid()
         self.name = tempfile.mkdtemp(prefix=f"{prefix}{host_label()}_{self._pid}_")
         """The folder's path."""
-        _LIVE_SCRATCH[self.name] = self._pid
+        _LIVE_SCRATCH.add(self)
 
     def cleanup(self) -> None:
         """Delete the folder and what it holds, if this is the process that made it."""
         if os.getpid() == self._pid:
             shutil.rmtree(self.name, ignore_errors=True)
-            _LIVE_SCRATCH.pop(self.name, None)
+            _LIVE_SCRATCH.discard(self)
 
     def __enter__(self) -> str:
         return self.name
